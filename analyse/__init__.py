@@ -1,0 +1,1 @@
+"""Analyse stage: designs of experiments, ANOVA and regression, optimisation, the calibration campaign."""

@@ -1,0 +1,214 @@
+"""The run store and executor of a calibration campaign.
+
+Every DEM run of a campaign is one JSON record in ``DIR/runs/<key>.json``; the key is the
+SHA-256 of the run's canonical inputs (rig, parameters, profile, seed, extensions), so the same
+inputs always map to the same record. Records are written atomically the moment a run ends,
+so a campaign killed midway loses at most the runs that were in flight, and a rerun skips
+every run whose record says ``"status": "ok"``. A failed run is recorded with its error and
+retried once; a run that fails twice stays recorded as failed and the campaign reports it.
+
+Runs execute in local worker processes (``workers``) or on a Dask distributed cluster
+(``scheduler="tcp://host:port"``), with a progress bar and ETA.
+
+Record layout::
+
+    {"key": str, "inputs": {...}, "status": "ok" | "failed", "attempts": int,
+     "result": {...} | null, "error": str | null, "wall_s": float,
+     "provenance": {"code": {...}, "seed": int, "created": str}}
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import hashlib
+import json
+import multiprocessing as mp
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterable
+
+from tqdm.auto import tqdm
+
+from demcal.errors import InputError
+from demcal.jsonio import read_json, to_jsonable, write_json
+from demcal.provenance import Provenance
+
+#: How many times a failed run is attempted in all (the first try and one retry).
+MAX_ATTEMPTS = 2
+
+
+def run_key(inputs: dict) -> str:
+    """SHA-256 of the canonical JSON of a run's inputs (sorted keys, no whitespace)."""
+    text = json.dumps(to_jsonable(inputs), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+class RunStore:
+    """A folder of run records, one JSON file per run, keyed by :func:`run_key`."""
+
+    def __init__(self, root):
+        self.root = Path(root)
+        self.root.mkdir(parents=True, exist_ok=True)
+
+    def path(self, key: str) -> Path:
+        return self.root / f"{key}.json"
+
+    def get(self, key: str) -> dict | None:
+        p = self.path(key)
+        if not p.exists():
+            return None
+        try:
+            return read_json(p)
+        except json.JSONDecodeError as exc:
+            raise InputError(f"run record {p} is not valid JSON ({exc}); delete it to rerun that run") from exc
+
+    def put(self, record: dict) -> Path:
+        return write_json(self.path(record["key"]), record)
+
+    def finished(self, key: str) -> bool:
+        rec = self.get(key)
+        return rec is not None and rec.get("status") == "ok"
+
+    def records(self) -> list[dict]:
+        return [read_json(p) for p in sorted(self.root.glob("*.json"))]
+
+
+def _execute(runner: Callable[[dict], dict], inputs: dict) -> tuple[str, dict | None, str | None, float]:
+    """Run one set of inputs in a worker; never raises, so one failure cannot sink the pool."""
+    t0 = time.perf_counter()
+    try:
+        result = runner(inputs)
+        return "ok", to_jsonable(result), None, time.perf_counter() - t0
+    except Exception as exc:  # recorded in the run store, reported by the campaign
+        tb = traceback.format_exception_only(type(exc), exc)[-1].strip()
+        return "failed", None, tb, time.perf_counter() - t0
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    """What :func:`run_all` did: records in input order, and how many were run vs reused."""
+
+    records: list
+    ran: int
+    reused: int
+    failed: int
+
+
+def run_all(tasks: Iterable[dict], runner: Callable[[dict], dict], store: RunStore, *,
+            workers: int = 1, scheduler: str | None = None, desc: str = "DEM runs",
+            progress: bool = True) -> RunOutcome:
+    """Run every task not yet finished in ``store``; return all records in task order.
+
+    Parameters
+    ----------
+    tasks : iterable of dict
+        Canonical inputs of each run (must be JSON-serialisable; ``seed`` should be among them).
+    runner : callable
+        A picklable top-level function ``runner(inputs) -> dict`` that performs one run.
+    store : RunStore
+    workers : int
+        Local worker processes (1 runs in this process). Ignored when ``scheduler`` is given.
+    scheduler : str, optional
+        Address of a Dask distributed scheduler (e.g. ``tcp://127.0.0.1:8786``).
+    """
+    tasks = [to_jsonable(t) for t in tasks]
+    keys = [run_key(t) for t in tasks]
+    pending, seen = [], set()
+    for key, task in zip(keys, tasks):
+        if key in seen or store.finished(key):
+            continue
+        seen.add(key)
+        pending.append((key, task))
+    reused = len(set(keys)) - len(pending)
+
+    def record(key, task, status, result, error, wall, attempts):
+        rec = {"key": key, "inputs": task, "status": status, "attempts": attempts,
+               "result": result, "error": error, "wall_s": wall,
+               "provenance": Provenance(seed=task.get("seed")).to_dict()}
+        store.put(rec)
+        return rec
+
+    bar = tqdm(total=len(pending), desc=desc, unit="run", disable=not progress or not pending)
+    failed = 0
+    attempts = {key: 0 for key, _ in pending}
+    queue = list(pending)
+    try:
+        with _executor(workers, scheduler) as submit:
+            while queue:
+                futures = {submit(_execute, runner, task): (key, task) for key, task in queue}
+                queue = []
+                for fut in _as_completed(futures):
+                    key, task = futures[fut]
+                    status, result, error, wall = fut.result()
+                    attempts[key] += 1
+                    if status == "failed" and attempts[key] < MAX_ATTEMPTS:
+                        record(key, task, status, result, error, wall, attempts[key])
+                        queue.append((key, task))  # retried once, in the next round
+                        continue
+                    record(key, task, status, result, error, wall, attempts[key])
+                    failed += status == "failed"
+                    bar.update(1)
+    finally:
+        bar.close()
+    records = [store.get(k) for k in keys]
+    return RunOutcome(records=records, ran=len(pending), reused=reused, failed=failed)
+
+
+class _executor:
+    """Context manager giving a ``submit(fn, *args) -> future`` for local processes or Dask."""
+
+    def __init__(self, workers: int, scheduler: str | None):
+        self.workers, self.scheduler = workers, scheduler
+        self._pool = self._client = None
+
+    def __enter__(self):
+        if self.scheduler:
+            try:
+                from dask.distributed import Client
+            except ImportError as exc:  # pragma: no cover - dask is a dependency
+                raise InputError("--scheduler needs dask[distributed] installed") from exc
+            try:
+                self._client = Client(self.scheduler, timeout="10s")
+            except OSError as exc:
+                raise InputError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from exc
+            return lambda fn, *args: self._client.submit(fn, *args, pure=False)
+        if self.workers <= 1:
+            return _inline_submit
+        # spawn: worker processes must not inherit numba/threading state from the parent
+        self._pool = cf.ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"))
+        return self._pool.submit
+
+    def __exit__(self, *exc):
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+        if self._client is not None:
+            self._client.close()
+        return False
+
+
+class _LazyResult:
+    """A run in this process, executed when its result is asked for, so that each record is
+    stored as soon as that run ends (not after the whole batch)."""
+
+    def __init__(self, fn, args):
+        self.fn, self.args = fn, args
+
+    def result(self):
+        return self.fn(*self.args)
+
+
+def _inline_submit(fn, *args):
+    return _LazyResult(fn, args)
+
+
+def _as_completed(futures):
+    """``as_completed`` for in-process, concurrent.futures or Dask futures."""
+    first = next(iter(futures), None)
+    if isinstance(first, _LazyResult):
+        return list(futures)
+    if first is not None and type(first).__module__.startswith("distributed"):
+        from dask.distributed import as_completed
+        return as_completed(list(futures))
+    return cf.as_completed(futures)

@@ -1,0 +1,55 @@
+"""The ``demcal`` command. Each stage registers its own sub-commands in its ``cli`` module;
+this dispatcher turns every domain error into a one-line message on stderr and a non-zero exit."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from demcal import __version__
+from demcal.errors import DemcalError
+
+#: Stage modules that contribute sub-commands, in the order of the pipeline.
+STAGE_CLIS = ("measure.cli", "simulate.cli", "analyse.cli", "report.cli")
+
+EXIT_INPUT = 2     # bad input or a domain error
+EXIT_FAILURE = 1   # the job ran but failed a check (e.g. audit found differences)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="demcal",
+        description="Calibrate DEM material models from lab measurements.")
+    parser.add_argument("--version", action="version", version=f"demcal {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for name in STAGE_CLIS:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name == name:
+                continue  # stage without commands yet
+            raise
+        module.register(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.handler(args) or 0)
+    except DemcalError as exc:
+        print(f"demcal {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_INPUT
+    except FileNotFoundError as exc:
+        print(f"demcal {args.command}: error: file not found: {exc.filename}", file=sys.stderr)
+        return EXIT_INPUT
+    except KeyboardInterrupt:
+        print(f"demcal {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,59 @@
+"""Provenance: what produced a number (code version, git sha, input hashes, seeds, options)."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import platform
+import subprocess
+from dataclasses import asdict, dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+from demcal import __version__
+
+
+def sha256_file(path, chunk: int = 1 << 20) -> str:
+    """SHA-256 hex digest of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while block := f.read(chunk):
+            h.update(block)
+    return h.hexdigest()
+
+
+@lru_cache(maxsize=1)
+def git_sha() -> str | None:
+    """The commit of the source tree demcal runs from, or None outside a git checkout."""
+    here = Path(__file__).resolve().parent
+    try:
+        out = subprocess.run(["git", "-C", str(here), "rev-parse", "HEAD"],
+                             capture_output=True, text=True, timeout=5)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    if out.returncode != 0:
+        return None
+    sha = out.stdout.strip()
+    dirty = subprocess.run(["git", "-C", str(here), "status", "--porcelain", "--untracked-files=no"],
+                           capture_output=True, text=True, timeout=5)
+    return sha + ("-dirty" if dirty.returncode == 0 and dirty.stdout.strip() else "")
+
+
+def code_version() -> dict:
+    """demcal version, git sha, Python and platform: enough to find the code again."""
+    return {"demcal": __version__, "git_sha": git_sha(),
+            "python": platform.python_version(), "platform": platform.platform()}
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """Where a result came from. ``inputs`` maps a file path to its SHA-256."""
+
+    code: dict = field(default_factory=code_version)
+    inputs: dict = field(default_factory=dict)
+    seed: int | None = None
+    options: dict = field(default_factory=dict)
+    created: str = field(default_factory=lambda: _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
+
+    def to_dict(self) -> dict:
+        return asdict(self)

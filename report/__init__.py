@@ -1,0 +1,1 @@
+"""Report stage: renders stored results as HTML and PDF laid out like the source paper; audits them."""
