@@ -1,1 +1,27 @@
-"""Simulate stage: a numba DEM of multi-sphere clumps and the twins of the lab rigs."""
+"""Simulate stage: a numba DEM of multi-sphere clumps and the twins of the lab rigs.
+
+Public API (details in each module's docstring):
+
+- ``Simulation`` (``simulate.engine``): state, walls, factories, ``run``, state readers.
+- ``DEMParameters`` (``simulate.params``): the parameter set with the paper's defaults.
+- ``MaterialTable`` (``simulate.materials``): materials and per-pair contact parameters.
+- ``ClumpTemplate``, ``segment_template``, ``segment_from_parameters``, ``make_template``
+  (``simulate.clump``): clump shapes and their mass properties.
+- ``Plane``, ``Rectangle``, ``box_rectangles`` (``simulate.walls``).
+- ``ParticleFactory`` (``simulate.factory``).
+- ``rayleigh_time`` (``simulate.timestep``).
+- ``build_paper_repose_case`` (``simulate.scenes``): the paper's repose-angle case.
+- ``write_vtp`` (``simulate.vtk``): frames for ParaView.
+"""
+
+from simulate.clump import ClumpTemplate, make_template, segment_from_parameters, segment_template
+from simulate.engine import Escape, RunSummary, Simulation
+from simulate.factory import ParticleFactory
+from simulate.materials import MaterialTable
+from simulate.params import DEMParameters
+from simulate.timestep import rayleigh_time
+from simulate.walls import Plane, Rectangle, box_rectangles
+
+__all__ = ["ClumpTemplate", "DEMParameters", "Escape", "MaterialTable", "ParticleFactory", "Plane",
+           "Rectangle", "RunSummary", "Simulation", "box_rectangles", "make_template",
+           "rayleigh_time", "segment_from_parameters", "segment_template"]

@@ -1,0 +1,157 @@
+"""Write the example campaign ``data/astragalus/``: a lab workbook whose raw rows are synthetic
+and reproduce the summary statistics the source paper printed (means and spreads only).
+
+Every sample of a quantity the paper reports is drawn, then shifted and scaled so that its
+mean and standard deviation equal the published figures exactly (``exact_sample``). Quantities
+the paper does not report (segment mass and moisture, curve shapes, photo conditions) get
+plausible values that are stated here. Heap photos are rendered from heap profiles of known
+flank angle, recorded in ``truth.json`` beside the workbook.
+
+Run from the repository root: ``python data/make_astragalus.py`` (deterministic, seed 2024).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pandas as pd
+
+HERE = Path(__file__).resolve().parent
+OUT = HERE / "astragalus"
+SEED = 2024
+PAPER = json.loads((HERE / "paper_defaults.json").read_text())
+
+SYNTHETIC_NOTE = ("Synthetic raw rows: the source paper printed only means and spreads, so these "
+                  "rows were generated to reproduce them exactly (data/make_astragalus.py).")
+
+
+def exact_sample(rng, n, mean, sd, low=None, high=None):
+    """n values with sample mean and sd (ddof=1) exactly ``mean`` and ``sd``, inside (low, high)."""
+    for _ in range(1000):
+        z = rng.standard_normal(n)
+        z = (z - z.mean()) / z.std(ddof=1)
+        x = mean + sd * z
+        if (low is None or x.min() > low) and (high is None or x.max() < high):
+            return x
+    raise RuntimeError(f"cannot draw {n} values with mean {mean}, sd {sd} inside ({low}, {high})")
+
+
+def specimens(rng, n=30):
+    length = exact_sample(rng, n, PAPER["segment"]["length_mm"], 1.6, 18, 32)
+    diameter = exact_sample(rng, n, PAPER["segment"]["diameter_mm"], 0.9, 8, 14)
+    # Segments are not perfect cylinders: envelope density a few percent below particle density.
+    envelope_density = 0.965 * PAPER["segment"]["particle_density_kg_m3"] * (1 + 0.02 * rng.standard_normal(n))
+    volume_mm3 = math.pi / 4 * diameter**2 * length
+    mass = envelope_density * volume_mm3 * 1e-9 * 1e3
+    return pd.DataFrame({
+        "specimen_id": [f"S{i + 1:02d}" for i in range(n)],
+        "length_mm": length.round(2), "diameter_mm": diameter.round(2), "mass_g": mass.round(3),
+        "moisture_pct": (48 + 3 * rng.standard_normal(n)).round(1),
+        "batch": rng.choice(["B1", "B2", "B3"], n),
+    })
+
+
+def density(rng, n=5):
+    rho = exact_sample(rng, n, PAPER["segment"]["particle_density_kg_m3"], 15.0)  # kg/m3
+    mass = rng.uniform(18, 26, n).round(2)
+    before = np.full(n, 100.0)
+    # Volumes are read to 0.1 ml; the mass is then set so that mass / displaced volume is exact.
+    displaced = np.round(mass / (rho / 1000.0), 1)
+    mass = displaced * rho / 1000.0
+    return pd.DataFrame({"sample_id": [f"D{i + 1}" for i in range(n)], "mass_g": mass.round(4),
+                         "volume_before_ml": before, "volume_after_ml": before + displaced})
+
+
+def drops(rng, tracks_dir):
+    """Drop trials at 400 mm on the three pairs, e = sqrt(h2/h1) with the published mean +- sd."""
+    h1 = PAPER["measured"]["drop_height_mm"]
+    rows, trial = [], 0
+    pairs = {"particle-particle": 20, "particle-steel": 20, "particle-rubber": 20}
+    for pair, n in pairs.items():
+        m = PAPER["measured"][f"restitution.{pair}"]
+        e = exact_sample(rng, n, m["value"], m["spread"], 0.05, 0.95)
+        for k in range(n):
+            trial += 1
+            rows.append({"trial_id": f"T{trial:03d}", "pair": pair, "drop_height_mm": h1,
+                         "rebound_height_mm": round(float(e[k] ** 2 * h1), 3),
+                         "specimen_id": f"S{rng.integers(1, 31):02d}",
+                         "operator": ["op1", "op2"][k % 2], "date": f"2023-05-{10 + k // 10:02d}",
+                         "orientation_deg": round(float(rng.uniform(0, 90)), 1),
+                         "trial_order": k + 1, "track_file": ""})
+    frame = pd.DataFrame(rows)
+    # A few particle-steel drops were filmed: their camera tracks give e from velocities.
+    tracks_dir.mkdir(parents=True, exist_ok=True)
+    filmed = frame.index[frame["pair"] == "particle-steel"][:5]
+    for i in filmed:
+        e = math.sqrt(frame.at[i, "rebound_height_mm"] / h1)
+        name = f"tracks/{frame.at[i, 'trial_id']}.csv"
+        camera_track(rng, h1 / 1000.0, e).to_csv(OUT / name, index=False)
+        frame.at[i, "track_file"] = name
+    return frame
+
+
+def camera_track(rng, h1_m, e, fps=1000.0, g=9.81, pixel_mm=0.4):
+    """A high-speed-camera track of the centre of mass: free fall from h1, impact, free flight
+    up with -e times the impact velocity; positions quantised to the camera's pixel size."""
+    v_in = math.sqrt(2 * g * h1_m)
+    t_impact = v_in / g
+    t = np.arange(0.20, t_impact + 2 * e * v_in / g * 0.9, 1 / fps)
+    y = np.where(t < t_impact, h1_m - 0.5 * g * t**2,
+                 e * v_in * (t - t_impact) - 0.5 * g * (t - t_impact) ** 2)
+    y_mm = 1000 * y + rng.normal(0, 0.15, t.size)
+    y_mm = np.round(y_mm / pixel_mm) * pixel_mm
+    return pd.DataFrame({"t_s": t.round(4), "y_mm": y_mm.round(2)})
+
+
+def incline(rng, n=20):
+    rows, trial = [], 0
+    for surface in ("particle", "steel"):
+        for mode, key in (("slide", "static_friction"), ("roll", "rolling_friction")):
+            m = PAPER["measured"][f"{key}.{surface}"]
+            mu = exact_sample(rng, n, m["value"], m["spread"], 0.02, 1.5)
+            for k in range(n):
+                trial += 1
+                rows.append({"trial_id": f"I{trial:03d}", "surface": surface, "mode": mode,
+                             "angle_deg": float(np.degrees(np.arctan(mu[k]))),
+                             "operator": ["op1", "op2"][k % 2], "trial_order": k + 1})
+    frame = pd.DataFrame(rows)
+    frame["angle_deg"] = frame["angle_deg"].round(4)
+    return frame
+
+
+def write_workbook(sheets: dict[str, pd.DataFrame], path: Path):
+    with pd.ExcelWriter(path, engine="openpyxl") as xl:
+        for name, frame in sheets.items():
+            frame.to_excel(xl, sheet_name=name, index=False)
+
+
+def meta():
+    rows = [
+        ("material", "Astragalus membranaceus segments"),
+        ("contact_material", "steel"),
+        ("contact_density_kg_m3", PAPER["steel"]["density_kg_m3"]),
+        ("contact_poisson", PAPER["steel"]["poisson_ratio"]),
+        ("contact_shear_modulus_pa", PAPER["steel"]["shear_modulus_pa"]),
+        ("particle_shear_modulus_pa", PAPER["segment"]["particle_shear_modulus_pa"]["value"]),
+        ("box_length_mm", 200), ("box_width_mm", 100), ("box_height_mm", 250),
+        ("plate_lift_speed_mm_s", 100), ("fill_count", 500),
+        ("synthetic", SYNTHETIC_NOTE),
+    ]
+    return pd.DataFrame(rows, columns=["key", "value"])
+
+
+def main():
+    rng = np.random.default_rng(SEED)
+    OUT.mkdir(exist_ok=True)
+    sheets = {"meta": meta(), "specimens": specimens(rng), "density": density(rng),
+              "drop": drops(rng, OUT / "tracks"), "incline": incline(rng)}
+    write_workbook(sheets, OUT / "workbook.xlsx")
+    print(f"wrote {OUT / 'workbook.xlsx'}")
+
+
+if __name__ == "__main__":
+    main()

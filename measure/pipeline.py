@@ -1,0 +1,272 @@
+"""The measure stage end to end: a validated workbook in, every material quantity out.
+
+:func:`measure_workbook` runs the estimator of each sheet present and gathers the results in a
+:class:`Measurement`, whose :meth:`Measurement.to_dict` is the JSON written by
+``demcal measure``::
+
+    {"material": str,
+     "quantities": {NAME: {"value", "sd", "n", "ci95": [lo, hi], "unit", "rows_used",
+                           "rows_rejected": [{"row", "reason"}],
+                           "source": {"file", "sheet", "sha256"}, "method", "extra"}},
+     "per_row": {NAME: [{"row", "value", "used", ..., "covariates": {...}}]},
+     "meta": {...}, "unknown_sheets": [...], "workbook": {...}, "provenance": {...},
+     "notes": [...]}
+
+Quantity names are those of lab-workbook.md: ``length_mm``, ``diameter_mm``, ``mass_g``,
+``particle_density_kg_m3``, ``envelope_density_kg_m3``, ``restitution.<pair>``,
+``static_friction.<surface>``, ``rolling_friction.<surface>``, ``poisson_ratio``,
+``elastic_modulus_pa``, ``shear_modulus_pa`` (when curves are given) and ``repose_angle_deg``.
+Each value is in the unit its name carries (mm, g, kg/m^3, Pa, deg) or is dimensionless.
+
+The angle of repose comes from the heap photos through a photo estimator
+``angle_from_photo(path, side=..., annotate_to=...)`` returning an object with ``angle_deg``,
+``flanks`` (``{"left": deg or None, "right": deg or None}``) and ``base_tilt_deg``; by default
+:func:`measure.repose.angle_from_photo`. A ``target_repose_deg`` in ``meta`` overrides it (the
+override is reported, the photo estimate kept in ``extra``); the lab's ``angle_deg_manual`` is
+only compared with the photo estimate, never used as the result.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from demcal.errors import DemcalError, WorkbookError
+from demcal.provenance import Provenance
+from measure.density import density_estimates
+from measure.dimensions import specimen_statistics
+from measure.elasticity import compression_estimates
+from measure.estimate import Estimate, parse_outlier_rule, summarise
+from measure.friction import friction_estimates
+from measure.restitution import STANDARD_GRAVITY, restitution_estimates
+from measure.workbook import Workbook, read_workbook
+
+#: Order of the quantities in outputs (prefixes stand for their families).
+ORDER = ("length_mm", "diameter_mm", "mass_g", "particle_density_kg_m3", "envelope_density_kg_m3",
+         "restitution.", "static_friction.", "rolling_friction.", "poisson_ratio",
+         "elastic_modulus_pa", "shear_modulus_pa", "repose_angle_deg")
+
+
+def _order_key(name: str):
+    for i, key in enumerate(ORDER):
+        if name == key or (key.endswith(".") and name.startswith(key)):
+            return (i, name)
+    return (len(ORDER), name)
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """Every quantity measured from one workbook.
+
+    Attributes
+    ----------
+    material : str
+        ``meta`` material name.
+    quantities : dict of str -> Estimate
+        Quantity name -> estimate, in the order of lab-workbook.md.
+    workbook : dict
+        ``source``, ``root``, ``files`` (path -> SHA-256), ``sheets`` (file, hash, row count,
+        required/optional/covariate columns per sheet) and ``unknown_sheets``.
+    meta : dict
+        The ``meta`` sheet (key -> value).
+    provenance : Provenance
+        Code version, input hashes and the options used.
+    notes : list of str
+        What the user should know (e.g. photos not measured because no estimator was available).
+    """
+
+    material: str
+    quantities: dict
+    workbook: dict
+    meta: dict
+    provenance: Provenance
+    notes: list = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        """The JSON layout described in the module docstring."""
+        return {"material": self.material,
+                "quantities": {n: e.to_dict() for n, e in self.quantities.items()},
+                "per_row": {n: [dict(r) for r in e.per_row] for n, e in self.quantities.items()},
+                "meta": dict(self.meta),
+                "unknown_sheets": list(self.workbook.get("unknown_sheets", [])),
+                "workbook": dict(self.workbook),
+                "provenance": self.provenance.to_dict(),
+                "notes": list(self.notes)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Measurement":
+        """Rebuild a measurement from :meth:`to_dict` output (e.g. a stored JSON)."""
+        per_row = d.get("per_row", {})
+        quantities = {n: Estimate.from_dict(q, per_row.get(n, [])) for n, q in d["quantities"].items()}
+        return cls(material=d["material"], quantities=quantities, workbook=dict(d.get("workbook", {})),
+                   meta=dict(d.get("meta", {})), provenance=Provenance(**d["provenance"]),
+                   notes=list(d.get("notes", [])))
+
+    def table(self) -> str:
+        """A short human-readable table of the quantities."""
+        def num(x):
+            return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.4g}"
+        lines = [f"{'quantity':<34} {'value':>10} {'sd':>10} {'n':>4}  {'95 % CI':<23} {'unit':<7} rejected"]
+        for name, e in self.quantities.items():
+            ci = "-" if math.isnan(e.ci95[0]) else f"[{num(e.ci95[0])}, {num(e.ci95[1])}]"
+            flag = " (override)" if e.extra.get("override") else ""
+            lines.append(f"{name:<34} {num(e.value):>10} {num(e.sd):>10} {e.n:>4}  {ci:<23} "
+                         f"{e.unit:<7} {len(e.rows_rejected)}{flag}")
+        return "\n".join(lines)
+
+
+def _default_photo_estimator():
+    """:func:`measure.repose.angle_from_photo`, or None when that module is not installed."""
+    try:
+        from measure.repose import angle_from_photo
+    except ModuleNotFoundError as exc:
+        if exc.name == "measure.repose":
+            return None
+        raise
+    return angle_from_photo
+
+
+def _safe_name(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", str(text)).strip("_") or "photo"
+
+
+def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir) -> Estimate:
+    """``repose_angle_deg`` from the heap photos of the ``repose`` sheet."""
+    sheet = wb.sheet("repose")
+    f = sheet.frame
+    values, rows, records, rejected = [], [], [], []
+    if annotate_dir is not None:
+        Path(annotate_dir).mkdir(parents=True, exist_ok=True)
+    for r in sheet.rows:
+        rel, side = f.at[r, "file"], f.at[r, "side"] if "side" in f else "both"
+        annotate_to = None
+        if annotate_dir is not None:
+            annotate_to = Path(annotate_dir) / f"{_safe_name(f.at[r, 'photo_id'])}_annotated.png"
+        try:
+            result = estimator(wb.resolve(rel), side=side, annotate_to=annotate_to)
+        except DemcalError as exc:
+            raise WorkbookError(f"photo {wb.resolve(rel)}: {exc}", file=str(sheet.file), sheet=sheet.name,
+                                row=r, column="file", value=rel) from None
+        angle = float(result.angle_deg) if result.angle_deg is not None else math.nan
+        manual = f.at[r, "angle_deg_manual"] if "angle_deg_manual" in f else math.nan
+        rec = {"id": f.at[r, "photo_id"], "file": rel, "side": side,
+               "flanks": {k: (None if v is None else float(v)) for k, v in dict(result.flanks).items()},
+               "base_tilt_deg": None if result.base_tilt_deg is None else float(result.base_tilt_deg),
+               "angle_deg_manual": None if math.isnan(manual) else float(manual),
+               "annotated": None if annotate_to is None else str(annotate_to),
+               "covariates": sheet.covariates_of(r)}
+        if not 0 < angle < 90:
+            rejected.append({"row": r, "reason": f"the photo estimator found no angle ({angle!r})"})
+            continue
+        values.append(angle)
+        rows.append(r)
+        records.append(rec)
+    extra = {}
+    est = summarise("repose_angle_deg", values, rows, unit="deg", source=sheet.source(),
+                    method="heap photo: mean slope of the heap flanks (measure.repose)",
+                    outliers=outliers, rejected=rejected, per_row=records)
+    pairs = [(rec["value"], rec["angle_deg_manual"]) for rec in est.per_row
+             if rec["used"] and rec["angle_deg_manual"] is not None]
+    if pairs:
+        photo, manual = np.array(pairs).T
+        extra["manual_comparison"] = {
+            "n": len(pairs), "mean_manual_deg": float(manual.mean()),
+            "mean_photo_minus_manual_deg": float((photo - manual).mean()),
+            "note": "angle_deg_manual is the lab's own reading, compared only, never used"}
+    for flank in ("left", "right"):
+        x = [rec["flanks"].get(flank) for rec in est.per_row if rec["used"]]
+        x = [v for v in x if v is not None]
+        if x:
+            extra.setdefault("flank_mean_deg", {})[flank] = float(np.mean(x))
+    return replace(est, extra=dict(est.extra, **extra))
+
+
+def repose_estimate(wb: Workbook, *, photo_estimator=None, outliers="mad", annotate_dir=None):
+    """``repose_angle_deg`` from the photos, overridden by ``meta`` ``target_repose_deg`` if given.
+
+    Returns
+    -------
+    (Estimate or None, list of str)
+        The estimate (None when there is neither a photo nor a target) and notes.
+    """
+    notes = []
+    photo = None
+    sheet = wb.sheet("repose")
+    if sheet is not None and sheet.rows:
+        estimator = photo_estimator or _default_photo_estimator()
+        if estimator is None:
+            notes.append("repose photos not measured: no photo estimator (measure.repose) available")
+        else:
+            photo = _photo_estimate(wb, estimator, outliers=outliers, annotate_dir=annotate_dir)
+    target = wb.meta.get("target_repose_deg")
+    if target is None:
+        return photo, notes
+    meta = wb.sheet("meta")
+    row = next(r for r in meta.rows if meta.frame.at[r, "key"] == "target_repose_deg")
+    override = Estimate(
+        name="repose_angle_deg", value=float(target), sd=math.nan, n=1, ci95=(math.nan, math.nan),
+        unit="deg", rows_used=[row], rows_rejected=[], source=meta.source(),
+        method="meta target_repose_deg (overrides the photo estimate)",
+        extra={"override": True, "photo_estimate": None if photo is None else photo.to_dict()},
+        per_row=[] if photo is None else list(photo.per_row))
+    notes.append(f"repose_angle_deg: meta target_repose_deg = {target:g} deg overrides the photo estimate"
+                 + ("" if photo is None else f" ({photo.value:.4g} deg)"))
+    return override, notes
+
+
+def measure_workbook(wb, *, photo_estimator=None, outliers="mad", annotate_dir=None,
+                     r2_min=0.995, g=STANDARD_GRAVITY) -> Measurement:
+    """Measure every quantity the workbook holds data for.
+
+    Parameters
+    ----------
+    wb : Workbook or str or Path
+        A workbook from :func:`measure.workbook.read_workbook`, or its path.
+    photo_estimator : callable, optional
+        ``f(path, side=..., annotate_to=...)`` for heap photos; default
+        ``measure.repose.angle_from_photo`` (imported on use).
+    outliers : str
+        Outlier rule for every quantity, see :func:`measure.estimate.screen_outliers`.
+    annotate_dir : str or Path, optional
+        Folder for annotated heap photos (none written if None).
+    r2_min : float
+        R^2 that the initial linear window of a compression curve must reach.
+    g : float
+        Gravitational acceleration for camera tracks [m/s^2].
+
+    Returns
+    -------
+    Measurement
+    """
+    if not isinstance(wb, Workbook):
+        wb = read_workbook(wb)
+    rule, limit = parse_outlier_rule(outliers)
+    quantities: dict = {}
+    quantities.update(specimen_statistics(wb.sheet("specimens"), outliers=outliers))
+    quantities.update(density_estimates(wb, outliers=outliers))
+    quantities.update(restitution_estimates(wb, outliers=outliers, g=g))
+    quantities.update(friction_estimates(wb, outliers=outliers))
+    quantities.update(compression_estimates(wb, outliers=outliers, r2_min=r2_min))
+    repose, notes = repose_estimate(wb, photo_estimator=photo_estimator, outliers=outliers,
+                                    annotate_dir=annotate_dir)
+    if repose is not None:
+        quantities["repose_angle_deg"] = repose
+    quantities = {n: quantities[n] for n in sorted(quantities, key=_order_key)}
+    sheets = {name: {"file": str(s.file), "sha256": s.sha256, "rows": len(s.rows),
+                     "required": list(s.required), "optional": list(s.optional),
+                     "covariates": list(s.covariates)} for name, s in wb.sheets.items()}
+    info = {"source": str(wb.source), "root": str(wb.root), "files": dict(wb.files),
+            "sheets": sheets, "unknown_sheets": list(wb.unknown_sheets)}
+    if wb.unknown_sheets:
+        notes.append(f"unknown sheets kept but not used: {', '.join(wb.unknown_sheets)}")
+    estimator = photo_estimator or (_default_photo_estimator() if "repose" in wb.sheets else None)
+    options = {"outliers": rule if limit is None else f"{rule}:{limit:g}", "r2_min": r2_min, "g": g,
+               "photo_estimator": None if estimator is None else
+               f"{getattr(estimator, '__module__', '?')}.{getattr(estimator, '__qualname__', repr(estimator))}"}
+    return Measurement(material=str(wb.meta["material"]), quantities=quantities, workbook=info,
+                       meta=dict(wb.meta), provenance=Provenance(inputs=dict(wb.files), options=options),
+                       notes=notes)

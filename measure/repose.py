@@ -1,0 +1,788 @@
+"""Angle of repose: from a side photo of a heap, from a heap profile, from a rotating drum.
+
+The lab photographs the heap left by the plate-withdrawal ("pumping plate") rig from the side
+and measures the slope of its flank(s) relative to the floor, as the source paper does with
+Matlab and Origin (binarise, extract the boundary curve, fit it). :func:`angle_from_photo`
+does the whole chain on the photo, step by step:
+
+1. *Grayscale*: luminance (ITU-R BT.601 weights).
+2. *Illumination flattening*: a smooth field (a quadratic in x and y of the log intensity) is
+   fitted to block medians of the background and divided out, removing light gradients and
+   vignetting; repeated twice with the new classification.
+3. *Otsu threshold* [Otsu1979]_ of the flattened image (lightly denoised). *Polarity*: the
+   class that fills the bottom centre of the frame (the floor in front of the heap) is the
+   object, so the heap may be darker or lighter than the background.
+4. *Morphological clean-up* [Soille2003]_: an opening removes thin grid lines and speckle, a
+   closing bridges the gaps between surface segments, holes are filled, and the largest
+   connected object (heap and floor) is kept.
+5. *Top boundary*: in every column, the top-most object pixel.
+6. *Floor line*: a Hough-type search [DudaHart1972]_ over near-horizontal lines for the one
+   supported by most boundary points with (almost) none below it (the floor is the lower
+   envelope of the boundary; a flat heap top is not), refined by the robust line of step 8
+   through the locally flat boundary points near it. Its tilt is the camera roll; it is reported and removed: heights are measured
+   perpendicular to the floor and distances along it.
+7. *Flanks*: on the boundary smoothed by a running median and a Gaussian, the crest is the
+   highest point and each toe is where the boundary falls to the floor (half the lower band
+   height) walking out from the crest. A flank is fitted between the *outermost* point above
+   ``band[1]`` of the crest height and the next point below ``band[0]`` (15 % .. 85 % by
+   default), which excludes the rounded crest and the concave toe.
+8. *Robust straight line* through the raw boundary points of the band: least squares with
+   outlier rejection (3.5 robust standard deviations), started from the Theil-Sen line
+   [Theil1950]_ [Sen1968]_. It is the mean (least-squares) slope of a rough flank, but gives
+   no weight to outliers such as a segment sticking out. The flank angle is the arctangent of
+   the slope, and the angle of repose the mean of the measured flanks.
+
+:func:`angle_from_profile` applies steps 7-8 to a height profile (e.g. the surface of a
+simulated heap), and :func:`angle_from_drum` measures the dynamic angle of the free surface
+in a rotating drum (e.g. a GranuDrum image) by a central-chord fit.
+
+References
+----------
+.. [Otsu1979] N. Otsu, "A threshold selection method from gray-level histograms", IEEE Trans.
+   Systems, Man, and Cybernetics 9(1), 62-66 (1979).
+.. [Soille2003] P. Soille, *Morphological Image Analysis*, 2nd ed., Springer (2003).
+.. [DudaHart1972] R. O. Duda, P. E. Hart, "Use of the Hough transformation to detect lines and
+   curves in pictures", Comm. ACM 15(1), 11-15 (1972).
+.. [Theil1950] H. Theil, "A rank-invariant method of linear and polynomial regression analysis",
+   Proc. Kon. Ned. Akad. v. Wetensch. A 53, 386-392 (1950).
+.. [Sen1968] P. K. Sen, "Estimates of the regression coefficient based on Kendall's tau",
+   J. Amer. Statist. Assoc. 63(324), 1379-1389 (1968).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+from scipy import ndimage, stats
+
+from demcal.errors import InputError
+
+SIDES = ("left", "right", "both", "auto")
+FLANKS = ("left", "right")
+
+
+@dataclass(frozen=True)
+class FlankFit:
+    """Straight-line fit to one flank, in the floor frame (u along the floor, h above it).
+
+    Attributes
+    ----------
+    side : str
+        "left" (rising toward the crest) or "right" (falling from it).
+    angle_deg : float
+        Flank angle relative to the floor [deg].
+    slope : float
+        Fitted dh/du (robust line, step 8 of :func:`angle_from_photo`) [-].
+    intercept : float
+        Fitted h at u = 0 [px for photos, m for profiles].
+    slope_ci : tuple of float
+        95 % confidence interval of the slope [-].
+    u_range : tuple of float
+        Along-floor range of the points used [px or m].
+    h_range : tuple of float
+        Height band used, ``band`` times the crest height [px or m].
+    residual_sd : float
+        Standard deviation of the residuals about the line [px or m].
+    n_points : int
+        Number of boundary points fitted.
+    """
+
+    side: str
+    angle_deg: float
+    slope: float
+    intercept: float
+    slope_ci: tuple
+    u_range: tuple
+    h_range: tuple
+    residual_sd: float
+    n_points: int
+
+    @property
+    def angle_ci_deg(self) -> tuple:
+        """95 % confidence interval of ``angle_deg`` from ``slope_ci`` [deg]."""
+        a = sorted(abs(math.degrees(math.atan(s))) for s in self.slope_ci)
+        return (a[0], a[1])
+
+    def to_dict(self) -> dict:
+        return {"side": self.side, "angle_deg": self.angle_deg, "angle_ci_deg": list(self.angle_ci_deg),
+                "slope": self.slope, "intercept": self.intercept, "slope_ci": list(self.slope_ci),
+                "u_range": list(self.u_range), "h_range": list(self.h_range),
+                "residual_sd": self.residual_sd, "n_points": self.n_points}
+
+
+@dataclass(frozen=True)
+class ReposeAngle:
+    """Angle of repose of a heap.
+
+    Attributes
+    ----------
+    angle_deg : float
+        Mean of the measured flank angles [deg].
+    flanks : dict
+        ``{"left": deg or None, "right": deg or None}``: each flank's angle [deg], None if not
+        measured.
+    base_tilt_deg : float
+        Tilt of the floor line in the image, counter-clockwise positive (the floor rises to the
+        right) [deg]; the angles are measured relative to the floor. 0 for a profile.
+    boundary : tuple of numpy.ndarray
+        Top boundary ``(x, y)``: for a photo in image pixels (y down); for a profile the
+        profile itself ``(x, z)`` [m].
+    fits : dict
+        ``{"left"/"right": FlankFit}`` for the measured flanks.
+    annotated : str or None
+        Path of the annotated image, if one was written.
+    unit : str
+        Length unit of ``boundary``, ``fits`` and ``crest_height``: "px" or "m".
+    crest_height : float
+        Height of the (smoothed) crest above the floor [px or m].
+    scale_m_per_px : float or None
+        Image scale when given [m/px]; converts pixel lengths to metres.
+    """
+
+    angle_deg: float
+    flanks: dict
+    base_tilt_deg: float
+    boundary: tuple
+    fits: dict
+    annotated: str | None = None
+    unit: str = "px"
+    crest_height: float = float("nan")
+    scale_m_per_px: float | None = None
+
+    @property
+    def crest_height_m(self) -> float | None:
+        """Crest height [m], when the unit or the scale allows it."""
+        if self.unit == "m":
+            return self.crest_height
+        return None if self.scale_m_per_px is None else self.crest_height * self.scale_m_per_px
+
+    def to_dict(self) -> dict:
+        return {"angle_deg": self.angle_deg, "flanks": dict(self.flanks),
+                "base_tilt_deg": self.base_tilt_deg,
+                "fits": {k: v.to_dict() for k, v in self.fits.items()},
+                "annotated": self.annotated, "unit": self.unit,
+                "crest_height": self.crest_height, "crest_height_m": self.crest_height_m,
+                "scale_m_per_px": self.scale_m_per_px,
+                "boundary": {"x": np.asarray(self.boundary[0]).tolist(),
+                             "y": np.asarray(self.boundary[1]).tolist()}}
+
+
+@dataclass(frozen=True)
+class DrumAngle:
+    """Dynamic angle of repose of the free surface in a rotating drum.
+
+    Attributes
+    ----------
+    angle_deg : float
+        Angle of the central chord of the free surface to the image rows [deg].
+    centre_px : tuple of float
+        Drum centre ``(x, y)`` in the image [px].
+    radius_px : float
+        Drum radius (inside of the rim) [px].
+    boundary : tuple of numpy.ndarray
+        Free-surface points ``(x, y)`` [px, y down].
+    fit : FlankFit
+        Robust line through the central chord (u = x, h = -y, in image pixels).
+    annotated : str or None
+        Path of the annotated image, if one was written.
+    """
+
+    angle_deg: float
+    centre_px: tuple
+    radius_px: float
+    boundary: tuple
+    fit: FlankFit
+    annotated: str | None = None
+
+    def to_dict(self) -> dict:
+        return {"angle_deg": self.angle_deg, "centre_px": list(self.centre_px),
+                "radius_px": self.radius_px, "fit": self.fit.to_dict(), "annotated": self.annotated,
+                "boundary": {"x": np.asarray(self.boundary[0]).tolist(),
+                             "y": np.asarray(self.boundary[1]).tolist()}}
+
+
+# ----------------------------------------------------------------------------------------
+# Public functions
+
+def angle_from_photo(image, side="both", annotate_to=None, scale_mm_per_px=None, *,
+                     band=(0.15, 0.85), smooth=0.02, max_tilt_deg=10.0, min_points=20):
+    """Angle of repose from a side photo of a heap [deg], measured relative to the floor.
+
+    Follows the steps in the module docstring: grayscale, illumination flattening, Otsu
+    threshold with automatic polarity, morphological clean-up, top boundary, floor line and
+    its tilt, crest and toes, robust line through the ``band`` of each flank.
+
+    Parameters
+    ----------
+    image : str, pathlib.Path or numpy.ndarray
+        Photo file, or an image array (grey ``(h, w)`` or BGR ``(h, w, 3)``, any numeric or
+        boolean dtype). The floor must be visible and run into the bottom centre of the frame.
+    side : {"both", "left", "right", "auto"}
+        Flank(s) to measure: "left" rises toward the crest, "right" falls from it. A heap from
+        the plate-withdrawal rig has one flank; a cone has two. "auto" measures every flank
+        whose toe is inside the frame.
+    annotate_to : str or pathlib.Path, optional
+        Write an annotated copy (boundary, floor line, fitted lines, angles) to this file.
+    scale_mm_per_px : float, optional
+        Image scale [mm/px]; only used to report lengths in metres (angles need none).
+    band : (float, float)
+        Lower and upper fraction of the crest height between which each flank is fitted [-].
+    smooth : float
+        Width of the boundary smoothing used to find crest, toes and band, as a fraction of
+        the boundary length [-] (the fit itself uses the raw boundary).
+    max_tilt_deg : float
+        Largest floor tilt searched for [deg].
+    min_points : int
+        Fewest boundary points a flank fit accepts.
+
+    Returns
+    -------
+    ReposeAngle
+
+    Raises
+    ------
+    InputError
+        Unreadable image, no heap or no floor found, or a requested flank not measurable.
+    """
+    if side not in SIDES:
+        raise InputError(f"side must be one of {SIDES}, got {side!r}")
+    band = _check_band(band)
+    scale = _check_scale(scale_mm_per_px)
+    bgr, name = _read_image(image)
+    h, w = bgr.shape[:2]
+    gray = _grayscale(bgr)
+    mask = _segment(gray, name)
+    x, y = _top_boundary(mask)
+    if x.size < 0.2 * w:
+        raise InputError(f"{name}: no heap found (the object covers only {x.size} of {w} columns)")
+    tol = max(2.0, 0.003 * max(h, w))
+    a, b, tilt = _floor_line(x, y, max_tilt_deg, tol, name)
+    # Floor frame: u along the floor, h perpendicular to it, up (image y is down).
+    norm = math.hypot(1.0, b)
+    u = (x + b * (y - a)) / norm
+    hgt = (b * x - (y - a)) / norm
+    fits, crest, reasons = _flank_fits(u, hgt, band, smooth, min_points)
+    fits = _select(fits, reasons, side, name)
+    flanks = {s: (fits[s].angle_deg if s in fits else None) for s in FLANKS}
+    angle = float(np.mean([f.angle_deg for f in fits.values()]))
+    annotated = None
+    if annotate_to is not None:
+        annotated = _annotate_photo(bgr, x, y, a, b, fits, crest, angle, tilt, annotate_to)
+    return ReposeAngle(angle_deg=angle, flanks=flanks, base_tilt_deg=tilt,
+                       boundary=(x.astype(float), y.astype(float)), fits=fits,
+                       annotated=annotated, unit="px", crest_height=crest, scale_m_per_px=scale)
+
+
+def angle_from_profile(x, z, side="both", *, band=(0.15, 0.85), smooth=0.02, floor_z=0.0,
+                       min_points=5):
+    """Angle of repose of a heap height profile [deg], with the flank rule of the photos.
+
+    Steps 7-8 of :func:`angle_from_photo` on a profile: crest = top of the smoothed profile,
+    toes where it falls back to the floor, robust line through the ``band`` of each flank.
+
+    Parameters
+    ----------
+    x, z : array_like
+        Profile: horizontal position and surface height [m], e.g. the top of a simulated heap
+        on a grid (need not be sorted; NaN heights are dropped).
+    side : {"both", "left", "right", "auto"}
+        Flank(s) to measure, as in :func:`angle_from_photo`.
+    band : (float, float)
+        Fractions of the crest height between which each flank is fitted [-].
+    smooth : float
+        Smoothing width as a fraction of the profile length [-].
+    floor_z : float
+        Height of the floor [m].
+    min_points : int
+        Fewest profile points a flank fit accepts.
+
+    Returns
+    -------
+    ReposeAngle
+        With ``unit="m"``, ``base_tilt_deg=0`` and ``boundary=(x, z)`` sorted by x.
+    """
+    if side not in SIDES:
+        raise InputError(f"side must be one of {SIDES}, got {side!r}")
+    band = _check_band(band)
+    x = np.asarray(x, dtype=float).ravel()
+    z = np.asarray(z, dtype=float).ravel()
+    if x.shape != z.shape:
+        raise InputError(f"angle_from_profile: x and z differ in length ({x.size} and {z.size})")
+    ok = np.isfinite(x) & np.isfinite(z)
+    if np.any(~np.isfinite(x)):
+        raise InputError("angle_from_profile: x has non-finite values")
+    x, z = x[ok], z[ok]
+    if x.size < 2 * min_points or np.unique(x).size < 3:
+        raise InputError(f"angle_from_profile: too few profile points ({x.size})")
+    order = np.argsort(x, kind="stable")
+    x, z = x[order], z[order]
+    fits, crest, reasons = _flank_fits(x, z - float(floor_z), band, smooth, min_points)
+    fits = _select(fits, reasons, side, "profile")
+    flanks = {s: (fits[s].angle_deg if s in fits else None) for s in FLANKS}
+    angle = float(np.mean([f.angle_deg for f in fits.values()]))
+    return ReposeAngle(angle_deg=angle, flanks=flanks, base_tilt_deg=0.0, boundary=(x, z),
+                       fits=fits, annotated=None, unit="m", crest_height=crest)
+
+
+def angle_from_drum(image, *, chord=0.5, rim_margin=0.04, annotate_to=None):
+    """Dynamic angle of repose in a rotating drum from a side image of its free surface [deg].
+
+    The drum is the region not connected to the bright frame corners (found by Otsu
+    threshold and connected components); its centre and radius come from the area and
+    centroid of that region. Inside the drum, less a ``rim_margin`` ring, the dark powder is
+    thresholded (Otsu) and cleaned; the free surface is its top boundary in each column. A
+    robust line (as for the heap flanks) is fitted to the central ``chord`` fraction of the free surface's
+    horizontal extent; its angle to the image rows is the dynamic angle of repose.
+
+    Parameters
+    ----------
+    image : str, pathlib.Path or numpy.ndarray
+        Drum image: dark powder, bright air, drum seen end-on.
+    chord : float
+        Central fraction of the free surface fitted, in (0, 1] [-].
+    rim_margin : float
+        Ring inside the rim left out, as a fraction of the radius [-].
+    annotate_to : str or pathlib.Path, optional
+        Write an annotated copy to this file.
+
+    Returns
+    -------
+    DrumAngle
+    """
+    if not 0.0 < float(chord) <= 1.0:
+        raise InputError(f"chord must be in (0, 1], got {chord!r}")
+    if not 0.0 <= float(rim_margin) < 0.5:
+        raise InputError(f"rim_margin must be in [0, 0.5), got {rim_margin!r}")
+    bgr, name = _read_image(image)
+    gray = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    h, w = gray.shape
+    dark = gray < _otsu(gray)
+    # Outside of the drum: bright regions touching the frame.
+    lab, n = ndimage.label(~dark)
+    border = np.unique(np.r_[lab[0], lab[-1], lab[:, 0], lab[:, -1]])
+    outside = np.isin(lab, border[border > 0])
+    drum = ndimage.binary_fill_holes(~outside)
+    area = drum.sum()
+    if area < 0.05 * h * w:
+        raise InputError(f"{name}: no drum found")
+    cy, cx = ndimage.center_of_mass(drum)
+    radius = math.sqrt(area / math.pi)
+    yy, xx = np.mgrid[0:h, 0:w]
+    r = np.hypot(xx - cx, yy - cy)
+    inner = r < radius * (1.0 - rim_margin)
+    powder = dark & inner
+    rad = max(1, int(round(0.01 * radius)))
+    powder = _largest(cv2.morphologyEx(powder.astype(np.uint8), cv2.MORPH_OPEN, _disk(rad)) > 0)
+    if powder.sum() < 0.05 * area:
+        raise InputError(f"{name}: no powder bed found in the drum")
+    # Free surface: top-most powder pixel of each column that has air above it.
+    cols = np.nonzero(powder.any(axis=0))[0]
+    top = powder[:, cols].argmax(axis=0)
+    inner_top = inner[:, cols].argmax(axis=0)
+    keep = (top > inner_top + 1) & (np.hypot(cols - cx, top - cy) < radius * (1.0 - 2 * rim_margin))
+    bx, by = cols[keep].astype(float), top[keep].astype(float)
+    if bx.size < 10:
+        raise InputError(f"{name}: no free surface found in the drum")
+    mid, span = 0.5 * (bx.min() + bx.max()), bx.max() - bx.min()
+    sel = np.abs(bx - mid) <= 0.5 * chord * span
+    slope, intercept, lo, hi = _robust_line(bx[sel], -by[sel])
+    res = -by[sel] - (intercept + slope * bx[sel])
+    angle = abs(math.degrees(math.atan(slope)))
+    fit = FlankFit(side="left" if slope > 0 else "right", angle_deg=angle, slope=slope,
+                   intercept=intercept, slope_ci=(lo, hi),
+                   u_range=(float(bx[sel].min()), float(bx[sel].max())),
+                   h_range=(float(-by[sel].max()), float(-by[sel].min())),
+                   residual_sd=float(np.std(res, ddof=2)), n_points=int(sel.sum()))
+    annotated = None
+    if annotate_to is not None:
+        img = bgr.copy()
+        t = _thickness(img)
+        cv2.circle(img, (int(round(cx)), int(round(cy))), int(round(radius)), (255, 255, 0), t,
+                   cv2.LINE_AA)
+        _polyline(img, bx, by, (0, 255, 255), t)
+        x0, x1 = fit.u_range
+        _line(img, (x0, -(intercept + slope * x0)), (x1, -(intercept + slope * x1)), (0, 0, 255), 2 * t)
+        _label(img, f"drum angle {angle:.1f} deg", (10, 10 + 14 * t), t)
+        annotated = _write(img, annotate_to)
+    return DrumAngle(angle_deg=angle, centre_px=(float(cx), float(cy)), radius_px=radius,
+                     boundary=(bx, by), fit=fit, annotated=annotated)
+
+
+# ----------------------------------------------------------------------------------------
+# Checks and image input
+
+def _check_band(band):
+    try:
+        lo, hi = (float(v) for v in band)
+    except (TypeError, ValueError):
+        raise InputError(f"band must be (low, high) fractions of the crest height, got {band!r}") from None
+    if not 0.0 < lo < hi < 1.0:
+        raise InputError(f"band must satisfy 0 < low < high < 1, got {band!r}")
+    return lo, hi
+
+
+def _check_scale(scale_mm_per_px):
+    if scale_mm_per_px is None:
+        return None
+    try:
+        s = float(scale_mm_per_px)
+    except (TypeError, ValueError):
+        raise InputError(f"scale_mm_per_px must be a number, got {scale_mm_per_px!r}") from None
+    if not (math.isfinite(s) and s > 0):
+        raise InputError(f"scale_mm_per_px must be positive, got {scale_mm_per_px!r}")
+    return s * 1e-3
+
+
+def _read_image(image):
+    """BGR uint8 image and a name for messages, from a path or an array."""
+    if isinstance(image, (str, Path)):
+        path = Path(image)
+        name = f"image {str(path)!r}"
+        if not path.is_file():
+            raise InputError(f"{name}: file not found")
+        data = np.fromfile(str(path), dtype=np.uint8)
+        img = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
+        if img is None:
+            raise InputError(f"{name}: not a readable image file")
+        return img, name
+    name = "image array"
+    if not isinstance(image, np.ndarray):
+        raise InputError(f"image must be a file path or a numpy array, got {type(image).__name__}")
+    a = image
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[..., 0]
+    if a.ndim == 3 and a.shape[2] == 4:
+        a = a[..., :3]
+    if not (a.ndim == 2 or (a.ndim == 3 and a.shape[2] == 3)):
+        raise InputError(f"{name}: expected shape (h, w) or (h, w, 3), got {image.shape}")
+    if min(a.shape[:2]) < 32:
+        raise InputError(f"{name}: too small ({a.shape[0]} x {a.shape[1]} px)")
+    if a.dtype == bool:
+        a = a.astype(np.uint8) * 255
+    elif a.dtype != np.uint8:
+        a = a.astype(np.float64)
+        if not np.all(np.isfinite(a)):
+            raise InputError(f"{name}: has non-finite values")
+        lo, hi = a.min(), a.max()
+        a = np.zeros(a.shape, np.uint8) if hi <= lo else np.rint(255 * (a - lo) / (hi - lo)).astype(np.uint8)
+    if a.ndim == 2:
+        a = cv2.cvtColor(a, cv2.COLOR_GRAY2BGR)
+    return np.ascontiguousarray(a), name
+
+
+# ----------------------------------------------------------------------------------------
+# Steps 1-5: grayscale, flattening, threshold, clean-up, boundary
+
+def _otsu(values):
+    """Otsu's threshold [Otsu1979]_ of an array of values."""
+    from skimage.filters import threshold_otsu
+    return float(threshold_otsu(np.asarray(values, dtype=np.float32)))
+
+
+def _grayscale(bgr):
+    """Step 1: luminance (ITU-R BT.601 weights, as OpenCV's BGR2GRAY)."""
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
+
+
+def _disk(radius):
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+
+
+def _object_class(img):
+    """Step 3: Otsu threshold; the class filling the bottom centre of the frame is the object."""
+    above = img > _otsu(img)
+    h, w = img.shape
+    patch = above[int(0.93 * h):, int(0.3 * w):int(0.7 * w) + 1]
+    return above if patch.mean() >= 0.5 else ~above
+
+
+def _illumination(img, background):
+    """Step 2: smooth multiplicative light field fitted to block medians of the background.
+
+    log(field) is a quadratic in normalised x, y, fitted by least squares to the log of the
+    median of each block that is mostly background. None if too few such blocks.
+    """
+    h, w = img.shape
+    b = max(8, min(h, w) // 20)
+    xs, ys, vs = [], [], []
+    for r0 in range(0, h - b + 1, b):
+        for c0 in range(0, w - b + 1, b):
+            bg = background[r0:r0 + b, c0:c0 + b]
+            if bg.mean() >= 0.6:
+                v = np.median(img[r0:r0 + b, c0:c0 + b][bg])
+                if v > 0:
+                    xs.append(c0 + 0.5 * b)
+                    ys.append(r0 + 0.5 * b)
+                    vs.append(math.log(v))
+    if len(vs) < 12:
+        return None
+    xs, ys, vs = np.array(xs), np.array(ys), np.array(vs)
+
+    def design(xv, yv):
+        xn, yn = 2 * xv / w - 1, 2 * yv / h - 1
+        return np.stack([np.ones_like(xn), xn, yn, xn * xn, xn * yn, yn * yn], axis=-1)
+
+    coef, *_ = np.linalg.lstsq(design(xs, ys), vs, rcond=None)
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    log_field = design(xx, yy) @ coef.astype(np.float32)
+    # Keep the extrapolation (below the background, into the floor) within the observed range.
+    log_field = np.clip(log_field, vs.min() - 0.2, vs.max() + 0.2)
+    return np.exp(log_field).astype(np.float32)
+
+
+def _largest(mask):
+    n, lab, st, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    if n <= 1:
+        return np.zeros(mask.shape, bool)
+    return lab == 1 + int(np.argmax(st[1:, cv2.CC_STAT_AREA]))
+
+
+def _segment(gray, name):
+    """Steps 2-4: flattened, thresholded, cleaned mask of the heap and floor."""
+    h, w = gray.shape
+    diag = math.hypot(h, w)
+    r_open = max(1, int(round(0.003 * diag)))
+    r_close = max(2, int(round(0.008 * diag)))
+
+    def clean(obj):
+        m = cv2.morphologyEx(obj.astype(np.uint8), cv2.MORPH_OPEN, _disk(r_open))
+        m = cv2.morphologyEx(m, cv2.MORPH_CLOSE, _disk(r_close))
+        return _largest(ndimage.binary_fill_holes(m > 0))
+
+    img = cv2.GaussianBlur(gray, (0, 0), max(1.0, diag / 1000.0))
+    mask = clean(_object_class(img))
+    for _ in range(2):
+        # Background well away from the object (its light level is what is fitted).
+        background = cv2.erode((~mask).astype(np.uint8), _disk(r_close)) > 0
+        field = _illumination(img, background)
+        if field is None:
+            break
+        mask = clean(_object_class(img / field))
+    if mask.sum() < 0.01 * h * w:
+        raise InputError(f"{name}: no heap found (no object large enough after thresholding)")
+    return mask
+
+
+def _top_boundary(mask):
+    """Step 5: column index and row of the top-most object pixel of each column."""
+    has = mask.any(axis=0)
+    cols = np.nonzero(has)[0]
+    return cols.astype(float), mask[:, cols].argmax(axis=0).astype(float)
+
+
+# ----------------------------------------------------------------------------------------
+# Step 6: floor line
+
+def _floor_line(x, y, max_tilt_deg, tol, name):
+    """Lower-envelope line y = a + b x of the boundary (image y down); tilt in degrees.
+
+    For each candidate tilt (0.05 deg steps) every boundary point proposes the line through
+    it; a line's support is the number of points within ``tol`` of it, and it is admissible
+    if at most 3 % of the points lie more than ``tol`` below it. The best admissible line is
+    refined by a robust fit to the locally flat points within 3 ``tol`` of it.
+    """
+    n = x.size
+    allowed = max(2, int(0.03 * n))
+    need = max(30, int(0.05 * n))
+    xc = x - x.mean()
+    best = (-1, 0.0, 0.0)
+    for tilt in np.arange(-max_tilt_deg, max_tilt_deg + 1e-9, 0.05):
+        b = -math.tan(math.radians(tilt))
+        # Intercepts of the points; candidate bands [c_k, c_k + 2 tol] in image rows.
+        c = np.sort(y - b * xc)
+        end = np.searchsorted(c, c + 2 * tol, side="right")
+        support = end - np.searchsorted(c, c, side="left")
+        ok = (n - end) <= allowed                       # few points below the band
+        if not ok.any():
+            continue
+        k = int(np.argmax(np.where(ok, support, -1)))
+        if support[k] > best[0]:
+            best = (int(support[k]), b, float(c[k]) + tol)
+    if best[0] < need:
+        raise InputError(f"{name}: no floor line found (need a straight floor edge visible over "
+                         f"at least {need} columns, within +-{max_tilt_deg} deg of horizontal)")
+    _, b, c0 = best
+    a = c0 - b * x.mean()
+    # Refine on the floor points near the line: locally flat boundary only (not the edges of
+    # a stray segment or the toe), robust line, three times.
+    dy = np.gradient(ndimage.uniform_filter1d(y, 5), x)
+    flat = np.abs(dy) <= math.tan(math.radians(max_tilt_deg)) + 0.05
+    for _ in range(3):
+        near = flat & (np.abs(y - (a + b * x)) <= 3 * tol)
+        if near.sum() < need // 2:
+            break
+        b, a = _robust_line(x[near], y[near])[:2]
+    return float(a), float(b), float(-math.degrees(math.atan(b)))
+
+
+# ----------------------------------------------------------------------------------------
+# Steps 7-8: crest, toes, band, robust line
+
+def _robust_line(u, h, clip=3.5, max_iter=20):
+    """Straight line h = intercept + slope u by least squares with outlier rejection.
+
+    Started from the Theil-Sen line [Theil1950]_ [Sen1968]_, which no outlier can pull far;
+    then points farther than ``clip`` robust standard deviations (1.4826 x the median absolute
+    residual) from the line are set aside and the line refitted by least squares until the set
+    is stable. A rough flank keeps all its points (the result is its mean, least-squares
+    slope), while a segment sticking out or a remnant of the background is rejected.
+
+    Returns slope, intercept and the 95 % interval of the slope (t distribution).
+    """
+    u = np.asarray(u, dtype=float)
+    h = np.asarray(h, dtype=float)
+    step = max(1, u.size // 2000)                # Theil-Sen's pairwise slopes grow as n^2
+    slope, intercept = stats.theilslopes(h[::step], u[::step])[:2]
+    keep = np.ones(u.size, bool)
+    for _ in range(max_iter):
+        res = h - (intercept + slope * u)
+        scale = 1.4826 * np.median(np.abs(res[keep] - np.median(res[keep])))
+        new = np.abs(res) <= clip * scale if scale > 0 else np.ones(u.size, bool)
+        if new.sum() < 3:
+            break
+        if np.array_equal(new, keep) and _ > 0:
+            break
+        keep = new
+        slope, intercept = np.polyfit(u[keep], h[keep], 1)
+    n = int(keep.sum())
+    res = h[keep] - (intercept + slope * u[keep])
+    if n > 2:
+        se = math.sqrt(np.sum(res ** 2) / (n - 2) / np.sum((u[keep] - u[keep].mean()) ** 2))
+        half = float(stats.t.ppf(0.975, n - 2)) * se
+    else:
+        half = float("nan")
+    return float(slope), float(intercept), float(slope - half), float(slope + half)
+
+
+def _flank_fits(u, h, band, smooth, min_points):
+    """Fit each flank of the profile h(u) (u sorted or not). Returns (fits, crest height,
+    reasons a flank could not be measured)."""
+    order = np.argsort(u, kind="stable")
+    u, h = u[order], h[order]
+    span = u[-1] - u[0]
+    du = np.median(np.diff(u))
+    if not (span > 0 and du > 0):
+        raise InputError("the boundary/profile has no horizontal extent")
+    grid = np.arange(u[0], u[-1] + 0.5 * du, du)
+    hg = np.interp(grid, u, h)
+    win = max(3, int(round(smooth * span / du)) | 1)
+    hs = ndimage.median_filter(hg, size=win, mode="nearest")
+    hs = ndimage.gaussian_filter1d(hs, win / 4.0, mode="nearest")
+    ic = int(np.argmax(hs))
+    crest = float(hs[ic])
+    lo, hi = band
+    if not crest > 0:
+        raise InputError("no heap above the floor")
+    fits, reasons = {}, {}
+    for side in FLANKS:
+        walk = np.arange(ic, -1, -1) if side == "left" else np.arange(ic, grid.size)
+        down = np.nonzero(hs[walk] <= 0.5 * lo * crest)[0]
+        if down.size == 0:
+            reasons[side] = "does not reach the floor inside the image (no toe)"
+            continue
+        walk = walk[:down[0] + 1]                       # crest .. toe
+        k_hi = np.nonzero(hs[walk] >= hi * crest)[0][-1]
+        k_lo = k_hi + np.nonzero(hs[walk[k_hi:]] <= lo * crest)[0][0]
+        ua, ub = sorted((grid[walk[k_hi]], grid[walk[k_lo]]))
+        sel = (u >= ua) & (u <= ub)
+        if sel.sum() < min_points:
+            reasons[side] = f"too few boundary points in the fitting band ({int(sel.sum())} < {min_points})"
+            continue
+        slope, intercept, s_lo, s_hi = _robust_line(u[sel], h[sel])
+        angle = math.degrees(math.atan(slope if side == "left" else -slope))
+        if angle <= 0:
+            reasons[side] = f"is not a slope down to the floor (fitted angle {angle:.1f} deg)"
+            continue
+        res = h[sel] - (intercept + slope * u[sel])
+        fits[side] = FlankFit(side=side, angle_deg=angle, slope=slope, intercept=intercept,
+                              slope_ci=(s_lo, s_hi), u_range=(float(ua), float(ub)),
+                              h_range=(lo * crest, hi * crest),
+                              residual_sd=float(np.std(res, ddof=2)) if sel.sum() > 2 else 0.0,
+                              n_points=int(sel.sum()))
+    return fits, crest, reasons
+
+
+def _select(fits, reasons, side, name):
+    """Keep the requested flanks; a requested flank that could not be measured is an error."""
+    wanted = FLANKS if side in ("both", "auto") else (side,)
+    if side != "auto":
+        missing = [s for s in wanted if s not in fits]
+        if missing:
+            why = "; ".join(f"{s} flank {reasons[s]}" for s in missing)
+            hint = " (try side='auto' or the other side)" if side == "both" or len(fits) else ""
+            raise InputError(f"{name}: {why}{hint}")
+        return {s: fits[s] for s in wanted}
+    if not fits:
+        why = "; ".join(f"{s} flank {reasons[s]}" for s in FLANKS)
+        raise InputError(f"{name}: no heap flank found ({why})")
+    return dict(fits)
+
+
+# ----------------------------------------------------------------------------------------
+# Annotation
+
+def _thickness(img):
+    return max(1, int(round(max(img.shape[:2]) / 700)))
+
+
+def _polyline(img, x, y, colour, t):
+    pts = np.round(np.c_[x, y] * 16).astype(np.int32)
+    cv2.polylines(img, [pts], False, colour, t, cv2.LINE_AA, 4)
+
+
+def _line(img, p, q, colour, t):
+    cv2.line(img, (int(round(p[0] * 16)), int(round(p[1] * 16))),
+             (int(round(q[0] * 16)), int(round(q[1] * 16))), colour, t, cv2.LINE_AA, 4)
+
+
+def _label(img, text, org, t, colour=(255, 255, 255)):
+    scale = 0.5 * t + 0.2
+    org = (int(org[0]), int(org[1]))
+    cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0), 3 * t, cv2.LINE_AA)
+    cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, colour, t, cv2.LINE_AA)
+
+
+def _write(img, path):
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        ok, buf = cv2.imencode(path.suffix or ".png", img)
+    except cv2.error:
+        ok = False
+    if not ok:
+        raise InputError(f"annotate_to: cannot encode an image as {path.suffix!r} ({path})")
+    buf.tofile(str(path))
+    return str(path)
+
+
+def _annotate_photo(bgr, x, y, a, b, fits, crest, angle, tilt, path):
+    img = bgr.copy()
+    t = _thickness(img)
+    w = img.shape[1]
+    norm = math.hypot(1.0, b)
+
+    def to_image(u, hh):                    # floor frame -> image
+        return (u + b * hh) / norm, a + (b * u - hh) / norm
+
+    _polyline(img, x, y, (0, 255, 255), t)
+    _line(img, (0, a), (w - 1, a + b * (w - 1)), (255, 255, 0), t)
+    for side, f in fits.items():
+        # The fitted line from the floor to the crest height, thick over the band used.
+        u_floor = -f.intercept / f.slope
+        u_top = (crest - f.intercept) / f.slope
+        _line(img, to_image(u_floor, 0.0), to_image(u_top, crest), (0, 0, 255), t)
+        ua, ub = f.u_range
+        _line(img, to_image(ua, f.intercept + f.slope * ua), to_image(ub, f.intercept + f.slope * ub),
+              (255, 0, 255), 3 * t)
+        um = 0.5 * (ua + ub)
+        px, py = to_image(um, f.intercept + f.slope * um + 0.12 * crest)
+        text = f"{side} {f.angle_deg:.1f} deg"
+        tw = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, 0.5 * t + 0.2, t)[0][0]
+        px = px - tw - 10 * t if side == "left" else px + 10 * t
+        _label(img, text, (min(max(px, 5), w - tw - 5), max(py, 20 * t)), t)
+    _label(img, f"angle of repose {angle:.1f} deg   floor tilt {tilt:+.2f} deg", (10, 10 + 14 * t), t)
+    return _write(img, path)

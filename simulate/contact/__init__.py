@@ -1,0 +1,1 @@
+"""Contact laws: one module per law, small numba evaluators called from the engine's loops."""

@@ -1,0 +1,200 @@
+"""Materials and the per-pair contact parameters of the Hertz-Mindlin law.
+
+Each material has a density, Poisson's ratio and shear modulus; each unordered pair of
+materials has a coefficient of restitution, a static and a rolling friction coefficient (the
+"interaction" table of EDEM). ``MaterialTable.compile()`` turns them into dense
+``(n_materials, n_materials)`` arrays of the pair constants used by the kernels, so the contact
+loop never recomputes E*, G* or the damping ratio.
+
+Example
+-------
+>>> table = MaterialTable()
+>>> table.add_material("particle", density=912.0, poisson_ratio=0.25, shear_modulus=1e7)
+>>> table.add_material("steel", density=7850.0, poisson_ratio=0.3, shear_modulus=8e10)
+>>> table.set_pair("particle", "particle", restitution=0.3, static_friction=0.65, rolling_friction=0.53)
+>>> table.set_pair("particle", "steel", restitution=0.35, static_friction=0.2, rolling_friction=0.15)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from demcal.errors import InputError
+from simulate.contact.hertz_mindlin import damping_ratio, effective_modulus, effective_shear_modulus
+
+
+@dataclass(frozen=True)
+class Material:
+    """A solid material.
+
+    Attributes
+    ----------
+    name : str
+    density : float
+        [kg/m3]
+    poisson_ratio : float
+        [-]
+    shear_modulus : float
+        [Pa]
+    """
+
+    name: str
+    density: float
+    poisson_ratio: float
+    shear_modulus: float
+
+    @property
+    def youngs_modulus(self) -> float:
+        """E = 2 G (1 + nu) [Pa]."""
+        return 2.0 * self.shear_modulus * (1.0 + self.poisson_ratio)
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "density": self.density, "poisson_ratio": self.poisson_ratio,
+                "shear_modulus": self.shear_modulus}
+
+
+@dataclass(frozen=True)
+class PairContact:
+    """Interaction parameters of one unordered material pair.
+
+    Attributes
+    ----------
+    restitution : float
+        Coefficient of restitution e in (0, 1] [-].
+    static_friction : float
+        Coulomb coefficient mu_s [-].
+    rolling_friction : float
+        Rolling friction coefficient mu_r [-] (dimensionless, as EDEM's; the torque is
+        mu_r F_n times a lever arm, see ``simulate.contact.rolling``).
+    """
+
+    restitution: float
+    static_friction: float
+    rolling_friction: float
+
+    def to_dict(self) -> dict:
+        return {"restitution": self.restitution, "static_friction": self.static_friction,
+                "rolling_friction": self.rolling_friction}
+
+
+@dataclass(frozen=True)
+class PairArrays:
+    """Dense pair-constant tables indexed ``[material_i, material_j]`` (symmetric).
+
+    Attributes
+    ----------
+    e_star : ndarray
+        Effective Young's modulus E* [Pa].
+    g_star : ndarray
+        Effective shear modulus G* [Pa].
+    damping : ndarray
+        2 sqrt(5/6) |beta| [-], the factor of the normal and tangential dashpots.
+    mu_s, mu_r : ndarray
+        Static and rolling friction coefficients [-].
+    """
+
+    e_star: np.ndarray
+    g_star: np.ndarray
+    damping: np.ndarray
+    mu_s: np.ndarray
+    mu_r: np.ndarray
+
+
+class MaterialTable:
+    """Materials by name and the contact parameters of every pair used."""
+
+    def __init__(self):
+        self._materials: dict[str, Material] = {}
+        self._pairs: dict[frozenset, PairContact] = {}
+
+    # ---- building ----
+    def add_material(self, name: str, *, density: float, poisson_ratio: float,
+                     shear_modulus: float) -> int:
+        """Add a material; returns its index. Density [kg/m3], shear modulus [Pa]."""
+        if name in self._materials:
+            raise InputError(f"material {name!r} is already defined")
+        for label, value in (("density", density), ("shear_modulus", shear_modulus)):
+            if not (np.isfinite(value) and value > 0):
+                raise InputError(f"material {name!r}: {label} must be > 0, got {value!r}")
+        if not -1.0 < poisson_ratio < 0.5:
+            raise InputError(f"material {name!r}: poisson_ratio must be in (-1, 0.5), got {poisson_ratio!r}")
+        self._materials[name] = Material(name, float(density), float(poisson_ratio), float(shear_modulus))
+        return len(self._materials) - 1
+
+    def set_pair(self, a: str, b: str, *, restitution: float, static_friction: float,
+                 rolling_friction: float) -> None:
+        """Set the interaction of materials ``a`` and ``b`` (order does not matter)."""
+        for name in (a, b):
+            self.index(name)
+        if not 0.0 < restitution <= 1.0:
+            raise InputError(f"pair {a}-{b}: restitution must be in (0, 1], got {restitution!r}")
+        for label, value in (("static_friction", static_friction), ("rolling_friction", rolling_friction)):
+            if not value >= 0.0:
+                raise InputError(f"pair {a}-{b}: {label} must be >= 0, got {value!r}")
+        self._pairs[frozenset((a, b))] = PairContact(float(restitution), float(static_friction),
+                                                     float(rolling_friction))
+
+    # ---- reading ----
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(self._materials)
+
+    def index(self, name: str) -> int:
+        """Index of material ``name``; an unknown name lists the defined ones."""
+        try:
+            return list(self._materials).index(name)
+        except ValueError:
+            raise InputError(f"unknown material {name!r}; defined: {', '.join(self._materials) or 'none'}") from None
+
+    def material(self, name: str) -> Material:
+        return self._materials[self.names[self.index(name)]]
+
+    def pair(self, a: str, b: str) -> PairContact:
+        try:
+            return self._pairs[frozenset((a, b))]
+        except KeyError:
+            raise InputError(f"no contact parameters for material pair {a}-{b}; use set_pair()") from None
+
+    def compile(self) -> PairArrays:
+        """Dense pair tables for the kernels. Pairs never set get NaN (a contact between them
+        is refused when the body or wall is added, see ``Simulation``)."""
+        n = len(self._materials)
+        out = {k: np.full((n, n), np.nan) for k in ("e_star", "g_star", "damping", "mu_s", "mu_r")}
+        mats = list(self._materials.values())
+        for i, mi in enumerate(mats):
+            for j, mj in enumerate(mats):
+                out["e_star"][i, j] = effective_modulus(mi.youngs_modulus, mi.poisson_ratio,
+                                                        mj.youngs_modulus, mj.poisson_ratio)
+                out["g_star"][i, j] = effective_shear_modulus(mi.shear_modulus, mi.poisson_ratio,
+                                                              mj.shear_modulus, mj.poisson_ratio)
+                p = self._pairs.get(frozenset((mi.name, mj.name)))
+                if p is not None:
+                    out["damping"][i, j] = 2.0 * np.sqrt(5.0 / 6.0) * abs(damping_ratio(p.restitution))
+                    out["mu_s"][i, j] = p.static_friction
+                    out["mu_r"][i, j] = p.rolling_friction
+        return PairArrays(**out)
+
+    def has_pair(self, a: str, b: str) -> bool:
+        return frozenset((a, b)) in self._pairs
+
+    def to_dict(self) -> dict:
+        return {"materials": [m.to_dict() for m in self._materials.values()],
+                "pairs": [{"a": sorted(k)[0], "b": sorted(k)[-1], **p.to_dict()}
+                          for k, p in self._pairs.items()]}
+
+    @classmethod
+    def from_parameters(cls, params, particle: str = "particle", wall: str = "steel") -> "MaterialTable":
+        """The two-material table (particle, wall) of a ``DEMParameters``."""
+        table = cls()
+        table.add_material(particle, density=params.particle_density_kg_m3,
+                           poisson_ratio=params.poisson_ratio, shear_modulus=params.shear_modulus_pa)
+        table.add_material(wall, density=params.wall_density_kg_m3,
+                           poisson_ratio=params.wall_poisson_ratio,
+                           shear_modulus=params.wall_shear_modulus_pa)
+        table.set_pair(particle, particle, restitution=params.e_pp, static_friction=params.mu_s_pp,
+                       rolling_friction=params.mu_r_pp)
+        table.set_pair(particle, wall, restitution=params.e_pw, static_friction=params.mu_s_pw,
+                       rolling_friction=params.mu_r_pw)
+        return table

@@ -1,0 +1,94 @@
+"""Ready-made scenes: the paper's repose-angle case (plate withdrawal from a carton).
+
+``build_paper_repose_case(params, seed)`` builds, with the public ``Simulation`` API, the
+"pumping plate" test of the source paper as the benchmark and the repose rig use it: a carton
+of inside size 200 x 100 x 250 mm (x along its length; open top; the end plate at x = 200 mm),
+standing on an infinite steel floor z = 0; 500 segments inserted at random orientations in the
+region x 10-190, y 10-90, z 100-240 mm during the first second; the end plate lifted at
+0.1 m/s from t = 4 s, so that the segments flow out under it onto the floor outside the carton
+(the carton side walls stop at x = 200 mm). Carton, plate and floor are all the wall material
+of ``params`` (steel). The run length (10 s in the paper) is the caller's ``sim.run(duration)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+from simulate.clump import segment_from_parameters
+from simulate.engine import Simulation
+from simulate.factory import ParticleFactory
+from simulate.materials import MaterialTable
+from simulate.params import DEMParameters
+from simulate.walls import Plane, Rectangle
+
+#: The paper's time step [s].
+PAPER_TIME_STEP = 7.43678e-5
+#: The paper's total simulated time [s].
+PAPER_DURATION = 10.0
+
+
+def build_paper_repose_case(params: DEMParameters, seed, n_clumps: int = 500, *,
+                            box_length: float = 0.200, box_width: float = 0.100,
+                            box_height: float = 0.250, lift_speed: float = 0.1,
+                            lift_time: float = 4.0, fill_time: float = 1.0,
+                            fill_margin: float = 0.010, fill_bottom: float = 0.100,
+                            fill_top: float = 0.240, dt: float = PAPER_TIME_STEP,
+                            outside_length: float = 0.45, force: bool = False,
+                            chunk_steps: int = 200) -> Simulation:
+    """The paper's plate-withdrawal repose case, ready to ``run``.
+
+    Parameters
+    ----------
+    params : DEMParameters
+        Materials, contact parameters, segment shape, mass model and rolling lever.
+    seed : int or numpy.random.Generator
+        Seed of the particle factory (positions and orientations).
+    n_clumps : int
+        Segments to insert.
+    box_length, box_width, box_height : float
+        Carton inside [m] (x, y, z).
+    lift_speed : float
+        End-plate lifting speed [m/s].
+    lift_time : float
+        Time at which the plate starts to rise [s].
+    fill_time : float
+        Segments are inserted uniformly over [0, fill_time] [s].
+    fill_margin, fill_bottom, fill_top : float
+        Factory region: x and y inset by ``fill_margin`` from the carton walls, z from
+        ``fill_bottom`` to ``fill_top`` [m].
+    dt : float
+        Time step [s].
+    outside_length : float
+        Floor length beyond the plate kept inside the simulation domain [m].
+    force : bool
+        Allow a time step above half the Rayleigh time.
+    chunk_steps : int
+        Steps between returns to Python.
+
+    Returns
+    -------
+    Simulation
+        With the factory attached; walls named ``floor``, ``carton x-``, ``carton y-``,
+        ``carton y+`` and ``end plate`` (``sim.wall_index(name)``).
+    """
+    materials = MaterialTable.from_parameters(params)
+    L, W, H = box_length, box_width, box_height
+    sim = Simulation(materials,
+                     domain_lo=(-0.05, -outside_length, -0.02),
+                     domain_hi=(L + outside_length, W + outside_length, H + 0.05),
+                     dt=dt, rolling_lever=params.rolling_lever, force=force, chunk_steps=chunk_steps)
+    template = sim.add_template(segment_from_parameters(params))
+    sim.add_wall(Plane((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), material="steel", name="floor"))
+    x_axis, y_axis, z_axis = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
+    sim.add_wall(Rectangle((0.0, W / 2, H / 2), y_axis, z_axis, W / 2, H / 2, "steel", name="carton x-"))
+    sim.add_wall(Rectangle((L / 2, 0.0, H / 2), x_axis, z_axis, L / 2, H / 2, "steel", name="carton y-"))
+    sim.add_wall(Rectangle((L / 2, W, H / 2), x_axis, z_axis, L / 2, H / 2, "steel", name="carton y+"))
+    sim.add_wall(Rectangle((L, W / 2, H / 2), y_axis, z_axis, W / 2, H / 2, "steel",
+                           velocity=(0.0, 0.0, lift_speed), move_start=lift_time, move_stop=math.inf,
+                           name="end plate"))
+    sim.add_factory(ParticleFactory(template, n_clumps,
+                                    (fill_margin, fill_margin, fill_bottom),
+                                    (L - fill_margin, W - fill_margin, fill_top),
+                                    seed=seed, start_time=0.0, end_time=fill_time,
+                                    material="particle"))
+    return sim

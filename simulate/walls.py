@@ -1,0 +1,189 @@
+"""Rigid walls: infinite planes and finite rectangles, static or translating.
+
+``Plane(point, normal)``
+    One-sided infinite plane (the floor); spheres are kept on the side ``normal`` points to.
+``Rectangle(centre, axis_u, axis_v, half_u, half_v)``
+    Finite, two-sided rectangle (carton sides, the lifted end plate). A sphere touches it at the
+    closest point of the rectangle, so its edges and corners push correctly.
+``box_rectangles(lo, hi, faces=...)``
+    The faces of an axis-aligned box as rectangles (e.g. an open carton: no "z+" face).
+
+A wall may translate at a constant ``velocity`` [m/s] during ``[move_start, move_stop)`` [s]
+(e.g. the end plate lifted at 0.1 m/s from t = 4 s). The wall's velocity enters the relative
+contact velocity, so friction and damping see the moving surface.
+
+Kernel layout (``pack_walls``): one row per wall in float64 arrays ``kind`` (0 plane,
+1 rectangle), ``origin``, ``normal``, ``axis_u``, ``axis_v``, ``half`` (2), ``velocity``,
+``window`` (2) and int ``material``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from demcal.errors import InputError
+from simulate._jit import evaluator
+
+PLANE, RECTANGLE = 0, 1
+
+
+def _unit(vector, name):
+    v = np.asarray(vector, dtype=float).reshape(3)
+    n = np.linalg.norm(v)
+    if not (np.isfinite(n) and n > 0):
+        raise InputError(f"{name} must be a non-zero 3-vector, got {vector!r}")
+    return v / n
+
+
+@dataclass(frozen=True)
+class Plane:
+    """Infinite one-sided plane through ``point`` [m] with unit ``normal`` toward the particles."""
+
+    point: tuple
+    normal: tuple
+    material: str = "steel"
+    velocity: tuple = (0.0, 0.0, 0.0)
+    move_start: float = 0.0
+    move_stop: float = math.inf
+    name: str = "plane"
+
+    def to_dict(self) -> dict:
+        return {"kind": "plane", "point": list(self.point), "normal": list(self.normal),
+                "material": self.material, "velocity": list(self.velocity),
+                "move_start": self.move_start, "move_stop": self.move_stop, "name": self.name}
+
+
+@dataclass(frozen=True)
+class Rectangle:
+    """Finite two-sided rectangle: ``centre`` [m], in-plane unit axes ``axis_u``, ``axis_v``
+    (orthogonal) and half-sizes ``half_u``, ``half_v`` [m] along them."""
+
+    centre: tuple
+    axis_u: tuple
+    axis_v: tuple
+    half_u: float
+    half_v: float
+    material: str = "steel"
+    velocity: tuple = (0.0, 0.0, 0.0)
+    move_start: float = 0.0
+    move_stop: float = math.inf
+    name: str = "rectangle"
+
+    def to_dict(self) -> dict:
+        return {"kind": "rectangle", "centre": list(self.centre), "axis_u": list(self.axis_u),
+                "axis_v": list(self.axis_v), "half_u": self.half_u, "half_v": self.half_v,
+                "material": self.material, "velocity": list(self.velocity),
+                "move_start": self.move_start, "move_stop": self.move_stop, "name": self.name}
+
+
+BOX_FACES = ("x-", "x+", "y-", "y+", "z-", "z+")
+
+
+def box_rectangles(lo, hi, faces=BOX_FACES, material: str = "steel", name: str = "box") -> list[Rectangle]:
+    """Rectangles on the chosen ``faces`` of the axis-aligned box ``lo``-``hi`` [m]."""
+    lo = np.asarray(lo, dtype=float)
+    hi = np.asarray(hi, dtype=float)
+    if not np.all(hi > lo):
+        raise InputError(f"box hi {hi.tolist()} must exceed lo {lo.tolist()} on every axis")
+    unknown = [f for f in faces if f not in BOX_FACES]
+    if unknown:
+        raise InputError(f"unknown box face(s) {unknown}; valid: {', '.join(BOX_FACES)}")
+    mid = (lo + hi) / 2.0
+    half = (hi - lo) / 2.0
+    eye = np.eye(3)
+    out = []
+    for face in faces:
+        axis = "xyz".index(face[0])
+        u_axis, v_axis = [a for a in range(3) if a != axis]
+        centre = mid.copy()
+        centre[axis] = lo[axis] if face[1] == "-" else hi[axis]
+        out.append(Rectangle(tuple(centre), tuple(eye[u_axis]), tuple(eye[v_axis]),
+                             float(half[u_axis]), float(half[v_axis]), material, name=f"{name} {face}"))
+    return out
+
+
+def pack_walls(walls, material_index) -> dict:
+    """Kernel arrays of ``walls`` (see module docstring); ``material_index(name) -> int``."""
+    n = len(walls)
+    out = {"kind": np.zeros(n, np.int64), "origin": np.zeros((n, 3)), "normal": np.zeros((n, 3)),
+           "axis_u": np.zeros((n, 3)), "axis_v": np.zeros((n, 3)), "half": np.zeros((n, 2)),
+           "velocity": np.zeros((n, 3)), "window": np.zeros((n, 2)), "material": np.zeros(n, np.int64)}
+    for k, w in enumerate(walls):
+        if isinstance(w, Plane):
+            out["kind"][k] = PLANE
+            out["origin"][k] = np.asarray(w.point, float)
+            out["normal"][k] = _unit(w.normal, f"wall {w.name!r} normal")
+        elif isinstance(w, Rectangle):
+            u = _unit(w.axis_u, f"wall {w.name!r} axis_u")
+            v = _unit(w.axis_v, f"wall {w.name!r} axis_v")
+            if abs(u @ v) > 1e-9:
+                raise InputError(f"wall {w.name!r}: axis_u and axis_v must be orthogonal")
+            if not (w.half_u > 0 and w.half_v > 0):
+                raise InputError(f"wall {w.name!r}: half sizes must be > 0, got {w.half_u!r}, {w.half_v!r}")
+            out["kind"][k] = RECTANGLE
+            out["origin"][k] = np.asarray(w.centre, float)
+            out["axis_u"][k] = u
+            out["axis_v"][k] = v
+            out["normal"][k] = np.cross(u, v)
+            out["half"][k] = (w.half_u, w.half_v)
+        else:
+            raise InputError(f"not a wall: {w!r}")
+        out["velocity"][k] = np.asarray(w.velocity, float).reshape(3)
+        if not w.move_stop >= w.move_start:
+            raise InputError(f"wall {w.name!r}: move_stop ({w.move_stop!r}) before move_start ({w.move_start!r})")
+        out["window"][k] = (w.move_start, w.move_stop)
+        out["material"][k] = material_index(w.material)
+    return out
+
+
+@evaluator
+def wall_distance(kind, origin, normal, axis_u, axis_v, half, k, x, y, z):
+    """Distance [m] from point (x, y, z) to wall ``k`` and the unit normal from the wall to it.
+
+    Plane: signed distance along its normal (negative behind it). Rectangle: distance to the
+    closest point of the rectangle (its edges included); at zero distance the rectangle normal.
+    """
+    dx = x - origin[k, 0]
+    dy = y - origin[k, 1]
+    dz = z - origin[k, 2]
+    nx = normal[k, 0]
+    ny = normal[k, 1]
+    nz = normal[k, 2]
+    if kind[k] == PLANE:
+        return dx * nx + dy * ny + dz * nz, nx, ny, nz
+    du = dx * axis_u[k, 0] + dy * axis_u[k, 1] + dz * axis_u[k, 2]
+    dv = dx * axis_v[k, 0] + dy * axis_v[k, 1] + dz * axis_v[k, 2]
+    hu = half[k, 0]
+    hv = half[k, 1]
+    du = -hu if du < -hu else (hu if du > hu else du)
+    dv = -hv if dv < -hv else (hv if dv > hv else dv)
+    # vector from the closest point of the rectangle to the sphere centre
+    px = dx - du * axis_u[k, 0] - dv * axis_v[k, 0]
+    py = dy - du * axis_u[k, 1] - dv * axis_v[k, 1]
+    pz = dz - du * axis_u[k, 2] - dv * axis_v[k, 2]
+    d = math.sqrt(px * px + py * py + pz * pz)
+    if d == 0.0:
+        return 0.0, nx, ny, nz
+    inv = 1.0 / d
+    return d, px * inv, py * inv, pz * inv
+
+
+def wall_distances(packed: dict, points) -> np.ndarray:
+    """Distances [m] from ``points`` (n, 3) to every wall of ``pack_walls`` output, (n, n_walls);
+    the numpy twin of ``wall_distance`` (signed for planes)."""
+    p = np.asarray(points, dtype=float).reshape(-1, 3)
+    n_walls = packed["kind"].shape[0]
+    out = np.empty((p.shape[0], n_walls))
+    for k in range(n_walls):
+        d = p - packed["origin"][k]
+        if packed["kind"][k] == PLANE:
+            out[:, k] = d @ packed["normal"][k]
+            continue
+        u, v = packed["axis_u"][k], packed["axis_v"][k]
+        du = np.clip(d @ u, -packed["half"][k, 0], packed["half"][k, 0])
+        dv = np.clip(d @ v, -packed["half"][k, 1], packed["half"][k, 1])
+        out[:, k] = np.linalg.norm(d - du[:, None] * u - dv[:, None] * v, axis=1)
+    return out
