@@ -235,3 +235,53 @@ def register(subparsers) -> None:
                      "the closest), comma-separated, in the units of --levels")
     bbd.add_argument("--seed", type=int, default=0, help="seed of the multi-start search")
     bbd.set_defaults(handler=_run_bbd)
+
+    cal = subparsers.add_parser(
+        "calibrate", help="whole calibration: measure, screening, climb, Box-Behnken, "
+        "optimisation, validation (runs the DEM)",
+        description="Calibrate DEM parameters from a lab workbook: measure it, run the "
+        "Plackett-Burman screening, steepest climb and Box-Behnken designs on the repose rig, "
+        "optimise to the measured angle and validate. Finished DEM runs are kept in DIR/runs "
+        "and never redone, so a killed campaign resumes where it stopped.")
+    cal.add_argument("workbook", type=Path, help="lab workbook (.xlsx, or a folder of CSVs "
+                     "or holding workbook.xlsx)")
+    cal.add_argument("--out", required=True, type=Path, help="output folder")
+    cal.add_argument("--profile", choices=("quick", "paper"), default="quick",
+                     help="repose-rig profile (default quick; paper = the source paper's case)")
+    cal.add_argument("--workers", type=int, default=None,
+                     help="local worker processes (default: all cores)")
+    cal.add_argument("--scheduler", help="Dask scheduler address (e.g. tcp://host:8786); "
+                     "runs go to that cluster")
+    cal.add_argument("--levels", choices=("minmax", "sd"), default="minmax",
+                     help="screening levels: measured min/max (default, as the paper) or mean -+ sd")
+    cal.add_argument("--seed", type=int, default=1, help="seed of the design runs (default 1)")
+    cal.add_argument("--no-report", action="store_true", help="skip the HTML/PDF report")
+    cal.set_defaults(handler=_run_calibrate)
+
+
+def _run_calibrate(args) -> int:
+    from analyse.campaign import CampaignConfig, calibrate
+    from measure.workbook import resolve_workbook
+
+    workbook = resolve_workbook(args.workbook)
+    config = CampaignConfig(profile=args.profile, levels=args.levels, seed=args.seed,
+                            scheduler=args.scheduler,
+                            **({} if args.workers is None else {"workers": args.workers}))
+    if config.workers < 1:
+        raise InputError(f"--workers must be >= 1, got {config.workers}")
+    results = calibrate(workbook, args.out, config)
+    opt = results["validation"]
+    print(f"target angle {results['target_angle_deg']:.2f} deg; calibrated "
+          + ", ".join(f"{k} = {v:.4g}" for k, v in opt["settings"].items()))
+    val = opt["result"]
+    print(f"validation: mean {val['mean']:.2f} deg over {len(opt['responses'])} seeds, "
+          f"relative error {val['relative_error_pct']:.2f} %")
+    print(f"results: {args.out / 'results.json'}")
+    if not args.no_report:
+        try:
+            from report.render import build_report
+        except ModuleNotFoundError:
+            return 0
+        paths = build_report(args.out)
+        print("report: " + ", ".join(str(p) for p in paths))
+    return 0

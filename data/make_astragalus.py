@@ -123,6 +123,70 @@ def incline(rng, n=20):
     return frame
 
 
+def compression(rng, specimen_frame, curves_dir, n=10):
+    """Radial compression to 30 % of the thickness (texture analyser, 5 mm/s), Poisson's ratio
+    0.25 +- 0.02 (normalised strains), and force curves whose initial slope gives
+    E = k t0 / (w L) = 2 G (1 + nu) with G = the paper-default shear modulus."""
+    nu = exact_sample(rng, n, PAPER["segment"]["poisson_ratio"], 0.02, 0.1, 0.45)
+    G = PAPER["segment"]["particle_shear_modulus_pa"]["value"]
+    E = 2 * G * (1 + PAPER["segment"]["poisson_ratio"]) * (1 + 0.05 * rng.standard_normal(n))
+    curves_dir.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for i in range(n):
+        spec = specimen_frame.iloc[i]
+        t0 = float(spec["diameter_mm"]) * (1 + 0.01 * rng.standard_normal())
+        w0 = float(spec["diameter_mm"]) * (1 + 0.01 * rng.standard_normal())
+        eps_t = 0.30 * (0.55 + 0.1 * rng.random())  # permanent part of the 30 % deformation
+        eps_w = nu[i] * eps_t
+        k = E[i] * (w0 * 1e-3) * (float(spec["length_mm"]) * 1e-3) / (t0 * 1e-3)  # N/m
+        name = f"curves/C{i + 1:02d}.csv"
+        force_curve(rng, k, 0.30 * t0).to_csv(OUT / name, index=False)
+        rows.append({"specimen_id": spec["specimen_id"], "axis": "radial",
+                     "width_before_mm": round(w0, 3), "width_after_mm": round(w0 * (1 + eps_w), 3),
+                     "thickness_before_mm": round(t0, 3), "thickness_after_mm": round(t0 * (1 - eps_t), 3),
+                     "curve_file": name})
+    frame = pd.DataFrame(rows)
+    return frame
+
+
+def force_curve(rng, k_n_per_m, max_disp_mm, rate_mm_s=5.0, hz=500.0):
+    """Loading curve of a texture analyser: linear (stiffness k) over the first ~6 % of the
+    thickness, then softening as the tissue yields; 0.3 N load-cell noise."""
+    d = np.arange(0.0, max_disp_mm, rate_mm_s / hz)  # mm
+    d_lin = 0.2 * max_disp_mm
+    k = k_n_per_m * 1e-3  # N/mm
+    f = np.where(d <= d_lin, k * d, k * d_lin + 0.45 * k * (d - d_lin) - 0.02 * k * (d - d_lin) ** 2 / d_lin)
+    f = f + rng.normal(0.0, 0.3, d.size)
+    return pd.DataFrame({"displacement_mm": d.round(4), "force_N": f.round(3)})
+
+
+#: True flank angles of the example heap photos [deg]; their mean is the paper's 35.79 deg.
+PHOTO_ANGLES = (35.20, 36.50, 35.67)
+
+
+def repose(rng, photos_dir):
+    """Photos of the heap left by the plate-withdrawal rig (one flank, to the right), rendered
+    from profiles of known angle under varied light, noise, blur, JPEG and slight camera roll."""
+    from simulate.render import Lighting, heap_photo, heap_profile
+
+    photos_dir.mkdir(parents=True, exist_ok=True)
+    rows, truth = [], []
+    for i, angle in enumerate(PHOTO_ANGLES):
+        x, z = heap_profile(None, angle, height_m=0.10, plateau_m=0.20, floor_m=0.06,
+                            roughness_m=0.002, rng=rng)
+        roll = float(rng.uniform(-1.5, 1.5))
+        light = Lighting(gradient=float(rng.uniform(0.1, 0.35)), direction_deg=float(rng.uniform(0, 360)))
+        img = heap_photo(x, z, rng=rng, camera_roll_deg=roll, light=light, noise_sd=4.0,
+                         blur_px=1.0, jpeg_quality=int(rng.integers(70, 92)))
+        name = f"photos/heap_{i + 1}.jpg"
+        cv2.imwrite(str(OUT / name), img, [cv2.IMWRITE_JPEG_QUALITY, 95])
+        rows.append({"photo_id": f"P{i + 1}", "file": name, "side": "right",
+                     "operator": "op1", "date": "2023-05-12"})
+        truth.append({"photo_id": f"P{i + 1}", "file": name, "true_angle_deg": angle,
+                      "camera_roll_deg": roll})
+    return pd.DataFrame(rows), truth
+
+
 def write_workbook(sheets: dict[str, pd.DataFrame], path: Path):
     with pd.ExcelWriter(path, engine="openpyxl") as xl:
         for name, frame in sheets.items():
@@ -147,9 +211,14 @@ def meta():
 def main():
     rng = np.random.default_rng(SEED)
     OUT.mkdir(exist_ok=True)
-    sheets = {"meta": meta(), "specimens": specimens(rng), "density": density(rng),
-              "drop": drops(rng, OUT / "tracks"), "incline": incline(rng)}
+    spec = specimens(rng)
+    photos, truth = repose(rng, OUT / "photos")
+    sheets = {"meta": meta(), "specimens": spec, "density": density(rng),
+              "drop": drops(rng, OUT / "tracks"), "incline": incline(rng),
+              "compression": compression(rng, spec, OUT / "curves"), "repose": photos}
     write_workbook(sheets, OUT / "workbook.xlsx")
+    (OUT / "truth.json").write_text(json.dumps({"note": SYNTHETIC_NOTE, "seed": SEED,
+                                                "photos": truth}, indent=2) + "\n")
     print(f"wrote {OUT / 'workbook.xlsx'}")
 
 

@@ -14,15 +14,15 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "measure", help="measure every material parameter from a lab workbook",
         description="Read a lab workbook (.xlsx or a folder of <sheet>.csv), validate it and "
-                    "estimate every quantity with sd, n, 95 %% CI, rows used and rejected, and "
+                    "estimate every quantity with sd, n, 95 % CI, rows used and rejected, and "
                     "source hashes. Prints a table; writes the full result as JSON with --json.")
     p.add_argument("workbook", help="the .xlsx file or the folder of CSV sheets")
     p.add_argument("--json", dest="json_out", metavar="OUT", help="write the measurement to this JSON file")
     p.add_argument("--annotate-dir", metavar="DIR",
                    help="folder for annotated heap photos (default: OUT's name + '_annotated' beside OUT)")
-    p.add_argument("--outliers", default="mad", metavar="RULE",
+    p.add_argument("--outliers", default="none", metavar="RULE",
                    help=f"outlier rule: {', '.join(OUTLIER_RULES)}, optionally with a limit "
-                        "('mad:3.5' = modified z-score limit, 'grubbs:0.05' = significance); default mad")
+                        "('mad:3.5' = modified z-score limit, 'grubbs:0.05' = significance); default none: every row is used")
     p.add_argument("--r2-min", type=float, default=0.995,
                    help="R^2 the initial linear part of a compression curve must reach (default 0.995)")
     p.set_defaults(handler=run)

@@ -66,7 +66,7 @@ def envelope_density(mass, length, diameter):
     return np.asarray(mass, dtype=float) / cylinder_volume(length, diameter)
 
 
-def density_estimates(workbook, *, outliers="mad") -> dict:
+def density_estimates(workbook, *, outliers="none") -> dict:
     """``particle_density_kg_m3`` (``density`` sheet) and ``envelope_density_kg_m3`` (``specimens``).
 
     Each is the mean of the per-row densities; a quantity is returned only when its sheet is

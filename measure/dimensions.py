@@ -37,7 +37,7 @@ def cylinder_volume(length, diameter):
     return np.pi * diameter**2 * length / 4.0
 
 
-def specimen_statistics(specimens, *, outliers="mad") -> dict:
+def specimen_statistics(specimens, *, outliers="none") -> dict:
     """Length, diameter and mass statistics of the ``specimens`` sheet.
 
     Parameters
@@ -53,6 +53,8 @@ def specimen_statistics(specimens, *, outliers="mad") -> dict:
         ``length_mm`` [mm], ``diameter_mm`` [mm] and ``mass_g`` [g], named and expressed in
         the units of lab-workbook.md. ``extra`` holds the minimum and maximum of the rows used.
     """
+    if specimens is None or not specimens.rows:
+        return {}
     frame = specimens.frame
     records = [{"id": frame.at[r, "specimen_id"], "covariates": specimens.covariates_of(r)}
                for r in specimens.rows]

@@ -249,7 +249,7 @@ def _segment_length(workbook, sheet, row) -> float:
     return specimens.frame.at[matches[0], "length_mm"] * MILLIMETRE
 
 
-def compression_estimates(workbook, *, outliers="mad", r2_min=0.995, min_points=5,
+def compression_estimates(workbook, *, outliers="none", r2_min=0.995, min_points=5,
                           trigger=0.01) -> dict:
     """``poisson_ratio``, ``elastic_modulus_pa`` and ``shear_modulus_pa`` from the ``compression`` sheet.
 

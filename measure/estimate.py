@@ -221,7 +221,7 @@ def mean_sd_ci95(values) -> tuple[float, float, tuple[float, float]]:
 
 
 def summarise(name: str, values, rows, *, unit: str, source: dict, method: str,
-              outliers="mad", rejected=None, extra=None, per_row=None) -> Estimate:
+              outliers="none", rejected=None, extra=None, per_row=None) -> Estimate:
     """Screen per-row values for outliers and summarise them as an :class:`Estimate`.
 
     Parameters

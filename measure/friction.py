@@ -113,7 +113,7 @@ def rolling_from_rollout(slope_angle, release_height, runout):
     return H * s / (H * c + S * s)
 
 
-def friction_estimates(workbook, *, outliers="mad") -> dict:
+def friction_estimates(workbook, *, outliers="none") -> dict:
     """``static_friction.<surface>`` and ``rolling_friction.<surface>`` from the ``incline`` sheet.
 
     Slide rows give static friction, roll rows rolling friction; a surface's tilt-angle and

@@ -142,7 +142,8 @@ def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir) -> Estim
     if annotate_dir is not None:
         Path(annotate_dir).mkdir(parents=True, exist_ok=True)
     for r in sheet.rows:
-        rel, side = f.at[r, "file"], f.at[r, "side"] if "side" in f else "both"
+        rel = f.at[r, "file"]
+        side = f.at[r, "side"] if "side" in f else "both"
         annotate_to = None
         if annotate_dir is not None:
             annotate_to = Path(annotate_dir) / f"{_safe_name(f.at[r, 'photo_id'])}_annotated.png"
@@ -185,7 +186,7 @@ def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir) -> Estim
     return replace(est, extra=dict(est.extra, **extra))
 
 
-def repose_estimate(wb: Workbook, *, photo_estimator=None, outliers="mad", annotate_dir=None):
+def repose_estimate(wb: Workbook, *, photo_estimator=None, outliers="none", annotate_dir=None):
     """``repose_angle_deg`` from the photos, overridden by ``meta`` ``target_repose_deg`` if given.
 
     Returns
@@ -218,7 +219,7 @@ def repose_estimate(wb: Workbook, *, photo_estimator=None, outliers="mad", annot
     return override, notes
 
 
-def measure_workbook(wb, *, photo_estimator=None, outliers="mad", annotate_dir=None,
+def measure_workbook(wb, *, photo_estimator=None, outliers="none", annotate_dir=None,
                      r2_min=0.995, g=STANDARD_GRAVITY) -> Measurement:
     """Measure every quantity the workbook holds data for.
 
@@ -230,7 +231,9 @@ def measure_workbook(wb, *, photo_estimator=None, outliers="mad", annotate_dir=N
         ``f(path, side=..., annotate_to=...)`` for heap photos; default
         ``measure.repose.angle_from_photo`` (imported on use).
     outliers : str
-        Outlier rule for every quantity, see :func:`measure.estimate.screen_outliers`.
+        Outlier rule for every quantity, see :func:`measure.estimate.screen_outliers`. The
+        default ``"none"`` uses every valid row, as the lab's own means do; ``"mad"`` or
+        ``"grubbs"`` screen each quantity and list every rejected row with its reason.
     annotate_dir : str or Path, optional
         Folder for annotated heap photos (none written if None).
     r2_min : float

@@ -583,7 +583,7 @@ def _floor_line(x, y, max_tilt_deg, tol, name):
     For each candidate tilt (0.05 deg steps) every boundary point proposes the line through
     it; a line's support is the number of points within ``tol`` of it, and it is admissible
     if at most 3 % of the points lie more than ``tol`` below it. The best admissible line is
-    refined by a robust fit to the locally flat points within 3 ``tol`` of it.
+    refined by a robust fit to the locally flat points within 2 ``tol`` of it.
     """
     n = x.size
     allowed = max(2, int(0.03 * n))
@@ -609,10 +609,13 @@ def _floor_line(x, y, max_tilt_deg, tol, name):
     a = c0 - b * x.mean()
     # Refine on the floor points near the line: locally flat boundary only (not the edges of
     # a stray segment or the toe), robust line, three times.
+    # Points within a few tolerances of a steep part are left out: the fillets that the
+    # morphological closing leaves where a segment meets the floor.
     dy = np.gradient(ndimage.uniform_filter1d(y, 5), x)
-    flat = np.abs(dy) <= math.tan(math.radians(max_tilt_deg)) + 0.05
+    steep = np.abs(dy) > math.tan(math.radians(max_tilt_deg)) + 0.05
+    flat = ~(ndimage.maximum_filter1d(steep.astype(np.uint8), 2 * int(4 * tol) + 1) > 0)
     for _ in range(3):
-        near = flat & (np.abs(y - (a + b * x)) <= 3 * tol)
+        near = flat & (np.abs(y - (a + b * x)) <= 2 * tol)
         if near.sum() < need // 2:
             break
         b, a = _robust_line(x[near], y[near])[:2]

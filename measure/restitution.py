@@ -344,7 +344,7 @@ def from_camera_track(t, y, *, g=STANDARD_GRAVITY, contact_band=None, min_points
                     impact_time_method=method, contact_band=float(contact_band))
 
 
-def restitution_estimates(workbook, *, outliers="mad", g=STANDARD_GRAVITY) -> dict:
+def restitution_estimates(workbook, *, outliers="none", g=STANDARD_GRAVITY) -> dict:
     """``restitution.<pair>`` for every pair of the ``drop`` sheet.
 
     Each drop gives one e: from its camera track when the row has a ``track_file``

@@ -26,9 +26,12 @@ Rules applied by :func:`read_workbook`:
   ``Steel`` is ``steel``). Anything else (empty, ``steel`` as a pair, ``particle steel``, a
   number) is unknown. ``mode`` is ``slide`` or ``roll``, ``axis`` ``radial`` or ``axial``,
   ``side`` ``left``, ``right`` or ``both`` (empty means ``both``).
-- Referenced files must exist and be readable: a photo must open with OpenCV, a curve or track
-  must be a CSV with its columns (``displacement_mm``, ``force_N``; ``t_s``, ``y_mm``, optional
-  ``angle_deg``) holding numbers, at least 3 rows.
+- ``compression`` may carry the segment's ``length_mm`` (used for the radial contact area;
+  otherwise it is taken from the ``specimens`` row with the same ``specimen_id``).
+- Referenced files (paths relative to the workbook; ``\\`` separators accepted) must exist
+  and be readable: a photo must open with OpenCV, a curve or track must be a CSV with its
+  columns (``displacement_mm``, ``force_N``; ``t_s``, ``y_mm``, optional ``angle_deg``)
+  holding numbers, at least 3 rows.
 
 Every violation raises :class:`demcal.errors.WorkbookError` naming the file, sheet, data row,
 column and value.
@@ -203,8 +206,7 @@ class Workbook:
 
     def resolve(self, relative) -> Path:
         """A path written in the workbook, relative to :attr:`root` (absolute paths stay)."""
-        p = Path(str(relative))
-        return p if p.is_absolute() else self.root / p
+        return _resolve(self.root, relative)
 
     def attachment(self, relative) -> pd.DataFrame:
         """The parsed curve or track CSV that a cell points to."""
@@ -225,6 +227,12 @@ def _is_empty(cell) -> bool:
         return bool(pd.isna(cell)) if not isinstance(cell, (str, bytes)) else False
     except (TypeError, ValueError):
         return False
+
+
+def _resolve(root: Path, text) -> Path:
+    """A path cell relative to ``root``; Windows separators are accepted."""
+    p = Path(str(text).replace("\\", "/"))
+    return p if p.is_absolute() else root / p
 
 
 def _plain(value):
@@ -346,7 +354,7 @@ def _drop_empty_rows(frame: pd.DataFrame) -> pd.DataFrame:
 # ----------------------------------------------------------------------------------------------
 # validation
 
-def _check_choice(sheet: str, column: str, value: str | None) -> str | None:
+def _check_choice(column: str, value: str | None) -> str | None:
     """Return an error message if ``value`` is not a valid name for this column."""
     if column == "pair":
         if value and value.startswith("particle-") and NAME_PATTERN.fullmatch(value[len("particle-"):]):
@@ -398,7 +406,7 @@ def _typed_frame(name: str, spec: SheetSpec, frame: pd.DataFrame, file: Path) ->
                 value = _name(cell)
                 if value is None and col == "side":
                     value = "both"
-                problem = _check_choice(name, col, value)
+                problem = _check_choice(col, value)
                 if problem:
                     raise WorkbookError(problem, file=str(file), sheet=name, row=row, column=col,
                                         value=None if _is_empty(cell) else cell)
@@ -586,8 +594,7 @@ def _check_files(wb_root: Path, name: str, spec: SheetSpec, frame: pd.DataFrame,
                 if column in spec.required:
                     raise WorkbookError("missing value", file=str(file), sheet=name, row=row, column=column)
                 continue
-            p = Path(rel)
-            path = p if p.is_absolute() else wb_root / p
+            path = _resolve(wb_root, rel)
             key = str(path)
 
             def err(message):
@@ -670,6 +677,8 @@ def read_workbook(path) -> Workbook:
         spec = SHEETS[key]
         frame = _drop_empty_rows(_canonical_columns(raw, spec.required + spec.optional, file, key))
         required = _required_columns(key, list(frame.columns), file)
+        if key in REQUIRED_SHEETS and frame.empty:
+            raise WorkbookError("the sheet has no data rows", file=str(file), sheet=key)
         if key == "meta":
             meta = _parse_meta(frame, file)
             typed = pd.DataFrame({"key": [_text(k).lower() for k in frame["key"]],

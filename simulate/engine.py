@@ -63,7 +63,7 @@ from simulate.contact.rolling import EDEM_COM, EDEM_SPHERE, lever_index, relativ
 from simulate.integrate import (drift, half_kick, matrix_from_quat, quat_from_matrix, quat_multiply,
                                 refresh_rotation)
 from simulate.materials import MaterialTable
-from simulate.neighbours import build_pair_list, build_wall_list, grid_shape
+from simulate.neighbours import build_pair_list, build_wall_list, grid_shape, padded_cell_count
 from simulate.timestep import DEFAULT_MAX_FRACTION, check_time_step, rayleigh_time
 from simulate.walls import Plane, Rectangle, pack_walls, wall_distance, wall_distances
 
@@ -72,9 +72,11 @@ from simulate.walls import Plane, Rectangle, pack_walls, wall_distance, wall_dis
 
 
 @kernel
-def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0):
-    """World positions of the spheres; returns the largest squared move since the last rebuild."""
+def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw):
+    """World positions of the spheres; returns the largest squared moves since the last pair
+    list and wall list rebuilds (references ``sx0`` and ``sxw``)."""
     dmax2 = 0.0
+    dwmax2 = 0.0
     for s in range(n_spheres):
         b = sbody[s]
         if not bactive[b]:
@@ -92,9 +94,13 @@ def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0):
         dy = y - sx0[s, 1]
         dz = z - sx0[s, 2]
         d2 = dx * dx + dy * dy + dz * dz
-        if d2 > dmax2:
-            dmax2 = d2
-    return dmax2
+        dmax2 = max(dmax2, d2)
+        dx = x - sxw[s, 0]
+        dy = y - sxw[s, 1]
+        dz = z - sxw[s, 2]
+        d2 = dx * dx + dy * dy + dz * dz
+        dwmax2 = max(dwmax2, d2)
+    return dmax2, dwmax2
 
 
 @kernel
@@ -286,65 +292,67 @@ def _wall_velocities(t, wvel, wwin, wvel_now):
 @kernel
 def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, need_rebuild, need_forces,
              n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, bmat, bactive,
-             n_spheres, sbody, soff, srad, sx, sx0,
+             n_spheres, sbody, soff, srad, sx, sx0, sxw,
              pstart, ppi, pj, ph, wstart, ws, wk, wh,
              wkind, worig, wnorm, wu, wv, whalf, wvel, wwin, wmat, wx0, wvel_now,
              e_star, g_star, damp, mu_s, mu_r,
-             lo, inv_cell, dims, cell_start, cell_items, sphere_cell):
+             lo, inv_cell, dims, cell_start):
     """Advance the state by ``n_steps`` steps (see the module docstring for the step).
 
-    Returns the new time, the (possibly rebuilt) Verlet lists and the number of rebuilds.
+    Between two steps the second half kick of one and the first of the next are one full kick
+    (leapfrog); the chunk starts and ends with half kicks, so velocities are synchronous with
+    positions whenever Python sees them. Returns the new time, the (possibly rebuilt) Verlet
+    lists and the numbers of pair-list and wall-list rebuilds.
     """
     h = 0.5 * dt
     n_walls = wkind.shape[0]
     n_rebuilds = 0
-    if need_forces:
-        _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0)
-        _wall_velocities(t, wvel, wwin, wvel_now)
-    for step in range(n_steps + (1 if need_forces else 0)):
-        if step > 0 or not need_forces:
+    n_wall_rebuilds = 0
+    for step in range(-1 if need_forces else 0, n_steps):
+        if step >= 0:
+            tau = h if step == 0 else dt
             for b in range(n_bodies):
                 if bactive[b]:
-                    half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi)
+                    half_kick(b, tau, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi)
                     drift(b, dt, bx, bv, bq, bL, bw, bR, binvi)
             _wall_velocities(t, wvel, wwin, wvel_now)
             for k in range(n_walls):
                 for a in range(3):
                     worig[k, a] += wvel_now[k, a] * dt
             t += dt
-        dmax2 = _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0)
-        wmax = 0.0
+        else:
+            _wall_velocities(t, wvel, wwin, wvel_now)
+        dmax2, dwmax2 = _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw)
+        wmax2 = 0.0
         for k in range(n_walls):
             dw2 = 0.0
             for a in range(3):
                 dw2 += (worig[k, a] - wx0[k, a]) ** 2
-            if dw2 > wmax:
-                wmax = dw2
+            wmax2 = max(wmax2, dw2)
         dmax = math.sqrt(dmax2)
-        wmax = math.sqrt(wmax)
-        if need_rebuild or 2.0 * dmax > skin or dmax + wmax > skin:
+        if need_rebuild or 2.0 * dmax > skin:
             pstart, ppi, pj, ph = build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo,
-                                                  inv_cell, dims, cell_start, cell_items,
-                                                  sphere_cell, pstart, pj, ph)
+                                                  inv_cell, dims, cell_start, pstart, pj, ph)
+            sx0[:n_spheres] = sx[:n_spheres]
+            n_rebuilds += 1
+        if need_rebuild or math.sqrt(dwmax2) + math.sqrt(wmax2) > skin:
             wstart, ws, wk, wh = build_wall_list(n_spheres, sx, srad, sbody, bactive, skin, wkind,
                                                  worig, wnorm, wu, wv, whalf, wstart, wk, wh)
-            sx0[:n_spheres] = sx[:n_spheres]
+            sxw[:n_spheres] = sx[:n_spheres]
             wx0[:] = worig
-            n_rebuilds += 1
-            need_rebuild = False
-        if step == 0 and need_forces:
-            # the first evaluation must not advance the contact history
-            _contact_forces(0.0, lever_mode, n_bodies, bx, bv, bw, bf, bt, brm, brv, binvm, bmat,
-                            sbody, sx, srad, pstart, pj, ph, wstart, wk, wh, wkind, worig, wnorm,
-                            wu, wv, whalf, wvel_now, wmat, e_star, g_star, damp, mu_s, mu_r)
-            continue
-        _contact_forces(dt, lever_mode, n_bodies, bx, bv, bw, bf, bt, brm, brv, binvm, bmat,
-                        sbody, sx, srad, pstart, pj, ph, wstart, wk, wh, wkind, worig, wnorm,
-                        wu, wv, whalf, wvel_now, wmat, e_star, g_star, damp, mu_s, mu_r)
+            n_wall_rebuilds += 1
+        need_rebuild = False
+        # the first evaluation of a fresh state must not advance the contact history
+        hist_dt = dt if step >= 0 else 0.0
+        _contact_forces(hist_dt, lever_mode, n_bodies, bx, bv, bw, bf, bt, brm,
+                        brv, binvm, bmat, sbody, sx, srad, pstart, pj, ph, wstart, wk, wh, wkind,
+                        worig, wnorm, wu, wv, whalf, wvel_now, wmat, e_star, g_star, damp, mu_s,
+                        mu_r)
+    if n_steps > 0:
         for b in range(n_bodies):
             if bactive[b]:
                 half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi)
-    return t, pstart, ppi, pj, ph, wstart, ws, wk, wh, n_rebuilds
+    return t, pstart, ppi, pj, ph, wstart, ws, wk, wh, n_rebuilds, n_wall_rebuilds
 
 
 # ----------------------------------------------------------------------------------------------
@@ -422,7 +430,7 @@ _BODY_FIELDS = {  # name: (trailing shape, dtype)
 }
 _SPHERE_FIELDS = {
     "sbody": ((), np.int64), "soff": ((3,), np.float64), "srad": ((), np.float64),
-    "sx": ((3,), np.float64), "sx0": ((3,), np.float64), "sphere_cell": ((), np.int64),
+    "sx": ((3,), np.float64), "sx0": ((3,), np.float64), "sxw": ((3,), np.float64),
 }
 
 
@@ -507,6 +515,7 @@ class Simulation:
         self._need_rebuild = True
         self._need_forces = True
         self.total_rebuilds = 0
+        self.total_wall_rebuilds = 0
 
     # ---------------------------------------------------------------- configuration
     @property
@@ -665,6 +674,7 @@ class Simulation:
         S["srad"][s0:s0 + ns] = tpl.radii
         S["sx"][s0:s0 + ns] = pos + tpl.offsets @ R.T
         S["sx0"][s0:s0 + ns] = S["sx"][s0:s0 + ns]
+        S["sxw"][s0:s0 + ns] = S["sx"][s0:s0 + ns]
         self.n_bodies = b + 1
         self.n_spheres = s0 + ns
         self._need_rebuild = True
@@ -703,16 +713,13 @@ class Simulation:
 
     # ---------------------------------------------------------------- running
     def _ensure_grid(self):
-        rmax = 0.0
-        if self.templates:
-            rmax = max(float(t.radii.max()) for t in self.templates)
+        rmax = max((float(t.radii.max()) for t in self.templates), default=0.0)
         key = (rmax, self.skin)
         if self._grid is not None and self._grid[0] == key:
             return
-        _, cell_xyz, dims = grid_shape(self.domain_lo, self.domain_hi, 2.0 * rmax + self.skin)
-        n_cells = int(np.prod(dims))
-        self._grid = (key, 1.0 / cell_xyz, dims.astype(np.int64), np.zeros(n_cells + 1, np.int64),
-                      np.zeros(max(self.n_spheres, 1), np.int64))
+        cell_xyz, dims = grid_shape(self.domain_lo, self.domain_hi, 2.0 * rmax + self.skin)
+        self._grid = (key, 1.0 / cell_xyz, dims.astype(np.int64),
+                      np.zeros(padded_cell_count(dims) + 1, np.int64))
         self._need_rebuild = True
 
     def run(self, duration: float | None = None, *, n_steps: int | None = None, progress=None) -> RunSummary:
@@ -763,12 +770,9 @@ class Simulation:
                           escaped=len(self.escaped) - n_escaped0)
 
     def _advance(self, n_steps: int) -> int:
-        """Run the numba step loop for ``n_steps``; returns the number of list rebuilds."""
+        """Run the numba step loop for ``n_steps``; returns the number of pair-list rebuilds."""
         self._ensure_grid()
-        key, inv_cell, dims, cell_start, cell_items = self._grid
-        if cell_items.shape[0] < self.n_spheres:
-            cell_items = np.zeros(self._s["sx"].shape[0], np.int64)
-            self._grid = (key, inv_cell, dims, cell_start, cell_items)
+        _, inv_cell, dims, cell_start = self._grid
         B, S, W = self._b, self._s, self._w
         if self._need_forces:
             refresh_rotation(self.n_bodies, B["bq"], B["bL"], B["bw"], B["bR"], B["binvi"])
@@ -779,15 +783,16 @@ class Simulation:
             self._need_rebuild, self._need_forces,
             self.n_bodies, B["bx"], B["bv"], B["bq"], B["bL"], B["bw"], B["bR"], B["bf"], B["bt"],
             B["brm"], B["brv"], B["binvm"], B["binvi"], B["bmat"], B["bactive"],
-            self.n_spheres, S["sbody"], S["soff"], S["srad"], S["sx"], S["sx0"],
+            self.n_spheres, S["sbody"], S["soff"], S["srad"], S["sx"], S["sx0"], S["sxw"],
             *self._pairs, *self._wpairs,
             W["kind"], W["origin"], W["normal"], W["axis_u"], W["axis_v"], W["half"], W["velocity"],
             W["window"], W["material"], self._wx0, self._wvel_now,
             pt.e_star, pt.g_star, pt.damping, pt.mu_s, pt.mu_r,
-            self.domain_lo, inv_cell, dims, cell_start, cell_items, S["sphere_cell"])
+            self.domain_lo, inv_cell, dims, cell_start)
         self.time = out[0]
         self._pairs = out[1:5]
         self._wpairs = out[5:9]
+        self.total_wall_rebuilds += int(out[10])
         self._need_rebuild = False
         self._need_forces = False
         return int(out[9])

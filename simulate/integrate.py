@@ -67,14 +67,16 @@ def apply_inverse_inertia(R, b, inv_i, ax, ay, az):
 @evaluator
 def rotate_quat(q0, q1, q2, q3, wx, wy, wz, dt):
     """exp(w dt / 2) * q for a world-frame angular velocity ``w`` [rad/s], normalised."""
-    wmag = math.sqrt(wx * wx + wy * wy + wz * wz)
-    half = 0.5 * wmag * dt
-    if wmag > 0.0:
-        c = math.cos(half)
-        s = math.sin(half) / wmag
+    w2 = wx * wx + wy * wy + wz * wz
+    x2 = 0.25 * w2 * dt * dt  # (half angle)^2
+    if x2 < 1e-4:
+        # Taylor series of cos(x) and sin(x)/x, exact to double precision for x < 0.01
+        c = 1.0 - x2 * (0.5 - x2 * (1.0 / 24.0 - x2 / 720.0))
+        s = 0.5 * dt * (1.0 - x2 * (1.0 / 6.0 - x2 * (1.0 / 120.0 - x2 / 5040.0)))
     else:
-        c = 1.0
-        s = 0.0
+        wmag = math.sqrt(w2)
+        c = math.cos(0.5 * wmag * dt)
+        s = math.sin(0.5 * wmag * dt) / wmag
     a0 = c
     a1 = s * wx
     a2 = s * wy
@@ -89,7 +91,8 @@ def rotate_quat(q0, q1, q2, q3, wx, wy, wz, dt):
 
 @evaluator
 def half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi):
-    """Half kick of body ``b`` by ``h`` = dt/2: forces, torques, then the capped rolling torque.
+    """Kick of body ``b`` over ``h`` (dt/2, or dt for two merged half kicks): forces, torques,
+    then the capped rolling torque.
 
     The rolling torque is ``brv[b]`` (a vector, LIGGGHTS convention) minus ``brm[b]`` (a
     magnitude, EDEM conventions) along the unit angular velocity after the other torques.

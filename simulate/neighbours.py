@@ -6,10 +6,11 @@ only those. The lists stay valid while no sphere has moved more than skin/2 and 
 wall has moved more than skin together (Verlet 1967; Allen & Tildesley 2017, sec. 5.3), which
 the engine checks every step.
 
-Cells are cubes of side at least 2 R_max + skin over the simulation domain; spheres outside it
+Cells are boxes of side at least 2 R_max + skin over the simulation domain; spheres outside it
 are counted in the nearest boundary cell, so the lists stay correct (only slower) for strays.
 Pairs are found over the 13 forward neighbour cells plus the own cell, then ordered by their
 first sphere (compressed rows: ``start[i]:start[i+1]`` holds the partners of sphere i).
+Sphere-wall pairs are listed in rows by sphere the same way.
 
 Contact history (the tangential displacement of each contact) lives in a row per listed pair and
 is carried across rebuilds by looking each new pair up in the old rows.
@@ -29,27 +30,20 @@ from simulate.walls import wall_distance
 
 
 def grid_shape(lo, hi, cell_min: float, max_cells: int = 4_000_000):
-    """Cell side [m] (>= ``cell_min``) and cell counts per axis covering ``lo``-``hi`` [m]."""
+    """Cell sides [m] (each >= ``cell_min``) and cell counts per axis tiling ``lo``-``hi`` [m]."""
     span = np.asarray(hi, float) - np.asarray(lo, float)
     cell = float(cell_min)
     while True:
         dims = np.maximum(1, np.floor(span / cell).astype(np.int64))
-        if int(np.prod(dims)) <= max_cells:
+        if int(np.prod(dims + 2)) <= max_cells:
             break
         cell *= 1.25
-    # stretch the cells so that they tile the domain exactly
-    cell_xyz = span / dims
-    return float(cell_xyz.min()), cell_xyz, dims
+    return span / dims, dims
 
 
-@kernel
-def _cell_of(x, lo, inv_cell, dims, axis):
-    c = int((x - lo[axis]) * inv_cell[axis])
-    if c < 0:
-        return 0
-    if c >= dims[axis]:
-        return dims[axis] - 1
-    return c
+def padded_cell_count(dims) -> int:
+    """Cells of the grid with one layer of empty cells around it (what the kernels index)."""
+    return int(np.prod(np.asarray(dims) + 2))
 
 
 @kernel
@@ -61,8 +55,19 @@ def _grow_int(a, n):
 
 @kernel
 def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dims, cell_start,
-                    cell_items, sphere_cell, old_start, old_j, old_hist):
+                    old_start, old_j, old_hist):
     """Sphere-sphere Verlet list with history carried from the previous list.
+
+    The grid is padded by one empty cell on every side, so the stencil needs no bounds checks;
+    cells are numbered x fastest, so the three cells of a stencil row are one contiguous run of
+    the cell-sorted spheres (five runs cover the own cell and the 13 forward neighbours).
+
+    Parameters
+    ----------
+    cell_start : int64 (padded cells + 1,)
+        Work array (overwritten).
+    old_start, old_j, old_hist
+        The previous list (rows, partners, tangential history).
 
     Returns
     -------
@@ -73,88 +78,103 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
     hist : float64 (n_pairs, 3)
         Tangential displacement carried over (zero for new pairs).
     """
-    nx, ny, nz = dims[0], dims[1], dims[2]
+    nx = dims[0] + 2
+    ny = dims[1] + 2
+    nz = dims[2] + 2
     n_cells = nx * ny * nz
-    # counting sort of active spheres into cells
-    for c in range(n_cells + 1):
-        cell_start[c] = 0
+    scell = np.empty(n_spheres, np.int64)
+    # counting sort of the active spheres into cells
+    cell_start[:] = 0
     for s in range(n_spheres):
         if bactive[sbody[s]]:
-            cx = _cell_of(sx[s, 0], lo, inv_cell, dims, 0)
-            cy = _cell_of(sx[s, 1], lo, inv_cell, dims, 1)
-            cz = _cell_of(sx[s, 2], lo, inv_cell, dims, 2)
+            cx = int((sx[s, 0] - lo[0]) * inv_cell[0])
+            cy = int((sx[s, 1] - lo[1]) * inv_cell[1])
+            cz = int((sx[s, 2] - lo[2]) * inv_cell[2])
+            # strays outside the domain go to the nearest boundary cell
+            cx = min(max(cx, 0), dims[0] - 1) + 1
+            cy = min(max(cy, 0), dims[1] - 1) + 1
+            cz = min(max(cz, 0), dims[2] - 1) + 1
             c = (cz * ny + cy) * nx + cx
-            sphere_cell[s] = c
+            scell[s] = c
             cell_start[c + 1] += 1
         else:
-            sphere_cell[s] = -1
+            scell[s] = -1
     for c in range(n_cells):
         cell_start[c + 1] += cell_start[c]
-    fill = np.empty(n_cells, np.int64)
-    fill[:] = cell_start[:n_cells]
+    m = cell_start[n_cells]
+    order = np.empty(m, np.int64)
     for s in range(n_spheres):
-        c = sphere_cell[s]
+        c = scell[s]
         if c >= 0:
-            cell_items[fill[c]] = s
-            fill[c] += 1
+            order[cell_start[c]] = s
+            cell_start[c] += 1  # used as a fill pointer, shifted back below
+    for c in range(n_cells, 0, -1):
+        cell_start[c] = cell_start[c - 1]
+    cell_start[0] = 0
+    # cell-ordered copies: the search below reads them contiguously
+    xs = np.empty(m)
+    ys = np.empty(m)
+    zs = np.empty(m)
+    rs = np.empty(m)
+    bs = np.empty(m, np.int64)
+    cs = np.empty(m, np.int64)
+    for p in range(m):
+        s = order[p]
+        xs[p] = sx[s, 0]
+        ys[p] = sx[s, 1]
+        zs[p] = sx[s, 2]
+        rs[p] = srad[s] + 0.5 * skin
+        bs[p] = sbody[s]
+        cs[p] = scell[s]
+    row = np.empty(5, np.int64)  # first cell of each forward stencil row, relative to the own cell
+    row[0] = 0
+    row[1] = nx - 1
+    row[2] = (ny - 1) * nx - 1
+    row[3] = ny * nx - 1
+    row[4] = (ny + 1) * nx - 1
 
-    cap = max(2 * old_j.shape[0], 8 * n_spheres + 64)
+    cap = max(2 * old_j.shape[0], 8 * m + 64)
     ta = np.empty(cap, np.int64)
     tb = np.empty(cap, np.int64)
     n = 0
-    for i in range(n_spheres):
-        c = sphere_cell[i]
-        if c < 0:
-            continue
-        cx = c % nx
-        cy = (c // nx) % ny
-        cz = c // (nx * ny)
-        bi = sbody[i]
-        xi = sx[i, 0]
-        yi = sx[i, 1]
-        zi = sx[i, 2]
-        ri = srad[i]
-        # own cell (j > i) and the 13 forward neighbours (all j): each pair once
-        for o in range(14):
+    for p in range(m):
+        xi = xs[p]
+        yi = ys[p]
+        zi = zs[p]
+        ri = rs[p]
+        bi = bs[p]
+        c = cs[p]
+        for o in range(5):
             if o == 0:
-                ox, oy, oz = 0, 0, 0
+                b0 = p + 1              # rest of the own cell and the cell at +x
+                b1 = cell_start[c + 2]
             else:
-                m = o + 13  # offsets 14..26 of the 3x3x3 stencil are the forward half
-                ox = m % 3 - 1
-                oy = (m // 3) % 3 - 1
-                oz = m // 9 - 1
-            qx = cx + ox
-            qy = cy + oy
-            qz = cz + oz
-            if qx < 0 or qx >= nx or qy < 0 or qy >= ny or qz < 0 or qz >= nz:
-                continue
-            q = (qz * ny + qy) * nx + qx
-            for p in range(cell_start[q], cell_start[q + 1]):
-                j = cell_items[p]
-                if o == 0 and j <= i:
-                    continue
-                if sbody[j] == bi:
-                    continue
-                dx = sx[j, 0] - xi
-                dy = sx[j, 1] - yi
-                dz = sx[j, 2] - zi
-                cut = ri + srad[j] + skin
-                if dx * dx + dy * dy + dz * dz < cut * cut:
-                    if n == ta.shape[0]:
-                        ta = _grow_int(ta, n)
-                        tb = _grow_int(tb, n)
-                    if i < j:
-                        ta[n] = i
-                        tb[n] = j
-                    else:
-                        ta[n] = j
-                        tb[n] = i
-                    n += 1
+                q = c + row[o]
+                b0 = cell_start[q]
+                b1 = cell_start[q + 3]
+            if n + (b1 - b0) > ta.shape[0]:
+                ta = _grow_int(ta, n)
+                tb = _grow_int(tb, n)
+            for k in range(b0, b1):
+                dx = xs[k] - xi
+                dy = ys[k] - yi
+                dz = zs[k] - zi
+                cut = ri + rs[k]
+                near = (dx * dx + dy * dy + dz * dz < cut * cut) & (bs[k] != bi)
+                ta[n] = p   # written always, kept only if near (no branch)
+                tb[n] = k
+                n += near
 
-    # order by first sphere (counting sort) into compressed rows
+    # back to sphere ids, ordered by first sphere (counting sort) into compressed rows
     start = np.zeros(n_spheres + 1, np.int64)
     for k in range(n):
-        start[ta[k] + 1] += 1
+        a = order[ta[k]]
+        b = order[tb[k]]
+        if a > b:
+            a, b = b, a
+        ta[k] = a
+        tb[k] = b
+        start[a + 1] += 1
     for s in range(n_spheres):
         start[s + 1] += start[s]
     pos = start[:n_spheres].copy()
@@ -173,11 +193,11 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
         if a >= n_old_rows:
             continue
         b = pj[k]
-        for m in range(old_start[a], old_start[a + 1]):
-            if old_j[m] == b:
-                hist[k, 0] = old_hist[m, 0]
-                hist[k, 1] = old_hist[m, 1]
-                hist[k, 2] = old_hist[m, 2]
+        for q in range(old_start[a], old_start[a + 1]):
+            if old_j[q] == b:
+                hist[k, 0] = old_hist[q, 0]
+                hist[k, 1] = old_hist[q, 1]
+                hist[k, 2] = old_hist[q, 2]
                 break
     return start, pi, pj, hist
 
@@ -197,10 +217,20 @@ def build_wall_list(n_spheres, sx, srad, sbody, bactive, skin, kind, origin, nor
     n = 0
     for s in range(n_spheres):
         if bactive[sbody[s]]:
+            x = sx[s, 0]
+            y = sx[s, 1]
+            z = sx[s, 2]
+            reach = srad[s] + skin
             for k in range(n_walls):
-                d, ux, uy, uz = wall_distance(kind, origin, normal, axis_u, axis_v, half, k,
-                                              sx[s, 0], sx[s, 1], sx[s, 2])
-                if d < srad[s] + skin:
+                # distance to the wall's plane bounds the distance to the wall from below
+                h = ((x - origin[k, 0]) * normal[k, 0] + (y - origin[k, 1]) * normal[k, 1]
+                     + (z - origin[k, 2]) * normal[k, 2])
+                if kind[k] != 0:
+                    h = abs(h)
+                if h >= reach:
+                    continue
+                d, ux, uy, uz = wall_distance(kind, origin, normal, axis_u, axis_v, half, k, x, y, z)
+                if d < reach:
                     if n == ts.shape[0]:
                         ts = _grow_int(ts, n)
                         tk = _grow_int(tk, n)

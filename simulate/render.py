@@ -225,7 +225,7 @@ def _trend_free(x, z, rough, a, b, height, band):
 def heap_photo(profile_x_m, profile_z_m, *, rng, px_per_m=2500.0, camera_roll_deg=0.0,
                light=None, noise_sd=3.0, blur_px=1.0, jpeg_quality=None, grid=True,
                texture=True, heap_tone="dark", size=(900, 1200), floor_row=0.78,
-               centre_x_m=None, strays=6):
+               centre_x_m=None, strays=4):
     """Photograph of a heap of cut root segments seen from the side.
 
     The scene, in the plane of the profile: a backdrop (grid paper), a floor plate whose far
@@ -579,7 +579,7 @@ def _heap(img, px, pz, row0, seg_len, seg_dia, scene, texture, rng):
     arc = np.r_[0.0, np.cumsum(seg)]
     on_heap = np.r_[pz < row0 - 0.3 * seg_dia]
     # Two passes: a deeper layer, then the outermost segments, which make the silhouette.
-    for depth_range, step in (((0.9, 1.4), 0.7), ((0.3, 0.7), 0.5)):
+    for depth_range, step in (((0.9, 1.4), 0.6), ((0.35, 0.65), 0.4)):
         for a in np.arange(rng.uniform(0, 0.5) * seg_len, arc[-1], step * seg_len):
             i = min(np.searchsorted(arc, a, side="right") - 1, px.size - 2)
             f = (a - arc[i]) / max(seg[i], 1e-9)
@@ -597,7 +597,7 @@ def _heap(img, px, pz, row0, seg_len, seg_dia, scene, texture, rng):
             if ny < 0:
                 nx, ny = -nx, -ny
             depth_in = rng.uniform(*depth_range) * seg_dia
-            phi = math.atan2(-ty, tx) + rng.normal(0.0, math.radians(22))
+            phi = math.atan2(-ty, tx) + rng.normal(0.0, math.radians(12))
             tilt = min(abs(rng.normal(0.0, 0.4)), 1.3)
             _draw_segment(img, x + nx * depth_in, y + ny * depth_in, phi, seg_len, seg_dia,
                           tilt, _segment_colour(scene, rng), rng, floor_row=row0)
@@ -611,7 +611,7 @@ def _strays(img, px, pz, row0, seg_len, seg_dia, scene, n, rng):
     toes = [px[on[0]], px[on[-1]]]
     for k in range(n):
         side = k % 2
-        dist = seg_len * rng.uniform(0.4, 4.0)
+        dist = seg_len * rng.uniform(0.5, 6.0)
         x = toes[side] + (dist if side else -dist)
         if not (0 <= x < img.shape[1]) or (side == 0 and on[0] == 0) or (side == 1 and on[-1] == px.size - 1):
             continue

@@ -33,7 +33,8 @@ def build_paper_repose_case(params: DEMParameters, seed, n_clumps: int = 500, *,
                             lift_time: float = 4.0, fill_time: float = 1.0,
                             fill_margin: float = 0.010, fill_bottom: float = 0.100,
                             fill_top: float = 0.240, dt: float = PAPER_TIME_STEP,
-                            outside_length: float = 0.45, force: bool = False,
+                            outside_length: float = 0.45, outside_width: float = 0.25,
+                            force: bool = False,
                             chunk_steps: int = 200) -> Simulation:
     """The paper's plate-withdrawal repose case, ready to ``run``.
 
@@ -58,8 +59,9 @@ def build_paper_repose_case(params: DEMParameters, seed, n_clumps: int = 500, *,
         ``fill_bottom`` to ``fill_top`` [m].
     dt : float
         Time step [s].
-    outside_length : float
-        Floor length beyond the plate kept inside the simulation domain [m].
+    outside_length, outside_width : float
+        Floor kept inside the simulation domain beyond the plate (x) and on either side of the
+        carton (y) [m]; a segment leaving it is recorded in ``sim.escaped``.
     force : bool
         Allow a time step above half the Rayleigh time.
     chunk_steps : int
@@ -74,8 +76,8 @@ def build_paper_repose_case(params: DEMParameters, seed, n_clumps: int = 500, *,
     materials = MaterialTable.from_parameters(params)
     L, W, H = box_length, box_width, box_height
     sim = Simulation(materials,
-                     domain_lo=(-0.05, -outside_length, -0.02),
-                     domain_hi=(L + outside_length, W + outside_length, H + 0.05),
+                     domain_lo=(-0.05, -outside_width, -0.02),
+                     domain_hi=(L + outside_length, W + outside_width, H + 0.05),
                      dt=dt, rolling_lever=params.rolling_lever, force=force, chunk_steps=chunk_steps)
     template = sim.add_template(segment_from_parameters(params))
     sim.add_wall(Plane((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), material="steel", name="floor"))

@@ -30,6 +30,22 @@ def pytest_approx(x):
     return pytest.approx(x, abs=1e-6)
 
 
+def test_outlier_option_reaches_every_quantity(campaign, tmp_path, monkeypatch):
+    monkeypatch.setattr(pipeline, "_default_photo_estimator",
+                        lambda: stub_photo_estimator({"p1.png": 34.0, "p2.png": 36.0}))
+
+    def edit(s):
+        for i, h2 in enumerate((36, 51.84, 43.56, 57.76, 256)):  # e .30 .36 .33 .38 .80
+            s["drop"].append({"trial_id": f"X{i}", "pair": "particle-particle", "drop_height_mm": 400,
+                              "rebound_height_mm": h2})
+    path = campaign(edit)
+    out = tmp_path / "m.json"
+    assert main(["measure", str(path), "--json", str(out), "--outliers", "mad:3.5"]) == 0
+    q = read_json(out)["quantities"]["restitution.particle-particle"]
+    assert [r["row"] for r in q["rows_rejected"]] == [12] and q["extra"]["outlier_rule"] == "mad:3.5"
+    assert read_json(out)["provenance"]["options"]["outliers"] == "mad:3.5"
+
+
 def test_bad_workbook_exit_code_2_message_no_traceback(campaign, fmt):
     path = campaign(lambda s: s["drop"][2].__setitem__("rebound_height_mm", 250))
     proc = subprocess.run([sys.executable, "-m", "demcal.cli", "measure", str(path)],

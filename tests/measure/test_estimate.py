@@ -76,8 +76,10 @@ def test_parse_outlier_rule_defaults():
 
 def test_summarise_reports_every_rejection_and_round_trips():
     values = [10.0, 10.1, 9.9, 10.05, 9.95, 12.0]
+    plain = summarise("q", values, [1, 2, 4, 5, 6, 7], unit="mm", source=SOURCE, method="m")
+    assert plain.n == 6 and plain.rows_rejected == []  # no screening unless asked
     est = summarise("q", values, [1, 2, 4, 5, 6, 7], unit="mm", source=SOURCE, method="m",
-                    rejected=[{"row": 3, "reason": "marked bad by the lab"}],
+                    outliers="mad", rejected=[{"row": 3, "reason": "marked bad by the lab"}],
                     per_row=[{"id": f"x{i}"} for i in range(6)])
     assert est.rows_used == [1, 2, 4, 5, 6]
     assert [r["row"] for r in est.rows_rejected] == [3, 7]

@@ -132,12 +132,14 @@ def test_outlier_rejected_visibly(campaign):
         for i, (h1, h2) in enumerate(extra):
             s["drop"].append({"trial_id": f"X{i}", "pair": "particle-particle", "drop_height_mm": h1,
                               "rebound_height_mm": h2, "operator": "ana"})
-    est = run(campaign(edit)).quantities["restitution.particle-particle"]
+    est = run(campaign(edit), outliers="mad").quantities["restitution.particle-particle"]
     assert est.rows_rejected == [{"row": 12, "reason": est.rows_rejected[0]["reason"]}]
     assert "outlier" in est.rows_rejected[0]["reason"] and 12 not in est.rows_used
     assert est.n == 6
-    none = run(campaign(edit), outliers="none").quantities["restitution.particle-particle"]
+    none = run(campaign(edit)).quantities["restitution.particle-particle"]  # default: no screening
     assert none.n == 7 and none.rows_rejected == []
+    grubbs = run(campaign(edit), outliers="grubbs").quantities["restitution.particle-particle"]
+    assert [r["row"] for r in grubbs.rows_rejected] == [12] and "Grubbs" in grubbs.rows_rejected[0]["reason"]
 
 
 def test_target_repose_overrides_photos(campaign):

@@ -139,6 +139,11 @@ def test_track_row_may_leave_heights_empty(campaign):
     assert math.isnan(wb.sheets["drop"].frame.loc[5, "rebound_height_mm"])
 
 
+def test_windows_separators_in_paths(campaign):
+    wb = read_workbook(campaign(lambda s: s["repose"][0].__setitem__("file", "photos\\p1.png")))
+    assert wb.resolve(wb.sheets["repose"].frame.loc[1, "file"]) == wb.root / "photos" / "p1.png"
+
+
 def test_attachments_parsed_in_lab_units(campaign):
     wb = read_workbook(campaign())
     curve = wb.attachment("curves/c1.csv")
@@ -165,6 +170,13 @@ def test_missing_required_sheet(campaign, fmt, sheet):
     path = campaign(lambda s: s.pop(sheet))
     err = expect_error(path, fmt, sheet, None, None)
     assert "missing sheet" in str(err)
+
+
+def test_required_sheet_without_rows(campaign, fmt):
+    path = campaign(lambda s: s.__setitem__("specimens", pd.DataFrame(
+        columns=["specimen_id", "length_mm", "diameter_mm", "mass_g"])))
+    err = expect_error(path, fmt, "specimens", None, None)
+    assert "no data rows" in str(err)
 
 
 def test_optional_sheet_may_be_absent(campaign):

@@ -1,0 +1,434 @@
+"""The calibration campaign: from a lab workbook to calibrated DEM parameters, as the source
+paper did in Design-Expert and EDEM, with every DEM run driven by demcal itself.
+
+Steps (``calibrate``):
+
+1. measure the workbook (``measure.pipeline.measure_workbook``);
+2. Plackett-Burman screening of the seven measured contact parameters (A Poisson's ratio,
+   B e p-p, C mu_s p-p, D mu_r p-p, E e p-wall, F mu_s p-wall, G mu_r p-wall), -1/+1 = the
+   measured min/max (``levels="minmax"``, as the paper) or mean -+ sd (``levels="sd"``),
+   12 runs, the four unused columns as dummies;
+3. seed-to-seed noise of the DEM: the screening centre run repeated with different seeds;
+   each effect is compared with it;
+4. steepest climb of the significant factors toward the measured angle, others at their
+   measured means; the best level becomes the Box-Behnken centre, its neighbours -1/+1;
+5. Box-Behnken (12 edge runs + 5 centre points with different seeds), full quadratic,
+   Design-Expert ANOVA, canonical analysis;
+6. optimisation to the measured angle: several solutions, the one closest to the measured
+   means preferred;
+7. validation: the preferred solution simulated with three fresh seeds.
+
+Every DEM run goes through the run store (``analyse.runs``): a rerun of a killed campaign
+redoes nothing that had finished. Screening runs share one seed (common random numbers make
+effects sharper); repeated centre points and validation runs use their own seeds.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from analyse.designs import box_behnken, plackett_burman, to_actual
+from analyse.optimise import (canonical_analysis, optimise_to_target, steepest_climb_analysis,
+                              steepest_climb_plan, validate_repeats)
+from analyse.regression import fit_response_surface
+from analyse.runs import RunStore, run_all
+from analyse.screening import plackett_burman_screening
+from demcal.errors import AnalysisError, InputError
+from demcal.jsonio import write_json
+from demcal.provenance import Provenance
+
+#: Screening factors: letter, DEM parameter, measured quantity (``{wall}`` = the rig's plate
+#: material from the workbook meta), as the source paper's Plackett-Burman table.
+SCREENING_FACTORS = (
+    ("A", "poisson_ratio", "poisson_ratio"),
+    ("B", "e_pp", "restitution.particle-particle"),
+    ("C", "mu_s_pp", "static_friction.particle"),
+    ("D", "mu_r_pp", "rolling_friction.particle"),
+    ("E", "e_pw", "restitution.particle-{wall}"),
+    ("F", "mu_s_pw", "static_friction.{wall}"),
+    ("G", "mu_r_pw", "rolling_friction.{wall}"),
+)
+
+#: Admissible range of each DEM parameter; design levels are clipped into it.
+PARAMETER_BOUNDS = {"poisson_ratio": (0.0, 0.49), "e_pp": (0.01, 1.0), "e_pw": (0.01, 1.0),
+                    "mu_s_pp": (0.0, 5.0), "mu_s_pw": (0.0, 5.0), "mu_r_pp": (0.0, 5.0),
+                    "mu_r_pw": (0.0, 5.0)}
+
+RESPONSE = "angle_deg"
+
+
+@dataclass(frozen=True)
+class CampaignConfig:
+    """Settings of a calibration campaign.
+
+    Attributes
+    ----------
+    profile : str
+        Repose-rig profile, ``quick`` or ``paper`` (see ``simulate.rigs.repose``).
+    levels : str
+        ``minmax``: screening levels -1/+1 = measured min/max of the rows used (the paper);
+        ``sd``: mean -+ one standard deviation.
+    workers : int
+        Local worker processes (default: the machine's cores).
+    scheduler : str or None
+        Dask scheduler address; runs go to that cluster instead of local processes.
+    seed : int
+        Seed of every screening, climb and Box-Behnken edge run.
+    noise_repeats : int
+        Extra seeds of the screening centre run, for the seed-to-seed noise.
+    climb_levels : int
+        Levels of the steepest climb.
+    validation_seeds : tuple of int
+        Seeds of the validation runs.
+    alpha : float
+        Significance level.
+    n_significant : tuple of int
+        Least and most factors carried from the screening to the Box-Behnken design; when the
+        screening flags fewer or more, the largest effects fill up or are kept (and it is said).
+    """
+
+    profile: str = "quick"
+    levels: str = "minmax"
+    workers: int = field(default_factory=lambda: os.cpu_count() or 1)
+    scheduler: str | None = None
+    seed: int = 1
+    noise_repeats: int = 4
+    climb_levels: int = 6
+    validation_seeds: tuple = (101, 102, 103)
+    alpha: float = 0.05
+    n_significant: tuple = (3, 3)
+    progress: bool = True
+
+    def __post_init__(self):
+        if self.levels not in ("minmax", "sd"):
+            raise InputError(f"levels must be 'minmax' or 'sd', got {self.levels!r}")
+        if self.noise_repeats < 2:
+            raise InputError(f"noise_repeats must be >= 2, got {self.noise_repeats}")
+
+
+def repose_runner(inputs: dict) -> dict:
+    """Run the repose rig for one set of campaign inputs (top level, so workers can pickle it)."""
+    from simulate.params import DEMParameters
+    from simulate.rigs import run_rig
+    from simulate.rigs.repose import ReposeGeometry
+
+    params = DEMParameters.from_names(inputs["params"])
+    result = run_rig("repose", params, inputs["seed"], profile=inputs["profile"],
+                     geometry=ReposeGeometry(**inputs["geometry"]))
+    return result.to_dict()
+
+
+# ----------------------------------------------------------------------------------------------
+# levels from the measurement
+
+def _per_row_values(estimate) -> np.ndarray:
+    used = [r["value"] for r in estimate.per_row if r.get("used", True) and r.get("value") is not None]
+    return np.asarray(used, dtype=float)
+
+
+def factor_levels(measurement, levels: str = "minmax") -> dict:
+    """Screening levels of the seven contact parameters from the measured quantities.
+
+    Returns ``{letter: {"parameter", "quantity", "low", "high", "mean"}}`` [parameter units].
+    """
+    wall = str(measurement.meta.get("contact_material", "steel")).strip().lower() or "steel"
+    table = {}
+    for letter, parameter, quantity in SCREENING_FACTORS:
+        name = quantity.format(wall=wall)
+        est = measurement.quantities.get(name)
+        if est is None:
+            raise InputError(f"the campaign needs the measured quantity {name!r} (factor {letter}, "
+                             f"DEM parameter {parameter}); the workbook has no rows for it")
+        values = _per_row_values(est)
+        if levels == "minmax" and values.size >= 2:
+            lo, hi = float(values.min()), float(values.max())
+            how = f"min/max of {values.size} rows"
+        else:
+            if not (est.sd > 0):
+                raise InputError(f"{name}: cannot set screening levels, its spread is {est.sd}")
+            lo, hi = est.value - est.sd, est.value + est.sd
+            how = "mean -+ sd"
+        bound = PARAMETER_BOUNDS[parameter]
+        lo, hi = max(lo, bound[0]), min(hi, bound[1])
+        if not hi > lo:
+            raise InputError(f"{name}: measured levels give an empty range [{lo}, {hi}]")
+        mean = min(max(float(est.value), lo), hi)
+        table[letter] = {"parameter": parameter, "quantity": name, "low": lo, "high": hi,
+                         "mean": mean, "how": how}
+    return table
+
+
+def base_parameters(measurement):
+    """DEM parameters from the measured shape, density and materials (meta), paper defaults
+    for the rest. Returns a ``simulate.params.DEMParameters``."""
+    from simulate.params import DEMParameters
+
+    q, meta = measurement.quantities, measurement.meta
+    changes = {}
+    if "length_mm" in q:
+        changes["segment_length_m"] = q["length_mm"].value / 1000.0
+    if "diameter_mm" in q:
+        changes["segment_diameter_m"] = q["diameter_mm"].value / 1000.0
+    if "particle_density_kg_m3" in q:
+        changes["particle_density_kg_m3"] = q["particle_density_kg_m3"].value
+    for key, name in (("particle_shear_modulus_pa", "shear_modulus_pa"),
+                      ("contact_density_kg_m3", "wall_density_kg_m3"),
+                      ("contact_poisson", "wall_poisson_ratio"),
+                      ("contact_shear_modulus_pa", "wall_shear_modulus_pa")):
+        if meta.get(key) not in (None, ""):
+            changes[name] = float(meta[key])
+    return DEMParameters().with_(**changes)
+
+
+def repose_geometry(meta: dict) -> dict:
+    """The repose rig's geometry from the workbook meta, as a plain dict."""
+    from simulate.rigs.repose import ReposeGeometry
+
+    return ReposeGeometry.from_meta(meta).to_dict()
+
+
+# ----------------------------------------------------------------------------------------------
+
+@dataclass
+class _Runner:
+    """Builds run inputs and executes batches through the store."""
+
+    base: object
+    geometry: dict
+    config: CampaignConfig
+    store: RunStore
+    runner: object
+    log: list = field(default_factory=list)
+
+    def inputs(self, settings: dict, seed: int) -> dict:
+        params = self.base.with_(**settings)
+        return {"rig": "repose", "profile": self.config.profile, "params": params.to_dict(),
+                "geometry": self.geometry, "seed": int(seed)}
+
+    def run(self, stage: str, tasks: list[dict]) -> list[dict]:
+        out = run_all(tasks, self.runner, self.store, workers=self.config.workers,
+                      scheduler=self.config.scheduler, desc=stage, progress=self.config.progress)
+        failed = [r for r in out.records if r["status"] != "ok"]
+        self.log.append({"stage": stage, "runs": len(tasks), "ran": out.ran, "reused": out.reused,
+                         "failed": len(failed)})
+        if failed:
+            raise AnalysisError(f"{stage}: {len(failed)} of {len(tasks)} DEM runs failed twice; "
+                                f"first error: {failed[0]['error']} (run record "
+                                f"{self.store.path(failed[0]['key'])})")
+        return out.records
+
+
+def _responses(records) -> np.ndarray:
+    y = np.array([r["result"]["observable"][RESPONSE] for r in records], dtype=float)
+    if not np.all(np.isfinite(y)):
+        bad = [r["key"] for r, v in zip(records, y) if not np.isfinite(v)]
+        raise AnalysisError(f"{len(bad)} DEM runs gave no finite {RESPONSE} (e.g. run {bad[0]})")
+    return y
+
+
+def _run_refs(records) -> list[dict]:
+    return [{"key": r["key"], "seed": r["inputs"]["seed"], "wall_s": r["result"].get("wall_s")}
+            for r in records]
+
+
+def calibrate(workbook, out_dir, config: CampaignConfig | None = None, *, runner=None,
+              measurement=None) -> dict:
+    """Run the whole calibration campaign and write ``out_dir/results.json``.
+
+    Parameters
+    ----------
+    workbook : str or Path
+        Lab workbook (``.xlsx`` or folder of CSVs).
+    out_dir : str or Path
+        Output folder: ``results.json``, ``measure.json``, ``runs/`` (one record per DEM run),
+        ``annotated/`` (processed heap photos).
+    config : CampaignConfig
+    runner : callable, optional
+        ``runner(inputs) -> dict`` performing one DEM run (default :func:`repose_runner`);
+        tests pass a cheap stand-in.
+    measurement : measure.pipeline.Measurement, optional
+        Use this measurement instead of measuring ``workbook`` again.
+
+    Returns
+    -------
+    dict
+        The content of ``results.json``.
+    """
+    from measure.pipeline import measure_workbook
+
+    config = config or CampaignConfig()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    t_start = time.perf_counter()
+    if measurement is None:
+        measurement = measure_workbook(workbook, annotate_dir=out / "annotated")
+    write_json(out / "measure.json", measurement.to_dict())
+    if "repose_angle_deg" not in measurement.quantities:
+        raise InputError("the campaign needs a target angle of repose: the workbook has no "
+                         "'repose' photos and no meta 'target_repose_deg'")
+    target = float(measurement.quantities["repose_angle_deg"].value)
+
+    factors = factor_levels(measurement, config.levels)
+    letters = list(factors)
+    low = np.array([factors[f]["low"] for f in letters])
+    high = np.array([factors[f]["high"] for f in letters])
+    means = {f: factors[f]["mean"] for f in letters}
+    param_of = {f: factors[f]["parameter"] for f in letters}
+
+    base = base_parameters(measurement)
+    geometry = repose_geometry(measurement.meta)
+    store = RunStore(out / "runs")
+    rn = _Runner(base, geometry, config, store, runner or repose_runner)
+
+    def settings(actual_by_letter: dict) -> dict:
+        return {param_of[f]: float(v) for f, v in actual_by_letter.items()}
+
+    # 2. Plackett-Burman screening --------------------------------------------------------
+    pb = plackett_burman(len(letters), runs=12)
+    pb_actual = to_actual(pb.coded[:, :len(letters)], low, high)
+    pb_records = rn.run("Plackett-Burman", [rn.inputs(settings(dict(zip(letters, row))), config.seed)
+                                            for row in pb_actual])
+    y_pb = _responses(pb_records)
+    dummies = pb.coded[:, len(letters):]
+    screening = plackett_burman_screening(pb.coded[:, :len(letters)], y_pb, factors=letters,
+                                          dummies=dummies if dummies.size else None,
+                                          alpha=config.alpha, response_name=RESPONSE,
+                                          low=low, high=high)
+
+    # 3. seed-to-seed noise at the screening centre ----------------------------------------
+    centre = {f: (factors[f]["low"] + factors[f]["high"]) / 2 for f in letters}
+    noise_seeds = [config.seed + 1000 + i for i in range(config.noise_repeats)]
+    noise_records = rn.run("noise", [rn.inputs(settings(centre), s) for s in noise_seeds])
+    y_noise = _responses(noise_records)
+    sigma = float(np.std(y_noise, ddof=1))
+    se_effect = sigma * math.sqrt(4.0 / len(y_pb))  # mean(+) - mean(-), n/2 runs each
+    effect_vs_noise = {f: {"effect": screening.effects[f], "se_noise": se_effect,
+                           "ratio": abs(screening.effects[f]) / se_effect if se_effect > 0 else math.inf,
+                           "exceeds_noise": bool(abs(screening.effects[f]) > 2 * se_effect)}
+                       for f in letters}
+
+    # choose the factors carried forward
+    flagged = list(screening.significant)
+    lo_n, hi_n = config.n_significant
+    chosen, chosen_note = list(flagged), []
+    if len(chosen) < lo_n:
+        extra = [f for f in screening.ranking if f not in chosen][:lo_n - len(chosen)]
+        chosen += extra
+        chosen_note.append(f"the screening flagged {len(flagged)} factor(s) "
+                           f"({', '.join(flagged) or 'none'}) at p < {config.alpha}; the next largest "
+                           f"effects ({', '.join(extra)}) fill the response-surface design up to {lo_n}")
+    if len(chosen) > hi_n:
+        dropped = sorted(chosen, key=lambda f: -abs(screening.effects[f]))[hi_n:]
+        chosen = [f for f in chosen if f not in dropped]
+        chosen_note.append(f"{len(flagged)} factors were significant; the {hi_n} largest effects are "
+                           f"kept, {', '.join(dropped)} stay at their measured means")
+    chosen = sorted(chosen, key=letters.index)
+
+    # 4. steepest climb ---------------------------------------------------------------------
+    increase = bool(target > float(np.mean(y_pb)))
+    plan = steepest_climb_plan({f: factors[f]["low"] for f in letters},
+                               {f: factors[f]["high"] for f in letters},
+                               screening.effects, chosen, increase=increase,
+                               n_levels=config.climb_levels, fixed=means)
+    climb_records = rn.run("steepest climb", [rn.inputs(settings(dict(zip(letters, row))), config.seed)
+                                              for row in plan.levels])
+    y_climb = _responses(climb_records)
+    climb = steepest_climb_analysis(plan, y_climb, target)
+
+    # 5. Box-Behnken --------------------------------------------------------------------------
+    k = len(chosen)
+    bbd = box_behnken(k, centre_points=5)
+    b_low = np.array([climb.low[f] for f in chosen])
+    b_high = np.array([climb.high[f] for f in chosen])
+    for j, f in enumerate(chosen):
+        lo_b, hi_b = PARAMETER_BOUNDS[param_of[f]]
+        b_low[j], b_high[j] = max(b_low[j], lo_b), min(b_high[j], hi_b)
+    bbd_actual = to_actual(bbd.coded, b_low, b_high)
+    fixed = {f: means[f] for f in letters if f not in chosen}
+    centre_count = 0
+    bbd_tasks = []
+    for coded_row, row in zip(bbd.coded, bbd_actual):
+        is_centre = not np.any(coded_row)
+        seed = config.seed + centre_count if is_centre else config.seed
+        centre_count += is_centre
+        bbd_tasks.append(rn.inputs(settings({**fixed, **dict(zip(chosen, row))}), seed))
+    bbd_records = rn.run("Box-Behnken", bbd_tasks)
+    y_bbd = _responses(bbd_records)
+    fit = fit_response_surface(bbd.coded, y_bbd, "quadratic", factors=chosen,
+                               response_name=RESPONSE, low=b_low, high=b_high)
+    canonical = canonical_analysis(fit)
+    centre_sd = float(np.std(y_bbd[~np.any(bbd.coded, axis=1)], ddof=1))
+    term_vs_noise = terms_against_noise(fit, centre_sd)
+
+    # 6. optimisation to the measured angle ---------------------------------------------------
+    reference = np.array([means[f] for f in chosen])
+    optimum = optimise_to_target(fit, target, reference_actual=reference, seed=config.seed)
+    best = optimum.preferred
+    best_actual = {f: float(v) for f, v in best["actual"].items()}
+
+    # 7. validation ------------------------------------------------------------------------------
+    val_settings = settings({**fixed, **best_actual})
+    val_records = rn.run("validation", [rn.inputs(val_settings, s) for s in config.validation_seeds])
+    y_val = _responses(val_records)
+    validation = validate_repeats(y_val, target)
+
+    calibrated = base.with_(**{param_of[f]: means[f] for f in letters}).with_(**val_settings)
+    results = {
+        "material": measurement.material,
+        "target_angle_deg": target,
+        "config": {k_: (list(v) if isinstance(v, tuple) else v) for k_, v in config.__dict__.items()},
+        "measurement": measurement.to_dict(),
+        "factors": factors,
+        "base_parameters": base.to_dict(),
+        "geometry": geometry,
+        "plackett_burman": {
+            "design_coded": pb.coded.tolist(), "columns": list(pb.columns),
+            "design_actual": pb_actual.tolist(), "response": y_pb.tolist(),
+            "runs": _run_refs(pb_records), "screening": screening.to_dict(),
+            "effects_vs_noise": effect_vs_noise},
+        "noise": {"settings": centre, "seeds": noise_seeds, "responses": y_noise.tolist(),
+                  "sd": sigma, "runs": _run_refs(noise_records),
+                  "bbd_centre_sd": centre_sd},
+        "significant": {"flagged": flagged, "carried_forward": chosen, "note": "; ".join(chosen_note)},
+        "steepest_climb": {"plan": plan.to_dict(), "response": y_climb.tolist(),
+                           "runs": _run_refs(climb_records), "result": climb.to_dict(),
+                           "increase": increase},
+        "box_behnken": {"factors": chosen, "low": b_low.tolist(), "high": b_high.tolist(),
+                        "centre": [climb.centre[f] for f in chosen], "fixed": fixed,
+                        "design_coded": bbd.coded.tolist(), "design_actual": bbd_actual.tolist(),
+                        "response": y_bbd.tolist(), "runs": _run_refs(bbd_records),
+                        "fit": fit.to_dict(), "canonical": canonical.to_dict(),
+                        "terms_vs_noise": term_vs_noise},
+        "optimisation": optimum.to_dict(),
+        "validation": {"settings": val_settings, "seeds": list(config.validation_seeds),
+                       "responses": y_val.tolist(), "runs": _run_refs(val_records),
+                       "result": validation.to_dict()},
+        "calibrated_parameters": calibrated.to_dict(),
+        "stages": rn.log,
+        "wall_s": time.perf_counter() - t_start,
+        "provenance": Provenance(inputs=dict(measurement.provenance.inputs), seed=config.seed,
+                                 options={"profile": config.profile, "levels": config.levels}).to_dict(),
+    }
+    write_json(out / "results.json", results)
+    return results
+
+
+def terms_against_noise(fit, sigma: float) -> dict:
+    """Each coded coefficient against the seed-to-seed noise: its standard error if the only
+    error were a DEM noise of sd ``sigma`` (sigma^2 (X'X)^-1), and whether it exceeds twice that."""
+    from analyse.regression import term_columns
+
+    x = term_columns(np.asarray(fit.coded, dtype=float), ((),) + tuple(fit.term_powers))
+    cov = np.linalg.pinv(x.T @ x)
+    out = {}
+    for i, name in enumerate(("Intercept",) + tuple(fit.terms)):
+        se = sigma * math.sqrt(max(cov[i, i], 0.0))
+        coef = float(fit.coefficients[name])
+        out[name] = {"coefficient": coef, "se_noise": se, "exceeds_noise": bool(abs(coef) > 2 * se)}
+    return out

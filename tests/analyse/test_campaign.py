@@ -1,0 +1,72 @@
+"""The calibration campaign end to end, on the example workbook, with an analytic stand-in for
+the repose rig whose active factors and optimum are known. (The campaign on the real DEM is
+exercised by ``demcal calibrate`` and the opt-in validation run.)"""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from analyse.campaign import CampaignConfig, calibrate, factor_levels
+from measure.pipeline import measure_workbook
+
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLE = ROOT / "data" / "astragalus" / "workbook.xlsx"
+
+#: Stand-in response: the angle depends on e_pp, e_pw and mu_s_pw only (factors B, E, F),
+#: plus a seed-dependent noise of sd 0.15 deg.
+NOISE_SD = 0.15
+
+
+def standin_angle(p: dict) -> float:
+    zb = (p["e_pp"] - 0.3) / 0.1
+    ze = (p["e_pw"] - 0.35) / 0.05
+    zf = (p["mu_s_pw"] - 0.2) / 0.1
+    return 34.0 - 1.5 * zb - 1.2 * ze + 2.0 * zf + 0.5 * zb * ze - 0.4 * zf**2
+
+
+def standin_runner(inputs: dict) -> dict:
+    noise = np.random.default_rng(inputs["seed"]).normal(0.0, NOISE_SD)
+    angle = standin_angle(inputs["params"]) + noise
+    return {"observable": {"angle_deg": angle}, "wall_s": 0.0, "seed": inputs["seed"]}
+
+
+@pytest.fixture(scope="module")
+def measurement():
+    if not EXAMPLE.exists():
+        pytest.skip(f"example workbook missing: {EXAMPLE}")
+    return measure_workbook(EXAMPLE)
+
+
+def test_levels_are_the_measured_extremes(measurement):
+    levels = factor_levels(measurement, "minmax")
+    est = measurement.quantities["restitution.particle-particle"]
+    used = [r["value"] for r in est.per_row if r["used"]]
+    assert levels["B"]["low"] == pytest.approx(min(used))
+    assert levels["B"]["high"] == pytest.approx(max(used))
+    assert levels["E"]["quantity"] == "restitution.particle-steel"
+    sd_levels = factor_levels(measurement, "sd")
+    assert sd_levels["C"]["high"] - sd_levels["C"]["low"] == pytest.approx(
+        2 * measurement.quantities["static_friction.particle"].sd)
+
+
+def test_campaign_finds_the_active_factors_and_the_target(measurement, tmp_path):
+    config = CampaignConfig(workers=1, progress=False)
+    res = calibrate(EXAMPLE, tmp_path, config, runner=standin_runner, measurement=measurement)
+    assert set(res["significant"]["carried_forward"]) == {"B", "E", "F"}
+    assert set(res["plackett_burman"]["screening"]["significant"]) == {"B", "E", "F"}
+    # the noise repeats measure the stand-in's noise (4 seeds: loose bound)
+    assert 0.02 < res["noise"]["sd"] < 0.5
+    # optimisation: the preferred solution sits on the target surface of the fitted model
+    opt = res["optimisation"]
+    assert opt["reached"]
+    assert opt["preferred"]["predicted"] == pytest.approx(res["target_angle_deg"], abs=1e-3)
+    # validation with fresh seeds: the true response at the solution is the target within noise
+    settings = res["validation"]["settings"]
+    base = res["calibrated_parameters"]
+    assert standin_angle({**base, **settings}) == pytest.approx(res["target_angle_deg"], abs=0.5)
+    assert res["validation"]["result"]["relative_error_pct"] < 2.0
+    # every run is in the store and the rerun reuses them all
+    again = calibrate(EXAMPLE, tmp_path, config, runner=standin_runner, measurement=measurement)
+    assert all(stage["ran"] == 0 for stage in again["stages"])
+    assert again["box_behnken"]["response"] == res["box_behnken"]["response"]
