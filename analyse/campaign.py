@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +37,7 @@ from analyse.designs import box_behnken, plackett_burman, to_actual
 from analyse.optimise import (canonical_analysis, optimise_to_target, steepest_climb_analysis,
                               steepest_climb_plan, validate_repeats)
 from analyse.regression import fit_response_surface
-from analyse.runs import RunStore, run_all
+from analyse.runs import RunStore, run_all, run_key
 from analyse.screening import plackett_burman_screening
 from demcal.errors import AnalysisError, InputError
 from demcal.jsonio import write_json
@@ -110,6 +110,15 @@ class CampaignConfig:
             raise InputError(f"levels must be 'minmax' or 'sd', got {self.levels!r}")
         if self.noise_repeats < 2:
             raise InputError(f"noise_repeats must be >= 2, got {self.noise_repeats}")
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "CampaignConfig":
+        """Rebuild the settings stored in ``results.json`` (``results["config"]``)."""
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - names)
+        if unknown:
+            raise InputError(f"unknown campaign settings {unknown}; valid: {sorted(names)}")
+        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 
 def repose_runner(inputs: dict) -> dict:
@@ -197,21 +206,14 @@ def repose_geometry(meta: dict) -> dict:
 
 @dataclass
 class _Runner:
-    """Builds run inputs and executes batches through the store."""
+    """Executes batches of runs through the store (``runner`` for those not yet finished)."""
 
-    base: object
-    geometry: dict
     config: CampaignConfig
     store: RunStore
     runner: object
     log: list = field(default_factory=list)
 
-    def inputs(self, settings: dict, seed: int) -> dict:
-        params = self.base.with_(**settings)
-        return {"rig": "repose", "profile": self.config.profile, "params": params.to_dict(),
-                "geometry": self.geometry, "seed": int(seed)}
-
-    def run(self, stage: str, tasks: list[dict]) -> list[dict]:
+    def __call__(self, stage: str, tasks: list[dict]) -> list[dict]:
         out = run_all(tasks, self.runner, self.store, workers=self.config.workers,
                       scheduler=self.config.scheduler, desc=stage, progress=self.config.progress)
         failed = [r for r in out.records if r["status"] != "ok"]
@@ -222,6 +224,30 @@ class _Runner:
                                 f"first error: {failed[0]['error']} (run record "
                                 f"{self.store.path(failed[0]['key'])})")
         return out.records
+
+
+@dataclass
+class _StoredRuns:
+    """Serves batches of runs from the store only, for a replay: never runs the DEM and never
+    writes; a run that is not in the store as finished is an error naming its key."""
+
+    store: RunStore
+    log: list = field(default_factory=list)
+
+    def __call__(self, stage: str, tasks: list[dict]) -> list[dict]:
+        records = []
+        for task in tasks:
+            key = run_key(task)
+            rec = self.store.get(key)
+            if rec is None or rec.get("status") != "ok":
+                state = "is not in the run store" if rec is None else f"has status {rec.get('status')!r}"
+                raise AnalysisError(f"{stage}: DEM run {key} {state} ({self.store.path(key)}); "
+                                    "its inputs differ from the stored campaign's, or the run "
+                                    "never finished")
+            records.append(rec)
+        self.log.append({"stage": stage, "runs": len(tasks), "ran": 0,
+                         "reused": len({r["key"] for r in records}), "failed": 0})
+        return records
 
 
 def _responses(records) -> np.ndarray:
@@ -251,7 +277,7 @@ def calibrate(workbook, out_dir, config: CampaignConfig | None = None, *, runner
     config : CampaignConfig
     runner : callable, optional
         ``runner(inputs) -> dict`` performing one DEM run (default :func:`repose_runner`);
-        tests pass a cheap stand-in.
+        tests pass a cheap stand-in. Its qualified name is kept in ``results["runner"]``.
     measurement : measure.pipeline.Measurement, optional
         Use this measurement instead of measuring ``workbook`` again.
 
@@ -269,6 +295,49 @@ def calibrate(workbook, out_dir, config: CampaignConfig | None = None, *, runner
     if measurement is None:
         measurement = measure_workbook(workbook, annotate_dir=out / "annotated")
     write_json(out / "measure.json", measurement.to_dict())
+    runner = runner or repose_runner
+    results = _derive(measurement, config, _Runner(config, RunStore(out / "runs"), runner))
+    results["runner"] = f"{getattr(runner, '__module__', '?')}.{getattr(runner, '__qualname__', repr(runner))}"
+    results["wall_s"] = time.perf_counter() - t_start
+    write_json(out / "results.json", results)
+    return results
+
+
+def derive_results(measurement, config: CampaignConfig, store_dir) -> dict:
+    """Replay a campaign's analysis from its stored DEM runs, running no DEM.
+
+    Every step of :func:`calibrate` after the measurement is redone with the same code; each
+    DEM run it asks for is read from the run store by its key (the SHA-256 of its inputs).
+    This is how ``demcal audit`` re-derives a campaign's tables.
+
+    Parameters
+    ----------
+    measurement : measure.pipeline.Measurement
+        The measurement to start from (e.g. the workbook measured again).
+    config : CampaignConfig
+        The campaign's settings (``CampaignConfig.from_dict(results["config"])``).
+    store_dir : str or Path
+        The campaign's run store (``DIR/runs``).
+
+    Returns
+    -------
+    dict
+        What ``results.json`` holds, without ``runner`` and ``wall_s``.
+
+    Raises
+    ------
+    AnalysisError
+        A run the analysis needs is not in the store (its inputs changed, e.g. because a
+        measured level did) or did not finish.
+    """
+    store_dir = Path(store_dir)
+    if not store_dir.is_dir():
+        raise InputError(f"run store {store_dir} does not exist")
+    return _derive(measurement, config, _StoredRuns(RunStore(store_dir)))
+
+
+def _derive(measurement, config: CampaignConfig, execute) -> dict:
+    """Steps 2-7 of the campaign; ``execute(stage, tasks) -> records`` supplies the DEM runs."""
     if "repose_angle_deg" not in measurement.quantities:
         raise InputError("the campaign needs a target angle of repose: the workbook has no "
                          "'repose' photos and no meta 'target_repose_deg'")
@@ -283,8 +352,11 @@ def calibrate(workbook, out_dir, config: CampaignConfig | None = None, *, runner
 
     base = base_parameters(measurement)
     geometry = repose_geometry(measurement.meta)
-    store = RunStore(out / "runs")
-    rn = _Runner(base, geometry, config, store, runner or repose_runner)
+
+    def inputs(settings: dict, seed: int) -> dict:
+        params = base.with_(**settings)
+        return {"rig": "repose", "profile": config.profile, "params": params.to_dict(),
+                "geometry": geometry, "seed": int(seed)}
 
     def settings(actual_by_letter: dict) -> dict:
         return {param_of[f]: float(v) for f, v in actual_by_letter.items()}
@@ -292,8 +364,8 @@ def calibrate(workbook, out_dir, config: CampaignConfig | None = None, *, runner
     # 2. Plackett-Burman screening --------------------------------------------------------
     pb = plackett_burman(len(letters), runs=12)
     pb_actual = to_actual(pb.coded[:, :len(letters)], low, high)
-    pb_records = rn.run("Plackett-Burman", [rn.inputs(settings(dict(zip(letters, row))), config.seed)
-                                            for row in pb_actual])
+    pb_records = execute("Plackett-Burman", [inputs(settings(dict(zip(letters, row))), config.seed)
+                                             for row in pb_actual])
     y_pb = _responses(pb_records)
     dummies = pb.coded[:, len(letters):]
     screening = plackett_burman_screening(pb.coded[:, :len(letters)], y_pb, factors=letters,
@@ -304,7 +376,7 @@ def calibrate(workbook, out_dir, config: CampaignConfig | None = None, *, runner
     # 3. seed-to-seed noise at the screening centre ----------------------------------------
     centre = {f: (factors[f]["low"] + factors[f]["high"]) / 2 for f in letters}
     noise_seeds = [config.seed + 1000 + i for i in range(config.noise_repeats)]
-    noise_records = rn.run("noise", [rn.inputs(settings(centre), s) for s in noise_seeds])
+    noise_records = execute("noise", [inputs(settings(centre), s) for s in noise_seeds])
     y_noise = _responses(noise_records)
     sigma = float(np.std(y_noise, ddof=1))
     se_effect = sigma * math.sqrt(4.0 / len(y_pb))  # mean(+) - mean(-), n/2 runs each
@@ -336,8 +408,8 @@ def calibrate(workbook, out_dir, config: CampaignConfig | None = None, *, runner
                                {f: factors[f]["high"] for f in letters},
                                screening.effects, chosen, increase=increase,
                                n_levels=config.climb_levels, fixed=means)
-    climb_records = rn.run("steepest climb", [rn.inputs(settings(dict(zip(letters, row))), config.seed)
-                                              for row in plan.levels])
+    climb_records = execute("steepest climb", [inputs(settings(dict(zip(letters, row))), config.seed)
+                                               for row in plan.levels])
     y_climb = _responses(climb_records)
     climb = steepest_climb_analysis(plan, y_climb, target)
 
@@ -357,8 +429,8 @@ def calibrate(workbook, out_dir, config: CampaignConfig | None = None, *, runner
         is_centre = not np.any(coded_row)
         seed = config.seed + centre_count if is_centre else config.seed
         centre_count += is_centre
-        bbd_tasks.append(rn.inputs(settings({**fixed, **dict(zip(chosen, row))}), seed))
-    bbd_records = rn.run("Box-Behnken", bbd_tasks)
+        bbd_tasks.append(inputs(settings({**fixed, **dict(zip(chosen, row))}), seed))
+    bbd_records = execute("Box-Behnken", bbd_tasks)
     y_bbd = _responses(bbd_records)
     fit = fit_response_surface(bbd.coded, y_bbd, "quadratic", factors=chosen,
                                response_name=RESPONSE, low=b_low, high=b_high)
@@ -374,7 +446,7 @@ def calibrate(workbook, out_dir, config: CampaignConfig | None = None, *, runner
 
     # 7. validation ------------------------------------------------------------------------------
     val_settings = settings({**fixed, **best_actual})
-    val_records = rn.run("validation", [rn.inputs(val_settings, s) for s in config.validation_seeds])
+    val_records = execute("validation", [inputs(val_settings, s) for s in config.validation_seeds])
     y_val = _responses(val_records)
     validation = validate_repeats(y_val, target)
 
@@ -410,12 +482,10 @@ def calibrate(workbook, out_dir, config: CampaignConfig | None = None, *, runner
                        "responses": y_val.tolist(), "runs": _run_refs(val_records),
                        "result": validation.to_dict()},
         "calibrated_parameters": calibrated.to_dict(),
-        "stages": rn.log,
-        "wall_s": time.perf_counter() - t_start,
+        "stages": list(execute.log),
         "provenance": Provenance(inputs=dict(measurement.provenance.inputs), seed=config.seed,
                                  options={"profile": config.profile, "levels": config.levels}).to_dict(),
     }
-    write_json(out / "results.json", results)
     return results
 
 

@@ -10,8 +10,11 @@ does the whole chain on the photo, step by step:
    fitted to block medians of the background and divided out, removing light gradients and
    vignetting; repeated twice with the new classification.
 3. *Otsu threshold* [Otsu1979]_ of the flattened image (lightly denoised). *Polarity*: the
-   class that fills the bottom centre of the frame (the floor in front of the heap) is the
-   object, so the heap may be darker or lighter than the background.
+   side of the threshold of the bottom centre of the frame (the floor in front of the heap)
+   is the object, so the heap may be darker or lighter than the background. A three-class
+   Otsu split [Liao2001]_ is tried first, so that a floor much lighter or darker than the heap
+   does not pull the threshold between floor and heap: the threshold next to the background
+   (the top of the frame) is used.
 4. *Morphological clean-up* [Soille2003]_: an opening removes thin grid lines and speckle, a
    closing bridges the gaps between surface segments, holes are filled, and the largest
    connected object (heap and floor) is kept.
@@ -40,6 +43,8 @@ References
 ----------
 .. [Otsu1979] N. Otsu, "A threshold selection method from gray-level histograms", IEEE Trans.
    Systems, Man, and Cybernetics 9(1), 62-66 (1979).
+.. [Liao2001] P.-S. Liao, T.-S. Chen, P.-C. Chung, "A fast algorithm for multilevel
+   thresholding", J. Inf. Sci. Eng. 17(5), 713-727 (2001).
 .. [Soille2003] P. Soille, *Morphological Image Analysis*, 2nd ed., Springer (2003).
 .. [DudaHart1972] R. O. Duda, P. E. Hart, "Use of the Hough transformation to detect lines and
    curves in pictures", Comm. ACM 15(1), 11-15 (1972).
@@ -331,9 +336,8 @@ def angle_from_profile(x, z, side="both", *, band=(0.15, 0.85), smooth=0.02, flo
 def angle_from_drum(image, *, chord=0.5, rim_margin=0.04, annotate_to=None):
     """Dynamic angle of repose in a rotating drum from a side image of its free surface [deg].
 
-    The drum is the region not connected to the bright frame corners (found by Otsu
-    threshold and connected components); its centre and radius come from the area and
-    centroid of that region. Inside the drum, less a ``rim_margin`` ring, the dark powder is
+    The drum rim is found as the strongest circle of the Hough gradient method
+    [DudaHart1972]_ with a radius of 35-55 % of the frame. Inside the drum, less a ``rim_margin`` ring, the dark powder is
     thresholded (Otsu) and cleaned; the free surface is its top boundary in each column. A
     robust line (as for the heap flanks) is fitted to the central ``chord`` fraction of the free surface's
     horizontal extent; its angle to the image rows is the dynamic angle of repose.
@@ -361,23 +365,21 @@ def angle_from_drum(image, *, chord=0.5, rim_margin=0.04, annotate_to=None):
     gray = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
     h, w = gray.shape
     dark = gray < _otsu(gray)
-    # Outside of the drum: bright regions touching the frame.
-    lab, n = ndimage.label(~dark)
-    border = np.unique(np.r_[lab[0], lab[-1], lab[:, 0], lab[:, -1]])
-    outside = np.isin(lab, border[border > 0])
-    drum = ndimage.binary_fill_holes(~outside)
-    area = drum.sum()
-    if area < 0.05 * h * w:
-        raise InputError(f"{name}: no drum found")
-    cy, cx = ndimage.center_of_mass(drum)
-    radius = math.sqrt(area / math.pi)
+    # The drum rim: the strongest circle (Hough gradient method) of radius 35-55 % of the frame.
+    side = min(h, w)
+    circles = cv2.HoughCircles(cv2.GaussianBlur(gray, (0, 0), 1.5).astype(np.uint8),
+                               cv2.HOUGH_GRADIENT, dp=1, minDist=side, param1=100, param2=30,
+                               minRadius=int(0.35 * side), maxRadius=int(0.55 * side))
+    if circles is None:
+        raise InputError(f"{name}: no drum rim (circle) found")
+    cx, cy, radius = (float(v) for v in circles[0][0])
     yy, xx = np.mgrid[0:h, 0:w]
     r = np.hypot(xx - cx, yy - cy)
     inner = r < radius * (1.0 - rim_margin)
     powder = dark & inner
     rad = max(1, int(round(0.01 * radius)))
     powder = _largest(cv2.morphologyEx(powder.astype(np.uint8), cv2.MORPH_OPEN, _disk(rad)) > 0)
-    if powder.sum() < 0.05 * area:
+    if powder.sum() < 0.05 * math.pi * radius ** 2:
         raise InputError(f"{name}: no powder bed found in the drum")
     # Free surface: top-most powder pixel of each column that has air above it.
     cols = np.nonzero(powder.any(axis=0))[0]
@@ -493,11 +495,27 @@ def _disk(radius):
 
 
 def _object_class(img):
-    """Step 3: Otsu threshold; the class filling the bottom centre of the frame is the object."""
-    above = img > _otsu(img)
+    """Step 3: threshold; the object is on the side of the bottom centre of the frame.
+
+    Three-class Otsu thresholds [Otsu1979]_ [Liao2001]_ split background, heap and floor when
+    the floor is much lighter or darker than the heap; the threshold next to the class of the
+    top of the frame (the background) is used. If the background is the middle class, the
+    two-class Otsu threshold is used instead.
+    """
+    from skimage.filters import threshold_multiotsu
     h, w = img.shape
-    patch = above[int(0.93 * h):, int(0.3 * w):int(0.7 * w) + 1]
-    return above if patch.mean() >= 0.5 else ~above
+    bottom = float(np.median(img[int(0.93 * h):, int(0.3 * w):int(0.7 * w) + 1]))
+    top = float(np.median(img[:max(2, h // 20)]))
+    try:
+        t1, t2 = threshold_multiotsu(img, classes=3)
+    except ValueError:                  # too few grey levels for three classes
+        t1 = t2 = None
+    if t1 is not None and top < t1 < bottom:
+        return img > t1
+    if t1 is not None and bottom < t2 < top:
+        return img < t2
+    t = _otsu(img)
+    return img > t if bottom > t else img <= t
 
 
 def _illumination(img, background):
@@ -508,30 +526,42 @@ def _illumination(img, background):
     """
     h, w = img.shape
     b = max(8, min(h, w) // 20)
-    xs, ys, vs = [], [], []
-    for r0 in range(0, h - b + 1, b):
-        for c0 in range(0, w - b + 1, b):
-            bg = background[r0:r0 + b, c0:c0 + b]
-            if bg.mean() >= 0.6:
-                v = np.median(img[r0:r0 + b, c0:c0 + b][bg])
-                if v > 0:
-                    xs.append(c0 + 0.5 * b)
-                    ys.append(r0 + 0.5 * b)
-                    vs.append(math.log(v))
-    if len(vs) < 12:
+    nr, nc = h // b, w // b
+    blocks = img[:nr * b, :nc * b].reshape(nr, b, nc, b).transpose(0, 2, 1, 3).reshape(nr, nc, b * b)
+    bg = background[:nr * b, :nc * b].reshape(nr, b, nc, b).transpose(0, 2, 1, 3).reshape(nr, nc, b * b)
+    use = bg.mean(axis=2) >= 0.6
+    if use.sum() < 12:
         return None
-    xs, ys, vs = np.array(xs), np.array(ys), np.array(vs)
+    # Median of each block's background pixels (NaN elsewhere; NaN sorts last).
+    vals = np.sort(np.where(bg[use], blocks[use], np.nan), axis=1)
+    count = bg[use].sum(axis=1)
+    med = vals[np.arange(vals.shape[0]), (count - 1) // 2]
+    rows, cols = np.nonzero(use)
+    ok = med > 0
+    if ok.sum() < 12:
+        return None
+    ys, xs, vs = (rows[ok] + 0.5) * b, (cols[ok] + 0.5) * b, np.log(med[ok])
 
     def design(xv, yv):
         xn, yn = 2 * xv / w - 1, 2 * yv / h - 1
-        return np.stack([np.ones_like(xn), xn, yn, xn * xn, xn * yn, yn * yn], axis=-1)
+        return [np.ones_like(xn * yn), xn, yn, xn * xn, xn * yn, yn * yn]
 
-    coef, *_ = np.linalg.lstsq(design(xs, ys), vs, rcond=None)
-    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
-    log_field = design(xx, yy) @ coef.astype(np.float32)
-    # Keep the extrapolation (below the background, into the floor) within the observed range.
-    log_field = np.clip(log_field, vs.min() - 0.2, vs.max() + 0.2)
+    coef, *_ = np.linalg.lstsq(np.stack(design(xs, ys), axis=-1), vs, rcond=None)
+    # No extrapolation downward: below the lowest background block (the floor, the bench) each
+    # column keeps the light level of that row; and stay within the observed range.
+    xg = np.arange(w, dtype=np.float32)[None, :]
+    yg = np.minimum(np.arange(h, dtype=np.float32), ys.max())[:, None]
+    log_field = sum(c * t for c, t in zip(coef.astype(np.float32), design(xg, yg)))
+    log_field = np.clip(log_field, vs.min() - 0.1, vs.max() + 0.1)
     return np.exp(log_field).astype(np.float32)
+
+
+def _fill_holes(mask):
+    """Fill the holes of a binary mask: background not connected to the frame border."""
+    m = np.pad(mask.astype(np.uint8), 1)
+    outside = m.copy()
+    cv2.floodFill(outside, None, (0, 0), 1)          # the padded border is connected
+    return (m | (outside == 0))[1:-1, 1:-1].astype(bool)
 
 
 def _largest(mask):
@@ -551,7 +581,7 @@ def _segment(gray, name):
     def clean(obj):
         m = cv2.morphologyEx(obj.astype(np.uint8), cv2.MORPH_OPEN, _disk(r_open))
         m = cv2.morphologyEx(m, cv2.MORPH_CLOSE, _disk(r_close))
-        return _largest(ndimage.binary_fill_holes(m > 0))
+        return _largest(_fill_holes(m > 0))
 
     img = cv2.GaussianBlur(gray, (0, 0), max(1.0, diag / 1000.0))
     mask = clean(_object_class(img))

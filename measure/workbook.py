@@ -618,13 +618,28 @@ def _check_files(wb_root: Path, name: str, spec: SheetSpec, frame: pd.DataFrame,
 # ----------------------------------------------------------------------------------------------
 # public API
 
+def resolve_workbook(path) -> Path:
+    """The workbook a path names: an ``.xlsx`` file, a folder of ``<sheet>.csv``, or a campaign
+    folder holding no CSV sheets and exactly one ``.xlsx`` (e.g. ``data/astragalus``)."""
+    source = Path(path)
+    if source.is_dir() and not (source / "meta.csv").exists():
+        books = sorted(p for p in source.glob("*.xls[xm]") if not p.name.startswith("~$"))
+        if len(books) == 1:
+            return books[0]
+        if len(books) > 1:
+            raise InputError(f"folder {source} holds {len(books)} workbooks "
+                             f"({', '.join(p.name for p in books)}): name one")
+    return source
+
+
 def read_workbook(path) -> Workbook:
     """Read and validate a lab workbook (``.xlsx`` or a folder of ``<sheet>.csv``).
 
     Parameters
     ----------
     path : str or Path
-        The ``.xlsx`` file, or the folder holding one CSV per sheet.
+        The ``.xlsx`` file, the folder holding one CSV per sheet, or a folder holding one
+        ``.xlsx`` (see :func:`resolve_workbook`).
 
     Returns
     -------
@@ -637,7 +652,7 @@ def read_workbook(path) -> Workbook:
     InputError
         If ``path`` does not exist or is neither an ``.xlsx`` file nor a folder.
     """
-    source = Path(path)
+    source = resolve_workbook(path)
     files: dict = {}
     if source.is_dir():
         root = source

@@ -1,16 +1,23 @@
-"""One shared set of numba JIT flags for every simulate kernel.
+"""One shared set of numba JIT flags for every simulate kernel, and the kernel cache guard.
 
 ``fastmath`` is restricted to the flags that only reorder or contract arithmetic; ``nnan`` and
-``ninf`` are left out on purpose, because the engine must be able to see a non-finite state and
-stop (that check runs in numpy on the returned arrays, but a kernel compiled under ``nnan`` may
-also drop the guards against zero-length vectors).
+``ninf`` are left out on purpose, so that comparisons with NaN and infinity keep their meaning
+(the engine must be able to see a non-finite state and stop).
+
+Kernels are cached on disk (``cache=True``), so a second run loads machine code instead of
+compiling. numba checks only the source file of each cached function, while the engine's
+kernels inline evaluators from several modules; ``refresh_stale_cache`` therefore drops the
+cached kernels of this package whenever any of those sources changes.
 """
 
 from __future__ import annotations
 
+import hashlib
+from pathlib import Path
+
 import numba
 
-#: Flags of every compiled kernel (``cache=True``: the second run loads machine code from disk).
+#: Flags of every compiled kernel.
 JIT_FLAGS = dict(
     cache=True,
     nogil=True,
@@ -21,6 +28,31 @@ JIT_FLAGS = dict(
 
 #: Small evaluators inlined into the kernels that call them.
 INLINE_FLAGS = dict(JIT_FLAGS, inline="always")
+
+#: Source files whose code ends up in the cached kernels.
+KERNEL_SOURCES = ("_jit.py", "contact/hertz_mindlin.py", "contact/rolling.py", "integrate.py",
+                  "walls.py", "neighbours.py", "engine.py")
+
+
+def refresh_stale_cache() -> None:
+    """Delete this package's cached kernels if any kernel source changed since they were made."""
+    root = Path(__file__).resolve().parent
+    try:
+        digest = hashlib.sha256(b"".join((root / name).read_bytes() for name in KERNEL_SOURCES)).hexdigest()
+        stamp = root / "__pycache__" / "kernel-sources.sha256"
+        if stamp.is_file() and stamp.read_text().strip() == digest:
+            return
+        for folder in (root / "__pycache__", root / "contact" / "__pycache__"):
+            if folder.is_dir():
+                for cached in list(folder.glob("*.nbi")) + list(folder.glob("*.nbc")):
+                    cached.unlink(missing_ok=True)
+        stamp.parent.mkdir(exist_ok=True)
+        stamp.write_text(digest + "\n")
+    except OSError:
+        pass  # a read-only installation keeps whatever cache it has
+
+
+refresh_stale_cache()
 
 
 def kernel(fn):

@@ -105,7 +105,7 @@ def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw):
 
 @kernel
 def _contact_forces(hist_dt, lever_mode, n_bodies, bx, bv, bw, bf, bt, brm, brv, binvm, bmat,
-                    sbody, sx, srad, pstart, pj, ph, wstart, wk, wh,
+                    sbody, sx, srad, ppi, pj, ph, ws, wk, wh,
                     wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
                     e_star, g_star, damp, mu_s, mu_r):
     """Contact forces, torques and rolling torques on every body from the Verlet lists.
@@ -124,165 +124,160 @@ def _contact_forces(hist_dt, lever_mode, n_bodies, bx, bv, bw, bf, bt, brm, brv,
         brv[b, 0] = 0.0
         brv[b, 1] = 0.0
         brv[b, 2] = 0.0
-    n_rows = pstart.shape[0] - 1
-    for i in range(n_rows):
-        k0 = pstart[i]
-        k1 = pstart[i + 1]
-        q0 = wstart[i]
-        q1 = wstart[i + 1]
-        if k0 == k1 and q0 == q1:
+    # ---- sphere-sphere
+    for k in range(ppi.shape[0]):
+        i = ppi[k]
+        j = pj[k]
+        xi = sx[i, 0]
+        yi = sx[i, 1]
+        zi = sx[i, 2]
+        dx = sx[j, 0] - xi
+        dy = sx[j, 1] - yi
+        dz = sx[j, 2] - zi
+        ri = srad[i]
+        rj = srad[j]
+        rsum = ri + rj
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 >= rsum * rsum:
+            ph[k, 0] = 0.0
+            ph[k, 1] = 0.0
+            ph[k, 2] = 0.0
             continue
+        d = math.sqrt(d2)
+        inv = 1.0 / d
+        nx = dx * inv
+        ny = dy * inv
+        nz = dz * inv
+        overlap = rsum - d
+        a = ri - 0.5 * overlap  # contact point: middle of the overlap, along n from i
+        px = xi + nx * a
+        py = yi + ny * a
+        pz = zi + nz * a
         bi = sbody[i]
+        bj = sbody[j]
+        aix = px - bx[bi, 0]
+        aiy = py - bx[bi, 1]
+        aiz = pz - bx[bi, 2]
+        ajx = px - bx[bj, 0]
+        ajy = py - bx[bj, 1]
+        ajz = pz - bx[bj, 2]
+        wxi = bw[bi, 0]
+        wyi = bw[bi, 1]
+        wzi = bw[bi, 2]
+        wxj = bw[bj, 0]
+        wyj = bw[bj, 1]
+        wzj = bw[bj, 2]
+        # velocity of i relative to j at the contact point
+        vrx = bv[bi, 0] + wyi * aiz - wzi * aiy - (bv[bj, 0] + wyj * ajz - wzj * ajy)
+        vry = bv[bi, 1] + wzi * aix - wxi * aiz - (bv[bj, 1] + wzj * ajx - wxj * ajz)
+        vrz = bv[bi, 2] + wxi * aiy - wyi * aix - (bv[bj, 2] + wxj * ajy - wyj * ajx)
+        vn = vrx * nx + vry * ny + vrz * nz
+        vtx = vrx - vn * nx
+        vty = vry - vn * ny
+        vtz = vrz - vn * nz
+        mi = bmat[bi]
+        mj = bmat[bj]
+        r_star = ri * rj / rsum
+        m_star = 1.0 / (binvm[bi] + binvm[bj])
+        cd = damp[mi, mj]
+        f_n, f_el, sqrt_rd = normal_force(e_star[mi, mj], r_star, m_star, cd, overlap, vn)
+        ftx, fty, ftz = tangential_force(ph, k, nx, ny, nz, vtx, vty, vtz, g_star[mi, mj],
+                                         m_star, cd, mu_s[mi, mj], sqrt_rd, f_n, hist_dt)
+        fx = ftx - f_n * nx
+        fy = fty - f_n * ny
+        fz = ftz - f_n * nz
+        bf[bi, 0] += fx
+        bf[bi, 1] += fy
+        bf[bi, 2] += fz
+        bf[bj, 0] -= fx
+        bf[bj, 1] -= fy
+        bf[bj, 2] -= fz
+        bt[bi, 0] += aiy * fz - aiz * fy
+        bt[bi, 1] += aiz * fx - aix * fz
+        bt[bi, 2] += aix * fy - aiy * fx
+        bt[bj, 0] -= ajy * fz - ajz * fy
+        bt[bj, 1] -= ajz * fx - ajx * fz
+        bt[bj, 2] -= ajx * fy - ajy * fx
+        mr = mu_r[mi, mj]
+        if mr > 0.0:
+            if lever_mode == EDEM_COM:
+                brm[bi] += mr * f_el * math.sqrt(aix * aix + aiy * aiy + aiz * aiz)
+                brm[bj] += mr * f_el * math.sqrt(ajx * ajx + ajy * ajy + ajz * ajz)
+            elif lever_mode == EDEM_SPHERE:
+                brm[bi] += mr * f_el * a
+                brm[bj] += mr * f_el * (rj - 0.5 * overlap)
+            else:
+                tx, ty, tz = relative_rolling_torque(mr, f_el, r_star, wxi - wxj, wyi - wyj,
+                                                     wzi - wzj, nx, ny, nz)
+                brv[bi, 0] -= tx
+                brv[bi, 1] -= ty
+                brv[bi, 2] -= tz
+                brv[bj, 0] += tx
+                brv[bj, 1] += ty
+                brv[bj, 2] += tz
+    # ---- sphere-wall
+    for q in range(ws.shape[0]):
+        i = ws[q]
+        k = wk[q]
         xi = sx[i, 0]
         yi = sx[i, 1]
         zi = sx[i, 2]
         ri = srad[i]
-        mi = bmat[bi]
-        cxi = bx[bi, 0]
-        cyi = bx[bi, 1]
-        czi = bx[bi, 2]
-        vxi = bv[bi, 0]
-        vyi = bv[bi, 1]
-        vzi = bv[bi, 2]
+        d, nx, ny, nz = wall_distance(wkind, worig, wnorm, wu, wv, whalf, k, xi, yi, zi)
+        overlap = ri - d
+        if overlap <= 0.0:
+            wh[q, 0] = 0.0
+            wh[q, 1] = 0.0
+            wh[q, 2] = 0.0
+            continue
+        a = ri - 0.5 * overlap
+        bi = sbody[i]
+        aix = xi - nx * a - bx[bi, 0]
+        aiy = yi - ny * a - bx[bi, 1]
+        aiz = zi - nz * a - bx[bi, 2]
         wxi = bw[bi, 0]
         wyi = bw[bi, 1]
         wzi = bw[bi, 2]
-        # ---- sphere-sphere
-        for k in range(k0, k1):
-            j = pj[k]
-            dx = sx[j, 0] - xi
-            dy = sx[j, 1] - yi
-            dz = sx[j, 2] - zi
-            rj = srad[j]
-            rsum = ri + rj
-            d2 = dx * dx + dy * dy + dz * dz
-            if d2 >= rsum * rsum:
-                ph[k, 0] = 0.0
-                ph[k, 1] = 0.0
-                ph[k, 2] = 0.0
-                continue
-            d = math.sqrt(d2)
-            inv = 1.0 / d
-            nx = dx * inv
-            ny = dy * inv
-            nz = dz * inv
-            overlap = rsum - d
-            a = ri - 0.5 * overlap  # contact point: middle of the overlap, along n from i
-            px = xi + nx * a
-            py = yi + ny * a
-            pz = zi + nz * a
-            bj = sbody[j]
-            aix = px - cxi
-            aiy = py - cyi
-            aiz = pz - czi
-            ajx = px - bx[bj, 0]
-            ajy = py - bx[bj, 1]
-            ajz = pz - bx[bj, 2]
-            wxj = bw[bj, 0]
-            wyj = bw[bj, 1]
-            wzj = bw[bj, 2]
-            # velocity of i relative to j at the contact point
-            vrx = vxi + wyi * aiz - wzi * aiy - (bv[bj, 0] + wyj * ajz - wzj * ajy)
-            vry = vyi + wzi * aix - wxi * aiz - (bv[bj, 1] + wzj * ajx - wxj * ajz)
-            vrz = vzi + wxi * aiy - wyi * aix - (bv[bj, 2] + wxj * ajy - wyj * ajx)
-            vn = vrx * nx + vry * ny + vrz * nz
-            vtx = vrx - vn * nx
-            vty = vry - vn * ny
-            vtz = vrz - vn * nz
-            mj = bmat[bj]
-            r_star = ri * rj / rsum
-            m_star = 1.0 / (binvm[bi] + binvm[bj])
-            cd = damp[mi, mj]
-            f_n, f_el, sqrt_rd = normal_force(e_star[mi, mj], r_star, m_star, cd, overlap, vn)
-            ftx, fty, ftz = tangential_force(ph, k, nx, ny, nz, vtx, vty, vtz, g_star[mi, mj],
-                                             m_star, cd, mu_s[mi, mj], sqrt_rd, f_n, hist_dt)
-            fx = ftx - f_n * nx
-            fy = fty - f_n * ny
-            fz = ftz - f_n * nz
-            bf[bi, 0] += fx
-            bf[bi, 1] += fy
-            bf[bi, 2] += fz
-            bf[bj, 0] -= fx
-            bf[bj, 1] -= fy
-            bf[bj, 2] -= fz
-            bt[bi, 0] += aiy * fz - aiz * fy
-            bt[bi, 1] += aiz * fx - aix * fz
-            bt[bi, 2] += aix * fy - aiy * fx
-            bt[bj, 0] -= ajy * fz - ajz * fy
-            bt[bj, 1] -= ajz * fx - ajx * fz
-            bt[bj, 2] -= ajx * fy - ajy * fx
-            mr = mu_r[mi, mj]
-            if mr > 0.0:
-                if lever_mode == EDEM_COM:
-                    brm[bi] += mr * f_el * math.sqrt(aix * aix + aiy * aiy + aiz * aiz)
-                    brm[bj] += mr * f_el * math.sqrt(ajx * ajx + ajy * ajy + ajz * ajz)
-                elif lever_mode == EDEM_SPHERE:
-                    brm[bi] += mr * f_el * a
-                    brm[bj] += mr * f_el * (rj - 0.5 * overlap)
-                else:
-                    tx, ty, tz = relative_rolling_torque(mr, f_el, r_star, wxi - wxj, wyi - wyj,
-                                                         wzi - wzj, nx, ny, nz)
-                    brv[bi, 0] -= tx
-                    brv[bi, 1] -= ty
-                    brv[bi, 2] -= tz
-                    brv[bj, 0] += tx
-                    brv[bj, 1] += ty
-                    brv[bj, 2] += tz
-        # ---- sphere-wall
-        for q in range(q0, q1):
-            k = wk[q]
-            d, nx, ny, nz = wall_distance(wkind, worig, wnorm, wu, wv, whalf, k, xi, yi, zi)
-            overlap = ri - d
-            if overlap <= 0.0:
-                wh[q, 0] = 0.0
-                wh[q, 1] = 0.0
-                wh[q, 2] = 0.0
-                continue
-            a = ri - 0.5 * overlap
-            px = xi - nx * a
-            py = yi - ny * a
-            pz = zi - nz * a
-            aix = px - cxi
-            aiy = py - cyi
-            aiz = pz - czi
-            # velocity of the sphere relative to the wall at the contact point
-            vrx = vxi + wyi * aiz - wzi * aiy - wvel_now[k, 0]
-            vry = vyi + wzi * aix - wxi * aiz - wvel_now[k, 1]
-            vrz = vzi + wxi * aiy - wyi * aix - wvel_now[k, 2]
-            vn = vrx * nx + vry * ny + vrz * nz
-            vtx = vrx - vn * nx
-            vty = vry - vn * ny
-            vtz = vrz - vn * nz
-            mk = wmat[k]
-            m_star = 1.0 / binvm[bi]
-            cd = damp[mi, mk]
-            f_n, f_el, sqrt_rd = normal_force(e_star[mi, mk], ri, m_star, cd, overlap, -vn)
-            ftx, fty, ftz = tangential_force(wh, q, nx, ny, nz, vtx, vty, vtz, g_star[mi, mk],
-                                             m_star, cd, mu_s[mi, mk], sqrt_rd, f_n, hist_dt)
-            fx = ftx + f_n * nx
-            fy = fty + f_n * ny
-            fz = ftz + f_n * nz
-            bf[bi, 0] += fx
-            bf[bi, 1] += fy
-            bf[bi, 2] += fz
-            bt[bi, 0] += aiy * fz - aiz * fy
-            bt[bi, 1] += aiz * fx - aix * fz
-            bt[bi, 2] += aix * fy - aiy * fx
-            mr = mu_r[mi, mk]
-            if mr > 0.0:
-                if lever_mode == EDEM_COM:
-                    brm[bi] += mr * f_el * math.sqrt(aix * aix + aiy * aiy + aiz * aiz)
-                elif lever_mode == EDEM_SPHERE:
-                    brm[bi] += mr * f_el * a
-                else:
-                    tx, ty, tz = relative_rolling_torque(mr, f_el, ri, wxi, wyi, wzi, nx, ny, nz)
-                    brv[bi, 0] -= tx
-                    brv[bi, 1] -= ty
-                    brv[bi, 2] -= tz
+        # velocity of the sphere relative to the wall at the contact point
+        vrx = bv[bi, 0] + wyi * aiz - wzi * aiy - wvel_now[k, 0]
+        vry = bv[bi, 1] + wzi * aix - wxi * aiz - wvel_now[k, 1]
+        vrz = bv[bi, 2] + wxi * aiy - wyi * aix - wvel_now[k, 2]
+        vn = vrx * nx + vry * ny + vrz * nz
+        vtx = vrx - vn * nx
+        vty = vry - vn * ny
+        vtz = vrz - vn * nz
+        mi = bmat[bi]
+        mk = wmat[k]
+        m_star = 1.0 / binvm[bi]
+        cd = damp[mi, mk]
+        f_n, f_el, sqrt_rd = normal_force(e_star[mi, mk], ri, m_star, cd, overlap, -vn)
+        ftx, fty, ftz = tangential_force(wh, q, nx, ny, nz, vtx, vty, vtz, g_star[mi, mk],
+                                         m_star, cd, mu_s[mi, mk], sqrt_rd, f_n, hist_dt)
+        fx = ftx + f_n * nx
+        fy = fty + f_n * ny
+        fz = ftz + f_n * nz
+        bf[bi, 0] += fx
+        bf[bi, 1] += fy
+        bf[bi, 2] += fz
+        bt[bi, 0] += aiy * fz - aiz * fy
+        bt[bi, 1] += aiz * fx - aix * fz
+        bt[bi, 2] += aix * fy - aiy * fx
+        mr = mu_r[mi, mk]
+        if mr > 0.0:
+            if lever_mode == EDEM_COM:
+                brm[bi] += mr * f_el * math.sqrt(aix * aix + aiy * aiy + aiz * aiz)
+            elif lever_mode == EDEM_SPHERE:
+                brm[bi] += mr * f_el * a
+            else:
+                tx, ty, tz = relative_rolling_torque(mr, f_el, ri, wxi, wyi, wzi, nx, ny, nz)
+                brv[bi, 0] -= tx
+                brv[bi, 1] -= ty
+                brv[bi, 2] -= tz
 
 
 @kernel
 def _wall_velocities(t, wvel, wwin, wvel_now):
+    """Velocity of each wall during the step whose midpoint is ``t`` (zero outside its window)."""
     for k in range(wvel.shape[0]):
         moving = wwin[k, 0] <= t < wwin[k, 1]
         for a in range(3):
@@ -315,13 +310,13 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, need_rebuild, need_fo
                 if bactive[b]:
                     half_kick(b, tau, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi)
                     drift(b, dt, bx, bv, bq, bL, bw, bR, binvi)
-            _wall_velocities(t, wvel, wwin, wvel_now)
+            _wall_velocities(t + h, wvel, wwin, wvel_now)
             for k in range(n_walls):
                 for a in range(3):
                     worig[k, a] += wvel_now[k, a] * dt
             t += dt
         else:
-            _wall_velocities(t, wvel, wwin, wvel_now)
+            _wall_velocities(t + h, wvel, wwin, wvel_now)
         dmax2, dwmax2 = _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw)
         wmax2 = 0.0
         for k in range(n_walls):
@@ -345,7 +340,7 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, need_rebuild, need_fo
         # the first evaluation of a fresh state must not advance the contact history
         hist_dt = dt if step >= 0 else 0.0
         _contact_forces(hist_dt, lever_mode, n_bodies, bx, bv, bw, bf, bt, brm,
-                        brv, binvm, bmat, sbody, sx, srad, pstart, pj, ph, wstart, wk, wh, wkind,
+                        brv, binvm, bmat, sbody, sx, srad, ppi, pj, ph, ws, wk, wh, wkind,
                         worig, wnorm, wu, wv, whalf, wvel_now, wmat, e_star, g_star, damp, mu_s,
                         mu_r)
     if n_steps > 0:
@@ -769,6 +764,12 @@ class Simulation:
                           kinetic_energy=self.kinetic_energy(),
                           escaped=len(self.escaped) - n_escaped0)
 
+    def evaluate_forces(self) -> None:
+        """Recompute the contact forces at the current state without advancing time or the
+        contact history (e.g. after editing the state, or to read ``contact_forces()``)."""
+        self._need_forces = True
+        self._advance(0)
+
     def _advance(self, n_steps: int) -> int:
         """Run the numba step loop for ``n_steps``; returns the number of pair-list rebuilds."""
         self._ensure_grid()
@@ -895,6 +896,13 @@ class Simulation:
         """Contact force [N] and torque about the centre of mass [N m] on each body at the last
         step (rolling-friction torque excluded; it is applied in the integration, capped)."""
         return self._b["bf"][:self.n_bodies].copy(), self._b["bt"][:self.n_bodies].copy()
+
+    def rolling_resistance(self) -> tuple[np.ndarray, np.ndarray]:
+        """Rolling-friction terms of each body at the last force evaluation: the summed torque
+        magnitude sum(mu_r F_n R_lever) [N m] of the EDEM conventions (applied against the
+        body's rotation) and the summed torque vector [N m] of the ``liggghts_reff`` convention,
+        both before the cap (``simulate.contact.rolling``)."""
+        return self._b["brm"][:self.n_bodies].copy(), self._b["brv"][:self.n_bodies].copy()
 
     def wall_origins(self) -> np.ndarray:
         """Current point (plane) or centre (rectangle) of each wall [m]."""

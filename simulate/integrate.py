@@ -5,9 +5,9 @@ One step of length dt (kick-drift-kick, as LIGGGHTS' ``nve`` integrators):
 
     v    += (F/m + g) dt/2;   L += T dt/2 (+ capped rolling torque, see contact.rolling)
     x    += v dt
-    q    <- exp(w(t + dt/2) dt / 2) q  with w = R diag(1/I) R^T L (principal frame),
-            w at mid-step from one predictor step (second order; the free rotation of an
-            asymmetric top is followed with the full inertia tensor)
+    q    <- exp(w(t + dt/2) dt / 2) q  with w = R diag(1/I) R^T L (principal frame), the
+            mid-step w from the torque-free Euler equations dw/dt = -I^-1 (w x L) (second
+            order; the free rotation of an asymmetric top follows the full inertia tensor)
     ... contact forces at the new positions ...
     v    += (F/m + g) dt/2;   L += T dt/2 (+ capped rolling torque)
 
@@ -136,27 +136,26 @@ def half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi):
 
 @evaluator
 def drift(b, dt, bx, bv, bq, bL, bw, bR, binvi):
-    """Move body ``b`` by v dt and turn it by the mid-step angular velocity; refresh R and w."""
+    """Move body ``b`` by v dt and turn it by the mid-step angular velocity; refresh R and w.
+
+    The mid-step angular velocity follows from the torque-free Euler equations in the world
+    frame, dw/dt = -I^-1 (w x L): w(t + dt/2) = w - dt/2 I^-1 (w x L) (second order).
+    """
     bx[b, 0] += bv[b, 0] * dt
     bx[b, 1] += bv[b, 1] * dt
     bx[b, 2] += bv[b, 2] * dt
-    q0 = bq[b, 0]
-    q1 = bq[b, 1]
-    q2 = bq[b, 2]
-    q3 = bq[b, 3]
     lx = bL[b, 0]
     ly = bL[b, 1]
     lz = bL[b, 2]
     if lx != 0.0 or ly != 0.0 or lz != 0.0:
-        # predictor: half a step with the current w, then the full step with the mid-step w
-        h0, h1, h2, h3 = rotate_quat(q0, q1, q2, q3, bw[b, 0], bw[b, 1], bw[b, 2], 0.5 * dt)
-        bq[b, 0] = h0
-        bq[b, 1] = h1
-        bq[b, 2] = h2
-        bq[b, 3] = h3
-        quat_to_matrix(bq, b, bR)
-        mx, my, mz = apply_inverse_inertia(bR, b, binvi, lx, ly, lz)
-        n0, n1, n2, n3 = rotate_quat(q0, q1, q2, q3, mx, my, mz, dt)
+        wx = bw[b, 0]
+        wy = bw[b, 1]
+        wz = bw[b, 2]
+        ax, ay, az = apply_inverse_inertia(bR, b, binvi, wy * lz - wz * ly, wz * lx - wx * lz,
+                                           wx * ly - wy * lx)
+        h = 0.5 * dt
+        n0, n1, n2, n3 = rotate_quat(bq[b, 0], bq[b, 1], bq[b, 2], bq[b, 3],
+                                     wx - h * ax, wy - h * ay, wz - h * az, dt)
         bq[b, 0] = n0
         bq[b, 1] = n1
         bq[b, 2] = n2

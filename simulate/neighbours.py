@@ -47,13 +47,6 @@ def padded_cell_count(dims) -> int:
 
 
 @kernel
-def _grow_int(a, n):
-    b = np.empty(2 * a.shape[0] + 16, a.dtype)
-    b[:n] = a[:n]
-    return b
-
-
-@kernel
 def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dims, cell_start,
                     old_start, old_j, old_hist):
     """Sphere-sphere Verlet list with history carried from the previous list.
@@ -133,9 +126,16 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
     row[3] = ny * nx - 1
     row[4] = (ny + 1) * nx - 1
 
-    cap = max(2 * old_j.shape[0], 8 * m + 64)
-    ta = np.empty(cap, np.int64)
-    tb = np.empty(cap, np.int64)
+    # candidates are at most the spheres in the stencil runs; sizing the buffers by that bound
+    # keeps them fixed in the loop below (a buffer that may be reallocated there slows it 4x)
+    cap = 0
+    for p in range(m):
+        c = cs[p]
+        cap += cell_start[c + 2] - p - 1
+        for o in range(1, 5):
+            cap += cell_start[c + row[o] + 3] - cell_start[c + row[o]]
+    ta = np.empty(cap + 1, np.int64)
+    tb = np.empty(cap + 1, np.int64)
     n = 0
     for p in range(m):
         xi = xs[p]
@@ -152,9 +152,6 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
                 q = c + row[o]
                 b0 = cell_start[q]
                 b1 = cell_start[q + 3]
-            if n + (b1 - b0) > ta.shape[0]:
-                ta = _grow_int(ta, n)
-                tb = _grow_int(tb, n)
             for k in range(b0, b1):
                 dx = xs[k] - xi
                 dy = ys[k] - yi
@@ -211,9 +208,8 @@ def build_wall_list(n_spheres, sx, srad, sbody, bactive, skin, kind, origin, nor
     """
     n_walls = kind.shape[0]
     start = np.zeros(n_spheres + 1, np.int64)
-    cap = 2 * old_wall.shape[0] + n_spheres + 16
-    ts = np.empty(cap, np.int64)
-    tk = np.empty(cap, np.int64)
+    ts = np.empty(n_spheres * n_walls, np.int64)  # the bound keeps the buffers fixed in the loop
+    tk = np.empty(n_spheres * n_walls, np.int64)
     n = 0
     for s in range(n_spheres):
         if bactive[sbody[s]]:
@@ -231,9 +227,6 @@ def build_wall_list(n_spheres, sx, srad, sbody, bactive, skin, kind, origin, nor
                     continue
                 d, ux, uy, uz = wall_distance(kind, origin, normal, axis_u, axis_v, half, k, x, y, z)
                 if d < reach:
-                    if n == ts.shape[0]:
-                        ts = _grow_int(ts, n)
-                        tk = _grow_int(tk, n)
                     ts[n] = s
                     tk[n] = k
                     n += 1

@@ -69,7 +69,7 @@ class Lighting:
 
 # Colours (BGR, 0..255). The segments are light brownish-yellow cut roots with a pale cut face
 # and a thin brown bark; what is seen between them is their shadow.
-_SEGMENT_BGR = np.array([112.0, 168.0, 202.0])
+_SEGMENT_BGR = np.array([122.0, 180.0, 212.0])
 _BROWNER = np.array([-14.0, -8.0, 4.0])      # direction of colour variation: redder, darker
 _CUT_FACE_BGR = np.array([168.0, 214.0, 234.0])
 _BARK_BGR = np.array([70.0, 112.0, 150.0])
@@ -81,11 +81,11 @@ _SCENES = {
     "dark": {"backdrop": (232.0, 240.0, 243.0), "minor": (196.0, 222.0, 190.0),
              "major": (150.0, 196.0, 140.0), "floor": (142.0, 140.0, 136.0),
              "floor_front": (105.0, 104.0, 102.0), "bench": (78.0, 88.0, 98.0),
-             "segment_gain": 0.92},
-    "light": {"backdrop": (62.0, 84.0, 40.0), "minor": (92.0, 118.0, 78.0),
+             "segment_gain": 0.85},
+    "light": {"backdrop": (52.0, 72.0, 32.0), "minor": (92.0, 118.0, 78.0),
               "major": (150.0, 178.0, 150.0), "floor": (206.0, 210.0, 212.0),
               "floor_front": (176.0, 182.0, 186.0), "bench": (160.0, 184.0, 204.0),
-              "segment_gain": 1.05},
+              "segment_gain": 1.12},
 }
 
 
@@ -102,12 +102,13 @@ def heap_profile(angle_left_deg, angle_right_deg, *, height_m=0.10, crest_width_
     held back by the box), then one slope down to the floor. ``floor_m`` of flat floor (z = 0)
     is added beyond each toe.
 
-    Optional roughness, of the order of a segment, is a Gaussian random field of standard
-    deviation ``roughness_m`` and correlation length ``correlation_m``, tapered to zero at the
-    toes and at the crest height (the floor stays flat and the crest keeps its height). It is then made free of any least-squares linear trend over
-    each whole flank and over the part of each flank between the heights ``trend_free_band``
-    (fractions of ``height_m``), so that a least-squares line through either part of a rough
-    flank has exactly the requested angle: the ground truth stays defined.
+    Optional roughness, of the order of a segment, is a Gaussian random field of correlation
+    length ``correlation_m``, tapered to zero at the toes and at the crest height (the floor
+    stays flat and the crest keeps its height), then made free of any least-squares linear
+    trend over each whole flank and over the part of each flank between the heights
+    ``trend_free_band`` (fractions of ``height_m``), and scaled to a root-mean-square of
+    ``roughness_m`` over the flanks. A least-squares line through either part of a rough flank
+    thus has exactly the requested angle: the ground truth stays defined.
 
     Parameters
     ----------
@@ -123,7 +124,7 @@ def heap_profile(angle_left_deg, angle_right_deg, *, height_m=0.10, crest_width_
     floor_m : float
         Length of floor kept beyond each toe [m].
     roughness_m : float
-        Standard deviation of the surface roughness [m]; 0 for a smooth profile.
+        Root-mean-square roughness over the flanks [m]; 0 for a smooth profile.
     correlation_m : float
         Correlation length of the roughness, the distance at which its autocorrelation falls
         to 1/e [m].
@@ -191,8 +192,12 @@ def heap_profile(angle_left_deg, angle_right_deg, *, height_m=0.10, crest_width_
         # Taper to zero at the floor and at the crest height, so that the toes stay on the
         # floor and the crest keeps its height.
         rough = r * np.clip(z / (3.0 * roughness_m), 0.0, 1.0) * np.clip((h - z) / (3.0 * roughness_m), 0.0, 1.0)
+        on_flanks = np.zeros(x.size, bool)
         for a, b in flanks:
             rough = _trend_free(x, z, rough, a, b, h, trend_free_band)
+            on_flanks |= (x >= a) & (x <= b)
+        # Removing the trends takes out the long waves: rescale to the requested deviation.
+        rough *= roughness_m / np.sqrt(np.mean(rough[on_flanks] ** 2))
         z = np.maximum(z + rough, 0.0)
     return x, z
 
@@ -333,17 +338,19 @@ def heap_photo(profile_x_m, profile_z_m, *, rng, px_per_m=2500.0, camera_roll_de
         _strays(img, px, pz, row0, seg_len, seg_dia, scene, int(strays), rng)
 
     # Scene illumination (a gradient across the frame), then the camera.
-    yy, xx = np.mgrid[0:ch, 0:cw].astype(np.float32)
+    xx = np.arange(cw, dtype=np.float32)[None, :] - 0.5 * cw
+    yy = np.arange(ch, dtype=np.float32)[:, None] - 0.5 * ch
     d = math.radians(light.direction_deg)
-    proj = ((xx - 0.5 * cw) * math.cos(d) - (yy - 0.5 * ch) * math.sin(d)) / max(cw, ch)
+    proj = (xx * math.cos(d) - yy * math.sin(d)) / max(cw, ch)
     img *= (light.exposure * (1.0 + light.gradient * proj))[..., None]
     rot = cv2.getRotationMatrix2D((0.5 * cw, 0.5 * ch), camera_roll_deg, 1.0)
     img = cv2.warpAffine(img, rot, (cw, ch), flags=cv2.INTER_LINEAR,
                          borderMode=cv2.BORDER_REFLECT)
     r0, c0 = int(round(oy)), int(round(ox))
     img = img[r0:r0 + h, c0:c0 + w]
-    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
-    r2 = ((xx - 0.5 * w) ** 2 + (yy - 0.5 * h) ** 2) / (0.25 * (w * w + h * h))
+    xx = np.arange(w, dtype=np.float32)[None, :] - 0.5 * w
+    yy = np.arange(h, dtype=np.float32)[:, None] - 0.5 * h
+    r2 = (xx ** 2 + yy ** 2) / (0.25 * (w * w + h * h))
     img *= (1.0 - light.vignetting * r2)[..., None]
     if blur_px > 0:
         img = cv2.GaussianBlur(img, (0, 0), blur_px)
@@ -473,26 +480,32 @@ def _floor(img, scene, row0, s, rng):
 
 
 def _shadow(img, px, pz, row0, seg_dia, light):
-    """Soft shadow of the heap, cast away from the light onto the backdrop and the floor."""
+    """Soft shadow of the heap, cast away from the light onto the backdrop behind it (the
+    floor seen in front of the heap is lit)."""
     ch, cw = img.shape[:2]
     d = math.radians(light.direction_deg)
     off = 1.2 * seg_dia
     poly = np.concatenate([np.c_[px - off * math.cos(d), pz + off * math.sin(d)],
                            [[px[-1], row0 + seg_dia], [px[0], row0 + seg_dia]]])
-    mask = np.zeros((ch, cw), np.float32)
-    cv2.fillPoly(mask, [np.round(poly * _ONE).astype(np.int32)], 1.0, cv2.LINE_AA, _SHIFT)
-    mask = cv2.GaussianBlur(mask, (0, 0), 1.5 * seg_dia)
+    # Drawn and blurred at a quarter of the resolution: the shadow is soft anyway.
+    q = 4
+    small = np.zeros((ch // q + 1, cw // q + 1), np.float32)
+    cv2.fillPoly(small, [np.round(poly / q * _ONE).astype(np.int32)], 1.0, cv2.LINE_AA, _SHIFT)
+    small = cv2.GaussianBlur(small, (0, 0), 1.5 * seg_dia / q)
+    mask = cv2.resize(small, (cw, ch), interpolation=cv2.INTER_LINEAR)
+    mask[int(math.ceil(row0)):] = 0.0
     img *= (1.0 - light.shadow * mask)[..., None]
 
 
 def _segment_colour(scene, rng):
     gain = scene["segment_gain"] * math.exp(rng.normal(0.0, 0.08))
     brown = abs(rng.normal(0.0, 1.0))
-    return np.clip(_SEGMENT_BGR * gain + brown * _BROWNER + rng.normal(0.0, 2.0, 3), 0, 255)
+    return _bgr(_SEGMENT_BGR * gain + brown * _BROWNER + rng.normal(0.0, 2.0, 3))
 
 
-def _bgr(c):
-    return tuple(float(v) for v in np.clip(c, 0, 255))
+def _bgr(c, gain=1.0, add=0.0):
+    """Colour tuple for OpenCV: gain * c + add, clipped to 0..255."""
+    return tuple(min(255.0, max(0.0, gain * float(v) + add)) for v in c)
 
 
 def _draw_segment(img, cx, cy, phi, seg_len, seg_dia, tilt, colour, rng, floor_row=None):
@@ -511,11 +524,11 @@ def _draw_segment(img, cx, cy, phi, seg_len, seg_dia, tilt, colour, rng, floor_r
     # Cylinder shading: nested strokes from the dark limb to the lit middle, shifted toward
     # the light (upper left).
     side = -1.0 if v[1] > 0 else 1.0
-    for width, gain, shift in ((1.0, 0.62, 0.0), (0.82, 0.82, 0.04), (0.6, 0.96, 0.08),
-                               (0.34, 1.07, 0.14), (0.14, 1.16, 0.2)):
+    for width, gain, shift in ((1.0, 0.68, 0.0), (0.82, 0.85, 0.04), (0.6, 0.96, 0.08),
+                               (0.34, 1.06, 0.14), (0.14, 1.12, 0.2)):
         o = side * shift * dia
         cv2.line(img, _pt(p1[0] + o * v[0], p1[1] + o * v[1]),
-                 _pt(p2[0] + o * v[0], p2[1] + o * v[1]), _bgr(colour * gain + (gain - 1) * 30),
+                 _pt(p2[0] + o * v[0], p2[1] + o * v[1]), _bgr(colour, gain, (gain - 1) * 30),
                  max(int(round(width * dia)), 1), cv2.LINE_AA, _SHIFT)
     # Longitudinal bark wrinkles.
     for _ in range(rng.integers(1, 5)):
@@ -523,31 +536,37 @@ def _draw_segment(img, cx, cy, phi, seg_len, seg_dia, tilt, colour, rng, floor_r
         a, b = sorted(rng.uniform(-1.1, 1.1, 2))
         q1 = (cx + a * half * u[0] + o * v[0], cy + a * half * u[1] + o * v[1])
         q2 = (cx + b * half * u[0] + o * v[0], cy + b * half * u[1] + o * v[1])
-        cv2.line(img, _pt(*q1), _pt(*q2), _bgr(colour * rng.uniform(0.7, 0.85)), 1,
+        cv2.line(img, _pt(*q1), _pt(*q2), _bgr(colour, rng.uniform(0.7, 0.85)), 1,
                  cv2.LINE_AA, _SHIFT)
     if tilt > math.radians(25):
         # Cut face at the end nearer the camera: cream wood, brown bark ring, dark pith.
         end = p2 if rng.random() < 0.5 else p1
         minor = 0.5 * dia * math.sin(tilt)
         ang = -math.degrees(phi) + 90.0
-        face = _CUT_FACE_BGR * rng.uniform(0.8, 1.0)
+        face = _bgr(_CUT_FACE_BGR, sum(colour) / _SEGMENT_BGR.sum() * rng.uniform(0.85, 1.0))
         cv2.ellipse(img, _pt(*end), _pt(0.5 * dia, minor), ang, 0, 360, _bgr(_BARK_BGR),
                     -1, cv2.LINE_AA, _SHIFT)
         cv2.ellipse(img, _pt(*end), _pt(0.4 * dia, 0.8 * minor), ang, 0, 360, _bgr(face),
                     -1, cv2.LINE_AA, _SHIFT)
         cv2.ellipse(img, _pt(*end), _pt(0.22 * dia, 0.44 * minor), ang, 0, 360,
-                    _bgr(face * 0.88), 1, cv2.LINE_AA, _SHIFT)
+                    _bgr(face, 0.88), 1, cv2.LINE_AA, _SHIFT)
         if minor > 2:
             cv2.ellipse(img, _pt(*end), _pt(0.05 * dia, 0.1 * minor), ang, 0, 360,
-                        _bgr(_BARK_BGR * 0.8), -1, cv2.LINE_AA, _SHIFT)
+                        _bgr(_BARK_BGR, 0.8), -1, cv2.LINE_AA, _SHIFT)
 
 
 def _heap(img, px, pz, row0, seg_len, seg_dia, scene, texture, rng):
     """The heap between the floor line and the profile (px, pz in canvas pixels)."""
     ch, cw = img.shape[:2]
-    poly = np.concatenate([np.c_[px, pz], [[px[-1], row0 + 1], [px[0], row0 + 1]]])
+    up = np.nonzero(pz < row0)[0]
+    if up.size == 0:
+        return
+    # Only the part of the profile above the floor (its flat ends are floor, not heap).
+    i0, i1 = max(up[0] - 1, 0), min(up[-1] + 1, px.size - 1)
+    poly = np.concatenate([np.c_[px[i0:i1 + 1], pz[i0:i1 + 1]], [[px[i1], row0], [px[i0], row0]]])
     mask = np.zeros((ch, cw), np.uint8)
     cv2.fillPoly(mask, [np.round(poly * _ONE).astype(np.int32)], 255, cv2.LINE_AA, _SHIFT)
+    mask[int(math.ceil(row0)):] = 0
     inside = mask > 127
     if not inside.any():
         return
@@ -555,7 +574,7 @@ def _heap(img, px, pz, row0, seg_len, seg_dia, scene, texture, rng):
     solid = mask.copy()
     solid[int(row0):] = 255
     depth = cv2.distanceTransform((solid > 127).astype(np.uint8), cv2.DIST_L2, 5)
-    shade = 0.62 + 0.38 * np.exp(-depth / (1.5 * seg_dia))
+    shade = 0.75 + 0.25 * np.exp(-depth / (1.5 * seg_dia))
     layer = np.empty_like(img)
     if texture:
         layer[:] = _GAP_BGR
@@ -578,8 +597,9 @@ def _heap(img, px, pz, row0, seg_len, seg_dia, scene, texture, rng):
     seg = np.hypot(np.diff(px), np.diff(pz))
     arc = np.r_[0.0, np.cumsum(seg)]
     on_heap = np.r_[pz < row0 - 0.3 * seg_dia]
-    # Two passes: a deeper layer, then the outermost segments, which make the silhouette.
-    for depth_range, step in (((0.9, 1.4), 0.6), ((0.35, 0.65), 0.4)):
+    # Two passes: a deeper, disordered layer, then the outermost segments, which make the
+    # silhouette and lie roughly along the slope (they came to rest sliding down it).
+    for depth_range, step, spread in (((0.9, 1.5), 0.6, 35.0), ((0.35, 0.65), 0.4, 12.0)):
         for a in np.arange(rng.uniform(0, 0.5) * seg_len, arc[-1], step * seg_len):
             i = min(np.searchsorted(arc, a, side="right") - 1, px.size - 2)
             f = (a - arc[i]) / max(seg[i], 1e-9)
@@ -597,7 +617,7 @@ def _heap(img, px, pz, row0, seg_len, seg_dia, scene, texture, rng):
             if ny < 0:
                 nx, ny = -nx, -ny
             depth_in = rng.uniform(*depth_range) * seg_dia
-            phi = math.atan2(-ty, tx) + rng.normal(0.0, math.radians(12))
+            phi = math.atan2(-ty, tx) + rng.normal(0.0, math.radians(spread))
             tilt = min(abs(rng.normal(0.0, 0.4)), 1.3)
             _draw_segment(img, x + nx * depth_in, y + ny * depth_in, phi, seg_len, seg_dia,
                           tilt, _segment_colour(scene, rng), rng, floor_row=row0)

@@ -4,32 +4,14 @@ exercised by ``demcal calibrate`` and the opt-in validation run.)"""
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from analyse.campaign import CampaignConfig, calibrate, factor_levels
 from measure.pipeline import measure_workbook
+from tests.analyse.standin import standin_angle, standin_runner
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "data" / "astragalus" / "workbook.xlsx"
-
-#: Stand-in response: the angle depends on e_pp, e_pw and mu_s_pw only (factors B, E, F),
-#: plus a seed-dependent noise of sd 0.15 deg.
-NOISE_SD = 0.15
-
-
-def standin_angle(p: dict) -> float:
-    zb = (p["e_pp"] - 0.3) / 0.1
-    ze = (p["e_pw"] - 0.35) / 0.05
-    zf = (p["mu_s_pw"] - 0.2) / 0.1
-    return 34.0 - 1.5 * zb - 1.2 * ze + 2.0 * zf + 0.5 * zb * ze - 0.4 * zf**2
-
-
-def standin_runner(inputs: dict) -> dict:
-    noise = np.random.default_rng(inputs["seed"]).normal(0.0, NOISE_SD)
-    angle = standin_angle(inputs["params"]) + noise
-    return {"observable": {"angle_deg": angle}, "wall_s": 0.0, "seed": inputs["seed"]}
-
 
 @pytest.fixture(scope="module")
 def measurement():

@@ -1,0 +1,340 @@
+"""The report's figures, drawn with matplotlib from stored results only.
+
+Each function draws one figure of the paper's kind and writes it as a PNG: the processed heap
+photos with their fitted lines (the measure stage's annotated images), the Plackett-Burman
+Pareto chart, the response-surface contours of every factor pair (a contour of the stored
+polynomial), the steepest-climb relative-error curve, and the simulated heaps of the
+validation runs against the photographed one. Nothing is fitted or estimated here.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from itertools import combinations
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure as _MplFigure
+from matplotlib.image import imread
+
+from report.tables import parameter_label
+
+#: Resolution of every PNG [dots per inch].
+DPI = 200
+
+_BLUE, _RED, _GREY, _GREEN = "#1f4e79", "#b22222", "#7f7f7f", "#2e7d32"
+
+
+@dataclass(frozen=True)
+class Figure:
+    """One figure of the report.
+
+    Attributes
+    ----------
+    id : str
+        Short name (``photos``, ``pareto``, ``surfaces``, ``climb``, ``validation``).
+    path : Path
+        The PNG file.
+    caption : str
+        Caption without the "Fig. N" label.
+    """
+
+    id: str
+    path: Path
+    caption: str
+
+    def to_dict(self) -> dict:
+        return {"id": self.id, "path": str(self.path), "caption": self.caption}
+
+
+def _new(width_in: float, height_in: float) -> _MplFigure:
+    fig = _MplFigure(figsize=(width_in, height_in), layout="constrained")
+    fig.set_facecolor("white")
+    return fig
+
+
+def _save(fig: _MplFigure, path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=DPI)
+    return path
+
+
+def heap_photos(measurement: dict, path: Path) -> Path | None:
+    """The heap photos as processed by the measure stage (boundary, floor and fitted flank lines
+    drawn on each), side by side with the angle found. None when no annotated photo exists."""
+    rows = [r for r in measurement.get("per_row", {}).get("repose_angle_deg", [])
+            if r.get("annotated") and Path(r["annotated"]).exists()]
+    if not rows:
+        return None
+    n = min(len(rows), 3)
+    fig = _new(6.8, 2.1 * math.ceil(len(rows) / n) + 0.2)
+    axes = fig.subplots(math.ceil(len(rows) / n), n, squeeze=False).ravel()
+    for ax, rec in zip(axes, rows):
+        ax.imshow(imread(rec["annotated"]))
+        flanks = ", ".join(f"{k} {v:.2f}°" for k, v in (rec.get("flanks") or {}).items() if v is not None)
+        used = "" if rec.get("used", True) else " (rejected)"
+        ax.set_title(f"{rec.get('id', '')}: {rec['value']:.2f}°{used}\n{flanks}", fontsize=7)
+    for ax in axes:
+        ax.set_axis_off()
+    return _save(fig, path)
+
+
+def pareto_chart(results: dict, path: Path) -> Path | None:
+    """Pareto chart of the Plackett-Burman effects: |t| of each factor, sorted, with the
+    t-value and Bonferroni limits (Design-Expert's chart)."""
+    p = results.get("plackett_burman", {}).get("screening", {}).get("pareto")
+    if not p:
+        return None
+    names, t, signs = p["names"], np.abs(p["t_values"]), p["signs"]
+    fig = _new(5.2, 2.6)
+    ax = fig.subplots()
+    colours = [_RED if s > 0 else _BLUE for s in signs]
+    ax.bar(range(len(names)), t, color=colours, width=0.6)
+    ax.set_xticks(range(len(names)), names)
+    ax.axhline(p["t_limit"], color="k", lw=1, ls="--")
+    ax.axhline(p["bonferroni_limit"], color="k", lw=1, ls=":")
+    ax.text(len(names) - 0.6, p["t_limit"], f"t limit {p['t_limit']:.3g}", va="bottom", ha="right", fontsize=7)
+    ax.text(len(names) - 0.6, p["bonferroni_limit"], f"Bonferroni {p['bonferroni_limit']:.3g}",
+            va="bottom", ha="right", fontsize=7)
+    ax.set_ylabel("|t| of the effect")
+    ax.set_xlabel("factor (red: raises the angle, blue: lowers it)")
+    ax.set_ylim(0, max(float(t.max()), p["bonferroni_limit"]) * 1.15)
+    for spine in ("top", "right"):
+        ax.spines[spine].set_visible(False)
+    return _save(fig, path)
+
+
+def _term_value(term: str, x: dict) -> np.ndarray | float:
+    """Value of one coded model term (``Intercept``, ``A``, ``AB``, ``A^2``) at coded ``x``."""
+    if term == "Intercept":
+        return 1.0
+    if term.endswith("^2"):
+        return x[term[0]] ** 2
+    out = 1.0
+    for ch in term:
+        out = out * x[ch]
+    return out
+
+
+def polynomial(coefficients: dict, x: dict):
+    """Evaluate a stored coded polynomial ``{term: coefficient}`` at coded ``x`` (arrays)."""
+    return sum(b * _term_value(term, x) for term, b in coefficients.items())
+
+
+def response_surfaces(results: dict, path: Path, target: float | None = None,
+                      labels: dict | None = None) -> Path | None:
+    """Contours of the fitted quadratic over each pair of Box-Behnken factors, in actual
+    units, the remaining factors held at the preferred solution (at their centre when there is
+    none), so the preferred solution lies on the drawn target contour. Box-Behnken runs of the
+    plane through the centre are marked.
+
+    ``labels`` maps a screening letter to its axis label (e.g. its symbol).
+    """
+    b = results.get("box_behnken")
+    if not b or not b.get("fit"):
+        return None
+    fit = b["fit"]
+    codes = list(fit["factors"])          # coded letters, e.g. A B C
+    letters = [fit["factors"][c] for c in codes]
+    labels = labels or {}
+    low, high = np.asarray(b["low"], float), np.asarray(b["high"], float)
+    pairs = list(combinations(range(len(codes)), 2))
+    if not pairs:
+        return None
+    ncol = min(3, len(pairs))
+    nrow = math.ceil(len(pairs) / ncol)
+    fig = _new(2.35 * ncol + 0.3, 2.35 * nrow + 0.2)
+    axes = np.atleast_1d(fig.subplots(nrow, ncol, squeeze=False).ravel())
+    g = np.linspace(-1.0, 1.0, 81)
+    pref = results.get("optimisation", {}).get("preferred", {}).get("coded", {})
+    held = {c: float(pref.get(c, 0.0)) for c in codes}
+    design = np.asarray(b["design_coded"], float)
+
+    def actual(k, coded):
+        return low[k] + (np.asarray(coded) + 1) * (high[k] - low[k]) / 2
+
+    for ax, (i, j) in zip(axes, pairs):
+        gi, gj = np.meshgrid(g, g)
+        x = {c: np.full_like(gi, held[c]) for c in codes}
+        x[codes[i]], x[codes[j]] = gi, gj
+        y = polynomial(fit["coefficients"], x)
+        ai, aj = actual(i, gi), actual(j, gj)
+        cf = ax.contourf(ai, aj, y, levels=12, cmap="viridis")
+        cs = ax.contour(ai, aj, y, levels=cf.levels, colors="k", linewidths=0.3)
+        ax.clabel(cs, cs.levels[::2], fontsize=5, fmt="%.1f")
+        if target is not None and np.nanmin(y) < target < np.nanmax(y):
+            ax.contour(ai, aj, y, levels=[target], colors=_RED, linewidths=1.2, linestyles="--")
+        pts = design[np.all(np.delete(design, [i, j], axis=1) == 0, axis=1)]
+        ax.plot(actual(i, pts[:, i]), actual(j, pts[:, j]), "o", ms=3.5, mfc="white", mec="k",
+                mew=0.6, clip_on=False, zorder=5)
+        if pref:
+            ax.plot(actual(i, pref[codes[i]]), actual(j, pref[codes[j]]), "*", ms=8, color=_RED,
+                    clip_on=False, zorder=6)
+        ax.set_xlabel(f"{codes[i]}: {labels.get(letters[i], letters[i])}", fontsize=7)
+        ax.set_ylabel(f"{codes[j]}: {labels.get(letters[j], letters[j])}", fontsize=7)
+        ax.tick_params(labelsize=6)
+        others = [f"{codes[k]} = {held[codes[k]]:+.2f}" for k in range(len(codes)) if k not in (i, j)]
+        ax.set_title("angle [deg]" + (f", {', '.join(others)} (coded)" if others else ""), fontsize=7)
+    for ax in axes[len(pairs):]:
+        ax.set_axis_off()
+    return _save(fig, path)
+
+
+def climb_curve(results: dict, path: Path) -> Path | None:
+    """Relative error of the simulated angle along the steepest climb, the chosen centre and
+    its neighbours marked."""
+    sc = results.get("steepest_climb")
+    if not sc:
+        return None
+    err = np.asarray(sc["result"]["relative_error_pct"], float)
+    y = np.asarray(sc["response"], float)
+    lv = np.arange(1, err.size + 1)
+    best = int(sc["result"]["best_level"])
+    fig = _new(5.2, 2.5)
+    ax = fig.subplots()
+    ax.plot(lv, err, "o-", color=_BLUE, lw=1.2, ms=4, label="relative error")
+    ax.plot([best], [err[best - 1]], "o", ms=9, mfc="none", mec=_RED, mew=1.5, label="Box-Behnken centre")
+    for k in (best - 1, best + 1):
+        if 1 <= k <= err.size:
+            ax.axvline(k, color=_GREY, lw=0.8, ls=":")
+    ax.set_xlabel("level of the steepest climb")
+    ax.set_ylabel("relative error [%]")
+    ax.set_xticks(lv)
+    ax2 = ax.twinx()
+    ax2.plot(lv, y, "s--", color=_GREEN, lw=0.8, ms=3, label="angle")
+    ax2.axhline(sc["result"]["target"], color=_GREEN, lw=0.6, ls=":")
+    ax2.set_ylabel("simulated angle [deg]", color=_GREEN)
+    ax2.tick_params(axis="y", colors=_GREEN)
+    ax.legend(loc="upper center", fontsize=7, frameon=False)
+    return _save(fig, path)
+
+
+def heap_profile(record: dict) -> dict | None:
+    """The heap's top profile ``{"x", "z"}`` [m] of a repose run record (``record.profile``
+    or ``record.profile_x`` / ``profile_z``), finite points only; None when there is none."""
+    rec = (record.get("result") or {}).get("record") or {}
+    prof = rec.get("profile") or {}
+    x, z = prof.get("x", rec.get("profile_x")), prof.get("z", rec.get("profile_z"))
+    if x is None or z is None:
+        return None
+    x, z = np.asarray(x, dtype=float), np.asarray(z, dtype=float)
+    ok = np.isfinite(x) & np.isfinite(z)
+    if ok.sum() < 2 or not np.any(z[ok] > 0):
+        return None
+    return {"x": x[ok], "z": z[ok], "plate_x": (rec.get("geometry") or {}).get("box_length")}
+
+
+def _flank_midpoint(x: np.ndarray, z: np.ndarray) -> tuple[float, float, int]:
+    """Point of the outer flank at half the heap height, and the side (+1: the heap falls
+    toward +x). Used only to place the photo's angle line beside the profile."""
+    zmax = float(np.max(z))
+    side = 1 if z[0] >= z[-1] else -1
+    order = np.arange(x.size) if side > 0 else np.arange(x.size)[::-1]
+    above = [k for k in order if z[k] >= zmax / 2]
+    k = above[-1]
+    nxt = order[min(list(order).index(k) + 1, x.size - 1)]
+    if z[nxt] == z[k]:
+        return float(x[k]), zmax / 2, side
+    t = (z[k] - zmax / 2) / (z[k] - z[nxt])
+    return float(x[k] + t * (x[nxt] - x[k])), zmax / 2, side
+
+
+def validation_heaps(results: dict, runs: dict, measurement: dict, path: Path) -> Path | None:
+    """Simulated heap profiles of the validation runs against the photographed heap: one
+    annotated photo, the profiles with the photo's mean angle drawn through their flank, and
+    the simulated angles against the measured one (the paper's values beside)."""
+    v = results.get("validation")
+    if not v:
+        return None
+    records = [runs.get(r["key"], {}) for r in v["runs"]]
+    profiles = [heap_profile(rec) for rec in records]
+    photo_rows = [r for r in measurement.get("per_row", {}).get("repose_angle_deg", [])
+                  if r.get("annotated") and Path(r["annotated"]).exists()]
+    target = float(v["result"]["target"])
+    est = measurement.get("quantities", {}).get("repose_angle_deg", {})
+    sd = est.get("sd")
+    panels = (1 if photo_rows else 0) + (1 if any(profiles) else 0) + 1
+    fig = _new(6.8, 2.4)
+    axes = list(np.atleast_1d(fig.subplots(1, panels, width_ratios=[1.4] * (panels - 1) + [1])))
+    if photo_rows:
+        ax = axes.pop(0)
+        ax.imshow(imread(photo_rows[0]["annotated"]))
+        ax.set_title(f"photographed heap {photo_rows[0].get('id', '')}", fontsize=7)
+        ax.set_axis_off()
+    if any(profiles):
+        ax = axes.pop(0)
+        for k, (prof, run) in enumerate(zip(profiles, v["runs"])):
+            if not prof:
+                continue
+            ax.plot(prof["x"] * 1e3, prof["z"] * 1e3, lw=1.1, label=f"seed {run['seed']}")
+        first = next(p for p in profiles if p)
+        x, z = first["x"] * 1e3, first["z"] * 1e3
+        if first["plate_x"]:
+            ax.axvline(first["plate_x"] * 1e3, color=_GREY, lw=0.7, ls=":")
+        xm, zm, side = _flank_midpoint(x, z)
+        for angle, style in [(target, "-")] + ([(target - sd, ":"), (target + sd, ":")]
+                                               if sd is not None and math.isfinite(sd) else []):
+            run_ = zm / math.tan(math.radians(angle))
+            ax.plot([xm - side * run_, xm + side * run_], [2 * zm, 0.0], style, color="k", lw=0.9)
+        ax.plot([], [], "-", color="k", lw=0.9, label=f"photos {target:.2f}°" + (f" ± {sd:.2f}" if sd else ""))
+        ax.set_aspect("equal", adjustable="box")
+        ax.set_ylim(-5, 1.25 * float(np.max(z)) + 5)
+        ax.set_xlabel("x [mm]", fontsize=7)
+        ax.set_ylabel("height [mm]", fontsize=7)
+        ax.tick_params(labelsize=6)
+        ax.legend(fontsize=6, frameon=False)
+        ax.set_title("simulated heap profiles", fontsize=7)
+    ax = axes.pop(0)
+    ys = np.asarray(v["responses"], float)
+    ax.plot(np.arange(1, ys.size + 1), ys, "o", color=_BLUE, label="ours")
+    ax.axhline(target, color=_BLUE, lw=0.9, label=f"measured {target:.2f}°")
+    if sd is not None and math.isfinite(sd):
+        ax.axhspan(target - sd, target + sd, color=_BLUE, alpha=0.12, lw=0)
+    paper = (results.get("_paper") or {}).get("validation", {})
+    if paper.get("runs_deg"):
+        pr = np.asarray(paper["runs_deg"], float)
+        ax.plot(np.arange(1, pr.size + 1) + 0.15, pr, "^", mfc="none", color=_RED, label="paper")
+        ax.axhline(paper["target_deg"], color=_RED, lw=0.8, ls="--", label=f"paper {paper['target_deg']:.2f}°")
+    ax.set_xticks(np.arange(1, ys.size + 1))
+    ax.set_xlabel("validation run", fontsize=7)
+    ax.set_ylabel("angle of repose [deg]", fontsize=7)
+    ax.tick_params(labelsize=6)
+    ax.legend(fontsize=6, frameon=False)
+    return _save(fig, path)
+
+
+def make_figures(campaign, fig_dir) -> list[Figure]:
+    """Draw every figure the stored results allow into ``fig_dir``; return them in order."""
+    fig_dir = Path(fig_dir)
+    m, r = campaign.measurement, campaign.results or {}
+    target = r.get("target_angle_deg")
+    out = []
+
+    def add(fid, path, caption):
+        if path is not None:
+            out.append(Figure(fid, path, caption))
+
+    add("photos", heap_photos(m, fig_dir / "heap_photos.png"),
+        "Image processing of the heap photos: heap boundary, floor line and the straight line fitted "
+        "to each measured flank (measure stage, annotated images).")
+    if r:
+        add("pareto", pareto_chart(r, fig_dir / "pareto.png"),
+            "Pareto chart of the Plackett-Burman effects (|t| of each factor; dashed: t limit at "
+            "p = 0.05, dotted: Bonferroni limit).")
+        add("climb", climb_curve(r, fig_dir / "steepest_climb.png"),
+            "Steepest climb: relative error between simulated and measured angle at each level "
+            "(circle: the Box-Behnken centre, dotted: its -1/+1 neighbours).")
+        wall = str(m.get("meta", {}).get("contact_material", "steel")).lower()
+        labels = {f: parameter_label(v["parameter"], wall)[1] for f, v in r.get("factors", {}).items()}
+        add("surfaces", response_surfaces(r, fig_dir / "response_surfaces.png", target, labels),
+            "Response surfaces of the fitted quadratic model for each factor pair, the remaining "
+            "factor held at the preferred solution (dashed red: the measured angle; star: the "
+            "preferred solution; circles: Box-Behnken runs of the plane through the centre).")
+        add("validation", validation_heaps({**r, "_paper": campaign.paper}, campaign.runs, m,
+                                           fig_dir / "validation.png"),
+            "Validation: the photographed heap, the simulated heap profiles of the validation runs "
+            "with the photos' mean angle (± SD, dotted) drawn through their flank (grey dotted: the "
+            "carton's end plate, when recorded), and the "
+            "simulated angles against the measured one (shaded: ± SD of the photos).")
+    return out

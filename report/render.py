@@ -1,0 +1,430 @@
+"""Render a campaign's stored results as a report laid out like the source paper.
+
+``build_report(DIR)`` reads ``DIR/results.json`` (with the measurement), the run records in
+``DIR/runs/`` and, when present, ``DIR/critique.json``; writes the tables to
+``DIR/tables.json``, the figures to ``DIR/figures/``, then renders ``DIR/report.html``
+(jinja2; figures embedded as data URIs, no network resource, system fonts only) and
+``DIR/report.pdf`` (weasyprint, A4) from those tables. Nothing is computed that the
+campaign did not store: the text and tables print stored numbers, the figures draw them.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+import re
+from pathlib import Path
+
+import jinja2
+
+from demcal.errors import InputError
+from demcal.jsonio import read_json, write_json
+from demcal.provenance import sha256_file
+from report.figures import make_figures
+from report.tables import (PAPER_FILE, Campaign, Table, build_tables, load_campaign, parameter_label,
+                           tables_document)
+
+HERE = Path(__file__).resolve().parent
+
+#: References cited by the methods and the analysis (short key -> full reference).
+REFERENCES = {
+    "paper": "Calibration and experimentation of discrete meta-simulation parameters of Astragalus "
+             "membranaceus (the source paper; Plackett-Burman, steepest climb and Box-Behnken "
+             "calibration of the angle of repose in EDEM 2018 with Design-Expert 11).",
+    "Plackett 1946": "Plackett, R. L. & Burman, J. P. (1946). The design of optimum multifactorial "
+                     "experiments. Biometrika 33(4), 305-325.",
+    "Box 1960": "Box, G. E. P. & Behnken, D. W. (1960). Some new three level designs for the study "
+                "of quantitative variables. Technometrics 2(4), 455-475.",
+    "Myers 2009": "Myers, R. H., Montgomery, D. C. & Anderson-Cook, C. M. (2009). Response Surface "
+                  "Methodology, 3rd ed. Wiley.",
+    "Lenth 1989": "Lenth, R. V. (1989). Quick and easy analysis of unreplicated factorials. "
+                  "Technometrics 31(4), 469-473.",
+    "Student 1908": "Student (1908). The probable error of a mean. Biometrika 6(1), 1-25.",
+    "Mohsenin 1986": "Mohsenin, N. N. (1986). Physical Properties of Plant and Animal Materials, "
+                     "2nd ed. Gordon and Breach.",
+    "Dai 2021": "Dai, N., Hou, Z., Qiu, Y., et al. (2021). Calibration and testing of discrete "
+                "meta-simulation parameters for red clover seeds. J. Hebei Agric. Univ. 44(06), 92-98.",
+    "Zhang 2018": "Zhang, T., Liu, F., Zhao, M., et al. (2018). Determination of physical parameters "
+                  "of corn stover contact and calibration by discrete element simulation. J. China "
+                  "Agric. Univ. 23(4), 120-127.",
+    "Ma 2020": "Ma, Y., Song, C., Xuan, C., et al. (2020). Parameter calibration of discrete element "
+               "model for alfalfa straw compression simulation. J. Agric. Eng. 36(11), 22-30.",
+    "Iglewicz 1993": "Iglewicz, B. & Hoaglin, D. C. (1993). How to Detect and Handle Outliers. ASQC "
+                     "Quality Press.",
+    "Stat-Ease": "Stat-Ease (2018). Design-Expert 11 user's guide: ANOVA, fit statistics (Adeq "
+                 "Precision, PRESS) and Pareto chart.",
+}
+
+
+# ----------------------------------------------------------------------------------------------
+# cell formatting (presentation only)
+
+def _sci(x: float, spec: str) -> str:
+    text = format(x, spec)
+    m = re.fullmatch(r"(-?[\d.]+)e([+-])0*(\d+)", text)
+    if not m:
+        return text
+    exp = ("-" if m.group(2) == "-" else "") + m.group(3)
+    return f"{m.group(1)}×10<sup>{exp}</sup>"
+
+
+def format_cell(value, fmt: str = "") -> str:
+    """One table cell as HTML text (already escaped)."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "–"
+    if isinstance(value, list):
+        return "[" + ", ".join(format_cell(v, fmt) for v in value) + "]"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, str):
+        return html.escape(value)
+    if isinstance(value, dict):
+        return html.escape(", ".join(f"{k}: {v}" for k, v in value.items()))
+    if fmt == "coded":
+        return f"{value:+d}" if isinstance(value, int) and value else str(int(value))
+    if fmt == "p":
+        return "&lt; 0.0001" if value < 1e-4 else f"{value:.4f}"
+    if fmt == "d" and float(value).is_integer():
+        return str(int(value))
+    if isinstance(value, int) and not fmt.endswith("e"):
+        return str(value)
+    spec = fmt if fmt and fmt not in ("mono", "d") else ".4g"
+    return _sci(float(value), spec)
+
+
+def format_unit(unit: str) -> str:
+    return html.escape(unit).replace("^2", "²").replace("^3", "³")
+
+
+def describe_sources(sources) -> list[str]:
+    """The ``sources`` of a table as short lines (HTML-escaped)."""
+    lines, seen = [], set()
+    workbook: dict = {}
+    files, runs = [], []
+    for s in sources:
+        kind = s.get("kind")
+        if kind == "workbook":
+            key = (s.get("file"), s.get("sha256"))
+            where = f"sheet {s.get('sheet')}"
+            if s.get("rows"):
+                where += f" rows {s['rows']}"
+            if s.get("keys"):
+                where += " keys " + ", ".join(s["keys"])
+            if s.get("path"):
+                where = s["path"]
+            workbook.setdefault(key, [])
+            if where not in workbook[key]:
+                workbook[key].append(where)
+        elif kind == "file":
+            if s.get("file") not in seen:
+                seen.add(s.get("file"))
+                files.append(f"{Path(s['file']).name} ({(s.get('sha256') or '?')[:16]})")
+        elif kind == "runs":
+            runs += [k for k in s.get("keys", []) if k not in runs]
+        elif kind == "results":
+            lines.append(f"{s['file']}: {s['path']}")
+        elif kind in ("reference", "critique"):
+            lines.append(f"{Path(s['file']).name}: {s.get('path', '')} (SHA-256 {s.get('sha256')})")
+    out = [f"{Path(f).name if f else '?'} (SHA-256 {sha}): {'; '.join(w)}" for (f, sha), w in workbook.items()]
+    if files:
+        out.append("files read by those rows (SHA-256, first 16 hex digits; all in Table A1): " + ", ".join(files))
+    if runs:
+        out.append(f"{len(runs)} DEM run record(s), runs/&lt;key&gt;.json (Table A2): "
+                   + ", ".join(k[:10] for k in runs))
+    return [html.escape(x, quote=False).replace("&amp;lt;", "&lt;").replace("&amp;gt;", "&gt;")
+            for x in out + lines]
+
+
+# ----------------------------------------------------------------------------------------------
+# text
+
+def _f(x, spec=".4g") -> str:
+    return "–" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
+
+
+def _signed_terms(coefs: dict, names: dict) -> str:
+    scale = max(abs(v) for v in coefs.values()) if coefs else 1.0
+    parts = []
+    for term, b in coefs.items():
+        b = 0.0 if abs(b) < 1e-12 * max(scale, 1.0) else b
+        name = "" if term == "Intercept" else names.get(term, term)
+        mag = format(abs(b), ".4g")
+        if not parts:
+            parts.append(("-" if b < 0 else "") + mag + (f" {name}" if name else ""))
+        else:
+            parts.append(("− " if b < 0 else "+ ") + mag + (f" {name}" if name else ""))
+    return " ".join(parts)
+
+
+def equations(c: Campaign) -> dict:
+    """The fitted model as equations in coded and actual terms, and the paper's eq. (5)."""
+    r = c.results
+    fit = r["box_behnken"]["fit"]
+    wall = str(c.measurement.get("meta", {}).get("contact_material", "steel")).lower()
+    codes = fit["factors"]
+    symbol = {code: parameter_label(r["factors"][letter]["parameter"], wall)[1] for code, letter in codes.items()}
+
+    def coded_name(term):
+        return term.replace("^2", "²")
+
+    def actual_name(term):
+        if term.endswith("^2"):
+            return f"{symbol[term[0]]}²"
+        return "·".join(symbol[ch] for ch in term)
+
+    out = {"coded": "θ = " + _signed_terms(fit["coefficients"], {t: coded_name(t) for t in fit["coefficients"]}),
+           "actual": "θ = " + _signed_terms(fit["coefficients_actual"],
+                                            {t: actual_name(t) for t in fit["coefficients_actual"] if t != "Intercept"}),
+           "codes": ", ".join(f"{code} = {symbol[code]} (screening factor {letter})" for code, letter in codes.items())}
+    pc = (c.paper.get("regression") or {}).get("coefficients")
+    if pc:
+        out["paper"] = "θ = " + _signed_terms(pc, {t: coded_name(t) for t in pc})
+        pf = (c.paper.get("regression") or {}).get("factors", {})
+        out["paper_codes"] = ", ".join(f"{k} = {v}" for k, v in pf.items())
+    return out
+
+
+def _runner_text(r: dict) -> tuple[str, bool]:
+    runner = r.get("runner")
+    if runner is None:
+        return "The DEM runner of this campaign is not recorded in results.json.", True
+    if runner == "analyse.campaign.repose_runner":
+        return ("Every DEM run was made by demcal's own DEM (numba; Hertz-Mindlin contacts, "
+                "constant-torque rolling friction, multi-sphere clumps) on its twin of the plate-"
+                "withdrawal repose test; the paper used EDEM 2018."), False
+    return (f"The DEM runs of this campaign were made by {runner}, not by demcal's repose rig: the "
+            "numbers below exercise the analysis, they are not a DEM calibration of the material."), True
+
+
+def differences(c: Campaign) -> list[str]:
+    """Where this campaign's procedure differs from the paper's, from the stored settings."""
+    r, m, p = c.results, c.measurement, c.paper
+    cfg = r.get("config", {})
+    q = m["quantities"]
+    out = [_runner_text(r)[0]]
+    sim = p.get("simulation", {})
+    if cfg.get("profile") != "paper":
+        out.append(f"Repose rig profile '{cfg.get('profile')}', not the paper-fidelity case "
+                   f"(profile 'paper': {sim.get('segments', 500)} segments generated in the first "
+                   f"{sim.get('generation_time_s', 1):g} s, plate withdrawn at "
+                   f"{sim.get('plate_withdrawn_at_s', 4):g} s, {sim.get('total_time_s', 10):g} s in all).")
+    base = r.get("base_parameters", {})
+    if base:
+        out.append(f"Segment model: {base.get('spheres_per_clump')} spheres of radius "
+                   f"{1e3 * base.get('segment_diameter_m', float('nan')) / 2:.4g} mm along a "
+                   f"{1e3 * base.get('segment_length_m', float('nan')):.4g} mm segment (from the measured "
+                   f"means), mass model '{base.get('mass_model')}', rolling-friction lever "
+                   f"'{base.get('rolling_lever')}'; the paper: 5 spheres of 5.5 mm.")
+    rep = q.get("repose_angle_deg", {})
+    if (rep.get("extra") or {}).get("override"):
+        out.append(f"Target angle {rep['value']:.4g}° from the workbook's meta target_repose_deg "
+                   "(overrides the photos).")
+    else:
+        out.append(f"Target angle {rep.get('value', float('nan')):.4g}° from {rep.get('n')} heap photo(s) "
+                   f"by demcal's photo estimator ({rep.get('method')}); the paper's "
+                   f"{(p.get('measured', {}).get('repose_angle_deg') or {}).get('value', 35.79)}° came from "
+                   "Matlab binarisation and Origin 2018 digitising.")
+    pr = q.get("poisson_ratio", {})
+    if pr:
+        out.append(f"Poisson's ratio: {pr.get('extra', {}).get('used', 'normalised strains')} is used; the "
+                   "paper's eq. (1) (absolute changes) is shown beside it in Table 2.")
+    for name, e in q.items():
+        n_track = (e.get("extra") or {}).get("n_from_track")
+        if name.startswith("restitution.") and n_track:
+            out.append(f"{name}: {n_track} drop(s) take restitution from the camera track velocities "
+                       "(free-flight fits), the others from heights (paper eq. 4).")
+    out.append("Screening levels: " + ("the measured minimum and maximum, as the paper." if cfg.get("levels") == "minmax"
+                                       else "measured mean -+ one SD (the paper used min/max)."))
+    n = r.get("noise", {})
+    out.append(f"Seed-to-seed noise, not measured by the paper: the screening centre run with "
+               f"{len(n.get('seeds', []))} seeds (SD {_f(n.get('sd'), '.3g')}°) and the Box-Behnken "
+               f"centre points with different seeds (SD {_f(n.get('bbd_centre_sd'), '.3g')}°).")
+    flagged = r.get("significant", {}).get("flagged", [])
+    paper_sig = p.get("screening", {}).get("significant", [])
+    if paper_sig and sorted(flagged) != sorted(paper_sig):
+        out.append(f"Significant factors: {', '.join(flagged) or 'none'} here, {', '.join(paper_sig)} in the paper.")
+    if r.get("significant", {}).get("note"):
+        out.append("Factors carried forward: " + r["significant"]["note"] + ".")
+    sc = r.get("steepest_climb", {})
+    out.append(f"Steepest climb with {cfg.get('climb_levels')} levels in equal steps across the measured "
+               f"range of each significant factor; level {sc.get('result', {}).get('best_level')} was best "
+               "(the paper's number of levels is not in its text; it used its level 4).")
+    out.append("The regression models the simulated angle itself (as the paper's eq. 5 does; its text "
+               "speaks of the relative error).")
+    out.append("Optimisation: every setting whose predicted angle equals the target ties, so several "
+               "are listed (Table 10) and the one closest to the measured means is preferred; "
+               "Design-Expert returned one.")
+    out.append(f"Validation with seeds {', '.join(str(s) for s in cfg.get('validation_seeds', []))} "
+               "(the paper repeated its validation three times).")
+    meta = m.get("meta", {})
+    if meta.get("particle_shear_modulus_pa") not in (None, ""):
+        out.append(f"Segment shear modulus {float(meta['particle_shear_modulus_pa']):.3g} Pa from the workbook "
+                   "meta (not stated in the paper).")
+    return out
+
+
+def abstract(c: Campaign) -> dict:
+    """Key numbers for the abstract and the conclusions (stored values, formatted)."""
+    r, m, p = c.results, c.measurement, c.paper
+    q = m["quantities"]
+    wall = str(m.get("meta", {}).get("contact_material", "steel")).lower()
+    rep = q.get("repose_angle_deg", {})
+    fit = r["box_behnken"]["fit"]["fit"]
+    val = r["validation"]["result"]
+    settings = r["validation"]["settings"]
+    chosen = r["box_behnken"]["factors"]
+    cal = ", ".join(f"{parameter_label(r['factors'][f]['parameter'], wall)[0].lower()} "
+                    f"{settings[r['factors'][f]['parameter']]:.3g}" for f in chosen)
+    pv = p.get("validation", {})
+    pf = (p.get("regression") or {}).get("fit", {})
+    text = (f"The physical and contact parameters of {m.get('material')} were measured "
+            f"({q.get('length_mm', {}).get('n', 0)} segments measured with callipers: "
+            f"{_f(q.get('length_mm', {}).get('value'))} mm × {_f(q.get('diameter_mm', {}).get('value'))} mm). "
+            f"The angle of repose of the heap, {_f(rep.get('value'), '.4g')}° "
+            f"(n = {rep.get('n')}), is the calibration target. A Plackett-Burman test of the seven "
+            f"contact parameters found {', '.join(r['significant']['flagged']) or 'no factor'} significant; "
+            f"a steepest climb and a Box-Behnken test of {', '.join(chosen)} gave a quadratic model with "
+            f"R² = {fit['r2']:.4f}, adjusted R² = {fit['adj_r2']:.4f}, Adeq Precision = "
+            f"{fit['adeq_precision']:.4g} and C.V. = {fit['cv_pct']:.3g} %. Optimised to the measured angle, "
+            f"the calibrated parameters are {cal}. Simulated with them over {val['n']} seeds the angle "
+            f"is {val['mean']:.4g}°, a relative error of {val['relative_error_pct']:.3g} % to the "
+            "measured angle.")
+    paper = ""
+    if pv:
+        paper = (f"The source paper reported {pv.get('target_deg')}° measured, R² {pf.get('r2')}, "
+                 f"adjusted R² {pf.get('adj_r2')}, Adeq Precision {pf.get('adeq_precision')}, "
+                 f"C.V. {pf.get('cv_pct')} %, calibrated e_pp 0.32, e_pw 0.36, μs_pw 0.22, and "
+                 f"{pv.get('mean_deg')}° in validation ({pv.get('relative_error_pct')} %).")
+    return {"text": text, "paper": paper}
+
+
+def rig_text(c: Campaign) -> str:
+    """The repose rig as the workbook meta describes it."""
+    meta = c.measurement.get("meta", {})
+    dims = [meta.get(k) for k in ("box_length_mm", "box_width_mm", "box_height_mm")]
+    parts = []
+    if all(d not in (None, "") for d in dims):
+        parts.append("the carton is " + " mm × ".join(f"{float(d):g}" for d in dims) + " mm inside")
+    if meta.get("fill_count") not in (None, ""):
+        parts.append(f"{int(float(meta['fill_count']))} segments are poured in")
+    if meta.get("plate_lift_speed_mm_s") not in (None, ""):
+        parts.append(f"the side plate is lifted at {float(meta['plate_lift_speed_mm_s']):g} mm/s")
+    profile = (c.results or {}).get("config", {}).get("profile")
+    text = "; ".join(parts) + " (workbook meta)" if parts else "the rig geometry comes from the workbook meta"
+    return text + (f"; rig profile '{profile}'." if profile else ".")
+
+
+def provenance(c: Campaign) -> dict:
+    r = c.results
+    prov = r.get("provenance", {})
+    code = prov.get("code", {})
+    mp = c.measurement.get("provenance", {})
+    return {"created": prov.get("created"), "demcal": code.get("demcal"), "git_sha": code.get("git_sha"),
+            "python": code.get("python"), "platform": code.get("platform"), "seed": prov.get("seed"),
+            "options": prov.get("options", {}), "runner": r.get("runner"),
+            "wall_s": r.get("wall_s"), "measure_options": mp.get("options", {}),
+            "workbook": c.measurement.get("workbook", {}).get("source"),
+            "stages": r.get("stages", [])}
+
+
+# ----------------------------------------------------------------------------------------------
+
+def _data_uri(path: Path) -> str:
+    return "data:image/png;base64," + base64.b64encode(Path(path).read_bytes()).decode("ascii")
+
+
+def _environment() -> jinja2.Environment:
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE)), autoescape=False,
+                             undefined=jinja2.StrictUndefined, trim_blocks=True, lstrip_blocks=True)
+    env.filters["cell"] = format_cell
+    env.filters["unit"] = format_unit
+    env.filters["sources"] = describe_sources
+    env.filters["e"] = lambda s: html.escape(str(s))
+    env.filters["kv"] = lambda d: ", ".join(f"{k} {v}" for k, v in d.items())
+    env.globals["fnum"] = _f
+    return env
+
+
+def input_hashes(c: Campaign, out_dir: Path) -> dict:
+    """SHA-256 of every file the tables rest on: the workbook's files as the campaign recorded
+    them, the paper's numbers, critique.json and each run record (hashed now)."""
+    inputs = dict(c.measurement.get("workbook", {}).get("files", {}))
+    if c.paper_source:
+        inputs[c.paper_source["file"]] = c.paper_source["sha256"]
+    if c.critique_source:
+        inputs["critique.json"] = c.critique_source["sha256"]
+    for key in c.runs:
+        inputs[f"runs/{key}.json"] = sha256_file(out_dir / "runs" / f"{key}.json")
+    return inputs
+
+
+def render_html(c: Campaign, tables: list[dict], figures: list) -> str:
+    """The report as one HTML document (figures embedded, no external resource)."""
+    by_id = {t["id"]: t for t in tables}
+    figs = {f.id: {"n": i, "src": _data_uri(f.path), "caption": f.caption} for i, f in enumerate(figures, 1)}
+    css = (HERE / "report.css").read_text()
+    r = c.results
+    runner_text, runner_warn = _runner_text(r)
+    context = {
+        "material": c.measurement.get("material", ""), "css": css, "t": by_id, "fig": figs,
+        "tables": tables, "abstract": abstract(c), "equations": equations(c),
+        "differences": differences(c), "rig": rig_text(c), "runner_text": runner_text, "runner_warn": runner_warn,
+        "synthetic": c.measurement.get("meta", {}).get("synthetic"),
+        "notes": c.measurement.get("notes", []), "critique": c.critique is not None,
+        "provenance": provenance(c), "references": REFERENCES, "results": r,
+        "critique_ids": [t["id"] for t in tables if t["id"].startswith("C")],
+    }
+    return _environment().get_template("report.html.j2").render(**context)
+
+
+def write_tables(out_dir) -> Path:
+    """Build every table from the stored results and write ``out_dir/tables.json`` (with the
+    SHA-256 of every file they rest on). Returns its path."""
+    out = Path(out_dir)
+    campaign = load_campaign(out)
+    return write_json(out / "tables.json",
+                      tables_document(build_tables(campaign), input_hashes(campaign, out)))
+
+
+def build_report(out_dir, *, pdf: bool = True) -> tuple[Path, ...]:
+    """Write ``tables.json``, ``figures/``, ``report.html`` and ``report.pdf`` in ``out_dir``.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        A campaign directory made by ``demcal calibrate`` (``results.json``, ``runs/``).
+    pdf : bool
+        Also write the PDF (weasyprint).
+
+    Returns
+    -------
+    tuple of Path
+        ``(report.html, report.pdf)`` (only the HTML when ``pdf`` is False).
+    """
+    out = Path(out_dir)
+    campaign = load_campaign(out)
+    write_json(out / "tables.json", tables_document(build_tables(campaign), input_hashes(campaign, out)))
+    # rendered from what was written, so the report shows exactly what audit checks
+    stored = read_json(out / "tables.json")["tables"]
+    figures = make_figures(campaign, out / "figures")
+    text = render_html(campaign, stored, figures)
+    html_path = out / "report.html"
+    html_path.write_text(text, encoding="utf-8")
+    if not pdf:
+        return (html_path,)
+    return html_path, write_pdf(text, out / "report.pdf", base_url=out)
+
+
+def write_pdf(text: str, path: Path, base_url) -> Path:
+    """Render HTML to an A4 PDF with weasyprint (fonts from the system only)."""
+    try:
+        import weasyprint
+    except ImportError as exc:  # pragma: no cover - weasyprint is a dependency
+        raise InputError(f"the PDF needs weasyprint ({exc}); use --no-pdf for the HTML only") from exc
+    weasyprint.HTML(string=text, base_url=str(base_url)).write_pdf(str(path))
+    return path
+
+
+__all__ = ["build_report", "write_tables", "render_html", "format_cell", "describe_sources", "equations", "differences",
+           "abstract", "REFERENCES", "PAPER_FILE", "Table"]

@@ -1,0 +1,950 @@
+"""The report's tables, built from a campaign's stored results and nothing else.
+
+Tables 1-9 are those of the source paper (dimensions; basic physical parameters; Plackett-Burman
+levels, design and results, ANOVA; steepest climb; Box-Behnken levels, design and results,
+ANOVA); the others show what the paper printed only in its text (regression coefficients, fit
+statistics, calibrated values, validation), what demcal adds (methods, seed-to-seed noise,
+optimisation solutions, critique) and the provenance appendix.
+
+:func:`build_tables` is a pure function of a :class:`Campaign`: ``demcal report`` feeds it the
+stored results and writes the tables to ``DIR/tables.json``; ``demcal audit`` feeds it the
+workbook measured again and the analysis replayed from the run store, and compares. Every
+table carries its ``sources`` (workbook file, sheet, rows and SHA-256; run keys; the path of
+the numbers in ``results.json``; the reference file of the paper's values).
+
+Cells hold numbers in the unit of their column (SI or the unit named in the workbook column),
+text, or None for "not available"; the ``formats`` only say how to print them.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from demcal.errors import InputError
+from demcal.jsonio import read_json, to_jsonable
+from demcal.provenance import sha256_file
+
+#: The source paper's printed numbers (its text; its Tables 1-9 are not available).
+PAPER_FILE = Path(__file__).resolve().parents[1] / "data" / "paper_defaults.json"
+
+#: The paper's significance note, printed under both ANOVA tables.
+SIGNIFICANCE_NOTE = ("Note: 0.01<P<0.05, significant effect (*); P<0.01, highly significant "
+                     "effect (**); P>0.05, no significant effect.")
+
+_MARK = {"highly significant": "**", "significant": "*"}
+
+#: Instrument behind each workbook sheet (lab-workbook.md; the paper's in brackets).
+INSTRUMENTS = {
+    "specimens": "digital vernier callipers and electronic balance",
+    "density": "measuring cylinder, liquid displacement",
+    "drop": "free-fall drop onto a plate; rebound read on a grid or from a high-speed camera "
+            "track (paper: high-speed camera and TEMA)",
+    "incline": "tilting-plane inclinometer (paper: CNY-1)",
+    "compression": "texture analyser, compression to about 30 % (paper: 5 mm/s)",
+    "repose": "plate withdrawal (pumping plate) heap, side photograph (paper: Matlab and "
+              "Origin 2018)",
+    "meta": "given in the workbook meta sheet",
+}
+
+_PARAMETERS = {
+    "poisson_ratio": ("Poisson's ratio of the segment", "ν"),
+    "e_pp": ("Restitution coefficient, segment-segment", "e_pp"),
+    "e_pw": ("Restitution coefficient, segment-{wall}", "e_pw"),
+    "mu_s_pp": ("Static friction coefficient, segment-segment", "μs_pp"),
+    "mu_s_pw": ("Static friction coefficient, segment-{wall}", "μs_pw"),
+    "mu_r_pp": ("Rolling friction coefficient, segment-segment", "μr_pp"),
+    "mu_r_pw": ("Rolling friction coefficient, segment-{wall}", "μr_pw"),
+}
+
+_RUN_STAGES = (("Plackett-Burman", ("plackett_burman", "runs")),
+               ("noise", ("noise", "runs")),
+               ("steepest climb", ("steepest_climb", "runs")),
+               ("Box-Behnken", ("box_behnken", "runs")),
+               ("validation", ("validation", "runs")))
+
+
+@dataclass(frozen=True)
+class Table:
+    """One table of the report, as stored in ``tables.json``.
+
+    Attributes
+    ----------
+    id : str
+        ``"1"`` ... ``"9"`` for the paper's tables, ``"2a"``, ``"9a"``, ``"10"``, ``"C1"``,
+        ``"A1"``... for the others.
+    title : str
+        Caption, without the "Table N" label.
+    columns : tuple of str
+        Column headings.
+    units : tuple of str
+        Unit of each column (``""`` dimensionless or text; ``"row"``: in the row's unit column).
+    rows : tuple of tuple
+        Cells: float, int, str, None (not available) or a list of those.
+    notes : tuple of str
+        Printed under the table.
+    sources : tuple of dict
+        Where the cells come from: ``{"kind": "workbook", "file", "sha256", "sheet", "rows"}``,
+        ``{"kind": "file", "file", "sha256"}`` (photos, tracks, curves),
+        ``{"kind": "runs", "keys"}``, ``{"kind": "results", "file", "path"}``,
+        ``{"kind": "reference", "file", "sha256", "path"}``, ``{"kind": "critique", ...}``.
+    formats : tuple of str
+        How to print each column: a format spec (``".4g"``), ``"p"`` (p-value), ``"coded"``,
+        ``"mono"`` (hashes, keys) or ``""`` (as is).
+    """
+
+    id: str
+    title: str
+    columns: tuple
+    units: tuple
+    rows: tuple
+    notes: tuple = ()
+    sources: tuple = ()
+    formats: tuple = ()
+
+    def __post_init__(self):
+        n = len(self.columns)
+        if len(self.units) != n or (self.formats and len(self.formats) != n):
+            raise ValueError(f"table {self.id}: columns, units and formats differ in length")
+        for i, row in enumerate(self.rows):
+            if len(row) != n:
+                raise ValueError(f"table {self.id}: row {i + 1} has {len(row)} cells, expected {n}")
+
+    @property
+    def label(self) -> str:
+        return f"Table {self.id}"
+
+    def to_dict(self) -> dict:
+        """JSON layout of one entry of ``tables.json``."""
+        return to_jsonable({"id": self.id, "title": self.title, "columns": list(self.columns),
+                            "units": list(self.units), "rows": [list(r) for r in self.rows],
+                            "notes": list(self.notes), "sources": list(self.sources),
+                            "formats": list(self.formats or ("",) * len(self.columns))})
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Table":
+        return cls(id=str(d["id"]), title=d["title"], columns=tuple(d["columns"]),
+                   units=tuple(d["units"]), rows=tuple(tuple(r) for r in d["rows"]),
+                   notes=tuple(d.get("notes", ())), sources=tuple(d.get("sources", ())),
+                   formats=tuple(d.get("formats", ())))
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """What the tables are built from.
+
+    Attributes
+    ----------
+    measurement : dict
+        ``measure.pipeline.Measurement.to_dict()`` (stored in ``measure.json``, or measured again).
+    results : dict or None
+        ``results.json`` (stored, or replayed by ``analyse.campaign.derive_results``); None when
+        the analysis could not be derived: only the measurement tables are built then.
+    runs : dict
+        Run key -> run record (``analyse.runs`` layout) of every run the results name.
+    paper : dict
+        The paper's printed numbers (``data/paper_defaults.json``), empty when not available.
+    paper_source : dict
+        ``{"file", "sha256"}`` of that file (empty when not available).
+    critique : dict or None
+        ``critique.json`` when the critique stage has run.
+    critique_source : dict
+        ``{"file", "sha256"}`` of ``critique.json`` (empty when absent).
+    """
+
+    measurement: dict
+    results: dict | None
+    runs: dict = field(default_factory=dict)
+    paper: dict = field(default_factory=dict)
+    paper_source: dict = field(default_factory=dict)
+    critique: dict | None = None
+    critique_source: dict = field(default_factory=dict)
+
+
+def load_paper() -> tuple[dict, dict]:
+    """The paper's numbers and ``{"file", "sha256"}`` of their file (empty if it is absent)."""
+    if not PAPER_FILE.exists():
+        return {}, {}
+    return read_json(PAPER_FILE), {"file": str(PAPER_FILE), "sha256": sha256_file(PAPER_FILE)}
+
+
+def run_keys(results: dict) -> list[str]:
+    """Every run key the results name, in campaign order (first occurrence)."""
+    keys = []
+    for _, (part, name) in _RUN_STAGES:
+        keys += [r["key"] for r in results.get(part, {}).get(name, [])]
+    return list(dict.fromkeys(keys))
+
+
+def load_campaign(out_dir) -> Campaign:
+    """Read a campaign directory's stored results for the report.
+
+    Raises
+    ------
+    InputError
+        ``results.json`` is missing, or a run record it names is missing from ``runs/``.
+    """
+    out = Path(out_dir)
+    res_path = out / "results.json"
+    if not res_path.exists():
+        raise InputError(f"{out} holds no results.json: run 'demcal calibrate WORKBOOK --out {out}' first")
+    results = read_json(res_path)
+    measurement = results.get("measurement") or read_json(out / "measure.json")
+    runs = {}
+    for key in run_keys(results):
+        p = out / "runs" / f"{key}.json"
+        if not p.exists():
+            raise InputError(f"run record {p} named in {res_path} is missing")
+        runs[key] = read_json(p)
+    paper, paper_source = load_paper()
+    critique, critique_source = load_critique(out)
+    return Campaign(measurement=measurement, results=results, runs=runs, paper=paper,
+                    paper_source=paper_source, critique=critique, critique_source=critique_source)
+
+
+def load_critique(out_dir) -> tuple[dict | None, dict]:
+    p = Path(out_dir) / "critique.json"
+    if not p.exists():
+        return None, {}
+    try:
+        return read_json(p), {"file": str(p), "sha256": sha256_file(p)}
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{p} is not valid JSON ({exc})") from None
+
+
+# ----------------------------------------------------------------------------------------------
+# small helpers
+
+def _wall(measurement: dict) -> str:
+    return str(measurement.get("meta", {}).get("contact_material", "steel")).strip().lower() or "steel"
+
+
+def _get(d, *path, default=None):
+    for p in path:
+        if not isinstance(d, dict) or p not in d:
+            return default
+        d = d[p]
+    return d
+
+
+def row_ranges(rows) -> str:
+    """``[1, 2, 3, 5]`` -> ``"1-3, 5"``."""
+    rows = sorted({int(r) for r in rows})
+    parts, i = [], 0
+    while i < len(rows):
+        j = i
+        while j + 1 < len(rows) and rows[j + 1] == rows[j] + 1:
+            j += 1
+        parts.append(str(rows[i]) if i == j else f"{rows[i]}-{rows[j]}")
+        i = j + 1
+    return ", ".join(parts)
+
+
+def _files_of(measurement: dict, name: str) -> list[dict]:
+    """Photos, tracks and curves the rows of one quantity read, with their SHA-256."""
+    root = Path(measurement.get("workbook", {}).get("root", "."))
+    hashes = measurement.get("workbook", {}).get("files", {})
+    out = []
+    for rec in measurement.get("per_row", {}).get(name, []):
+        for key in ("file", "track_file", "curve_file"):
+            rel = rec.get(key)
+            if rel:
+                path = str(root / rel)
+                out.append({"kind": "file", "file": path, "sha256": hashes.get(path), "row": rec.get("row")})
+    return out
+
+
+def _workbook_source(measurement: dict, name: str) -> list[dict]:
+    """Source entries of one measured quantity: sheet and rows, then the files its rows read."""
+    est = measurement["quantities"][name]
+    src = est.get("source", {})
+    rows = list(est.get("rows_used", [])) + [r["row"] for r in est.get("rows_rejected", [])]
+    entry = {"kind": "workbook", "quantity": name, "file": src.get("file"), "sha256": src.get("sha256"),
+             "sheet": src.get("sheet"), "rows": row_ranges(rows)}
+    return [entry] + _files_of(measurement, name)
+
+
+def _meta_source(measurement: dict, keys) -> dict:
+    sheet = _get(measurement, "workbook", "sheets", "meta", default={})
+    return {"kind": "workbook", "file": sheet.get("file"), "sha256": sheet.get("sha256"),
+            "sheet": "meta", "keys": list(keys)}
+
+
+def _results_source(path: str) -> dict:
+    return {"kind": "results", "file": "results.json", "path": path}
+
+
+def _reference_source(campaign: Campaign, path: str) -> list[dict]:
+    if not campaign.paper_source:
+        return []
+    return [{"kind": "reference", **campaign.paper_source, "path": path}]
+
+
+def _runs_source(results: dict, part: str) -> dict:
+    return {"kind": "runs", "keys": [r["key"] for r in results[part]["runs"]]}
+
+
+def _paper_measured(campaign: Campaign, name: str):
+    """(value, spread) the paper printed for a measured quantity, or (None, None)."""
+    paper = campaign.paper
+    entry = _get(paper, "measured", name.replace(f"-{_wall(campaign.measurement)}", "-steel")
+                 if _wall(campaign.measurement) != "steel" else name)
+    if isinstance(entry, dict):
+        return entry.get("value"), entry.get("spread")
+    return None, None
+
+
+def parameter_label(parameter: str, wall: str) -> tuple[str, str]:
+    """Readable name and symbol of a DEM contact parameter."""
+    name, symbol = _PARAMETERS.get(parameter, (parameter, parameter))
+    return name.format(wall=wall), symbol
+
+
+def quantity_label(name: str) -> str:
+    """Readable name of a measured quantity (lab-workbook.md names)."""
+    fixed = {"length_mm": "Length", "diameter_mm": "Diameter", "mass_g": "Mass of one segment",
+             "particle_density_kg_m3": "Particle density (liquid displacement)",
+             "envelope_density_kg_m3": "Envelope density (callipers and balance)",
+             "poisson_ratio": "Poisson's ratio", "elastic_modulus_pa": "Elastic modulus",
+             "shear_modulus_pa": "Shear modulus", "repose_angle_deg": "Angle of repose (heap photos)"}
+    if name in fixed:
+        return fixed[name]
+    family, _, what = name.partition(".")
+    words = {"restitution": "Restitution coefficient", "static_friction": "Static friction coefficient",
+             "rolling_friction": "Rolling friction coefficient"}.get(family, family)
+    if family == "restitution":
+        return f"{words}, {what.replace('particle', 'segment')}"
+    return f"{words}, segment-{'segment' if what == 'particle' else what}"
+
+
+_SYMBOLS = {"length_mm": "L", "diameter_mm": "D", "mass_g": "m", "particle_density_kg_m3": "ρ",
+            "envelope_density_kg_m3": "ρe", "poisson_ratio": "ν", "elastic_modulus_pa": "E",
+            "shear_modulus_pa": "G", "repose_angle_deg": "θ", "restitution": "e",
+            "static_friction": "μs", "rolling_friction": "μr"}
+
+
+def _symbol(name: str) -> str:
+    return _SYMBOLS.get(name, _SYMBOLS.get(name.partition(".")[0], ""))
+
+
+def _unit(est: dict) -> str:
+    unit = est.get("unit", "")
+    return "" if unit in ("1", "-") else unit
+
+
+# ----------------------------------------------------------------------------------------------
+# Tables 1, 2, 2a: the measurement
+
+def table_dimensions(c: Campaign) -> Table:
+    """Table 1: outer dimensions of the segments (callipers)."""
+    q = c.measurement["quantities"]
+    paper = {"length_mm": _get(c.paper, "segment", "length_mm"),
+             "diameter_mm": _get(c.paper, "segment", "diameter_mm")}
+    rows, sources = [], []
+    for name in ("length_mm", "diameter_mm"):
+        if name not in q:
+            continue
+        e = q[name]
+        rows.append((quantity_label(name), _symbol(name), e["n"], e["value"], e["sd"],
+                     _get(e, "extra", "min"), _get(e, "extra", "max"), e["ci95"][0], e["ci95"][1],
+                     paper[name]))
+        sources += _workbook_source(c.measurement, name)
+    return Table("1", "External dimensions of the segments",
+                 ("Dimension", "Symbol", "n", "Mean", "SD", "Min", "Max", "95 % CI low",
+                  "95 % CI high", "Paper"),
+                 ("", "", "", "mm", "mm", "mm", "mm", "mm", "mm", "mm"), tuple(rows),
+                 notes=("SD with n - 1; 95 % CI of the mean from Student's t. Paper: the mean "
+                        "segment size printed in its text (Table 1 of the paper is not available).",),
+                 sources=tuple(sources + _reference_source(c, "segment")),
+                 formats=("", "", "d", ".4g", ".3g", ".4g", ".4g", ".4g", ".4g", ".4g"))
+
+
+_META_ROWS = (("contact_density_kg_m3", "Density of the {wall} plate", "ρw", "kg/m^3", ("steel", "density_kg_m3")),
+              ("contact_poisson", "Poisson's ratio of the {wall} plate", "νw", "", ("steel", "poisson_ratio")),
+              ("contact_shear_modulus_pa", "Shear modulus of the {wall} plate", "Gw", "Pa", ("steel", "shear_modulus_pa")),
+              ("particle_shear_modulus_pa", "Shear modulus of the segment used by the DEM", "G", "Pa", None))
+
+
+def table_physical(c: Campaign) -> Table:
+    """Table 2: basic physical and contact parameters as measured, the paper's beside them."""
+    m = c.measurement
+    q = m["quantities"]
+    wall = _wall(m)
+    rows, sources, notes = [], [], []
+    for name, e in q.items():
+        if name in ("length_mm", "diameter_mm"):
+            continue
+        pv, ps = _paper_measured(c, name)
+        if name == "particle_density_kg_m3":
+            pv = _get(c.paper, "segment", "particle_density_kg_m3")
+        if name == "poisson_ratio":
+            pv = _get(c.paper, "segment", "poisson_ratio")
+        label = quantity_label(name)
+        if _get(e, "extra", "override"):
+            label += " (meta target_repose_deg)"
+        rows.append((label, _symbol(name), _unit(e), e["n"], e["value"], e["sd"], e["ci95"][0],
+                     e["ci95"][1], pv, ps))
+        sources += _workbook_source(m, name)
+        eq1 = _get(e, "extra", "eq1")
+        if name == "poisson_ratio" and isinstance(eq1, dict):
+            rows.append(("Poisson's ratio, paper eq. (1) |Δw|/|Δt|", "ν1", "", eq1.get("n"),
+                         eq1.get("value"), eq1.get("sd"), eq1["ci95"][0], eq1["ci95"][1], pv, None))
+            notes.append(f"Poisson's ratio: the DEM uses {_get(e, 'extra', 'used', default='the first row')}; "
+                         "the paper's eq. (1), absolute changes not divided by the original size, "
+                         "is shown below it.")
+    meta = m.get("meta", {})
+    used_keys = []
+    for key, label, symbol, unit, paper_path in _META_ROWS:
+        if meta.get(key) in (None, ""):
+            continue
+        used_keys.append(key)
+        pv = _get(c.paper, *paper_path) if paper_path else None
+        if key == "particle_shear_modulus_pa":
+            notes.append("The segment's shear modulus is not in the paper's text; the DEM uses "
+                         "the workbook's meta value.")
+        rows.append((label.format(wall=wall), symbol, unit, None, float(meta[key]), None, None,
+                     None, pv, None))
+    if used_keys:
+        sources.append(_meta_source(m, used_keys))
+    notes.append("Paper: values printed in the paper's text as mean ± spread (its Table 2 is "
+                 "not available); the paper does not say whether the spread is an SD or a range.")
+    return Table("2", "Basic physical and contact parameters of the segments (measured)",
+                 ("Parameter", "Symbol", "Unit", "n", "Mean", "SD", "95 % CI low",
+                  "95 % CI high", "Paper", "Paper ±"),
+                 ("", "", "", "", "row", "row", "row", "row", "row", "row"), tuple(rows),
+                 notes=tuple(notes), sources=tuple(sources + _reference_source(c, "measured")),
+                 formats=("", "", "", "d", ".4g", ".3g", ".4g", ".4g", ".4g", ".3g"))
+
+
+def table_methods(c: Campaign) -> Table:
+    """Table 2a: instrument, formula and rows of every measured quantity (the estimates' own
+    ``method`` text)."""
+    m = c.measurement
+    rows, sources = [], []
+    for name, e in m["quantities"].items():
+        sheet = _get(e, "source", "sheet", default="")
+        rejected = [f"{r['row']}: {r['reason']}" for r in e.get("rows_rejected", [])]
+        rows.append((quantity_label(name), sheet, INSTRUMENTS.get(sheet, ""), e.get("method", ""),
+                     row_ranges(e.get("rows_used", [])), "; ".join(rejected) or "none",
+                     _get(e, "extra", "outlier_rule", default="")))
+        src = _get(e, "source", default={})
+        sources.append({"kind": "workbook", "quantity": name, "file": src.get("file"),
+                        "sha256": src.get("sha256"), "sheet": sheet,
+                        "rows": row_ranges(list(e.get("rows_used", []))
+                                           + [r["row"] for r in e.get("rows_rejected", [])])})
+    return Table("2a", "Instruments, formulas and rows of each measured quantity",
+                 ("Quantity", "Sheet", "Instrument", "Formula used (reference)", "Rows used",
+                  "Rows rejected", "Outlier rule"),
+                 ("",) * 7, tuple(rows),
+                 notes=("Rows count data rows from 1 under the header of each sheet.",),
+                 sources=tuple(sources))
+
+
+# ----------------------------------------------------------------------------------------------
+# Tables 3-5a: Plackett-Burman screening
+
+def table_pb_levels(c: Campaign) -> Table:
+    """Table 3: the seven contact parameters and their -1/+1 levels."""
+    r, m = c.results, c.measurement
+    wall = _wall(m)
+    rows, sources = [], []
+    for letter, f in r["factors"].items():
+        name, symbol = parameter_label(f["parameter"], wall)
+        pv, ps = _paper_measured(c, f["quantity"])
+        if f["quantity"] == "poisson_ratio":
+            pv = _get(c.paper, "segment", "poisson_ratio")
+        rows.append((letter, name, symbol, f["low"], f["mean"], f["high"], f["how"], pv, ps))
+        if f["quantity"] in m["quantities"]:
+            sources += _workbook_source(m, f["quantity"])[:1]
+    return Table("3", "Plackett-Burman test: factors and level codes",
+                 ("Code", "Parameter", "Symbol", "Low (-1)", "Mean", "High (+1)", "Levels from",
+                  "Paper mean", "Paper ±"),
+                 ("",) * 9, tuple(rows),
+                 notes=("-1/+1 are the measured minimum and maximum of the rows used (as the "
+                        "paper) or the mean -+ one SD (levels 'sd'), clipped to the admissible "
+                        "range of the parameter. Paper: measured mean ± spread from its text.",),
+                 sources=tuple(sources + [_results_source("factors")] + _reference_source(c, "measured")),
+                 formats=("", "", "", ".4g", ".4g", ".4g", "", ".4g", ".3g"))
+
+
+def table_pb_design(c: Campaign) -> Table:
+    """Table 4: the 12-run Plackett-Burman design (coded) and the simulated angle."""
+    pb = c.results["plackett_burman"]
+    cols = list(pb["columns"])
+    shown = ["d" + col.split("_")[-1] if col.startswith("dummy") else col for col in cols]
+    rows = []
+    for i, (coded, y, run) in enumerate(zip(pb["design_coded"], pb["response"], pb["runs"]), 1):
+        rows.append((i, *[int(round(v)) for v in coded], y, run["seed"], run["key"][:12]))
+    return Table("4", "Design and results of the Plackett-Burman test",
+                 ("Run", *shown, "Angle of repose", "Seed", "Run key"),
+                 ("", *[""] * len(cols), "deg", "", ""), tuple(rows),
+                 notes=(f"Columns {', '.join(s for s in shown if s.startswith('d'))} are the unused "
+                        "(dummy) columns of the 12-run design; they estimate the error. Actual "
+                        "levels in Table 3; every run's full key in Table A2.",),
+                 sources=(_runs_source(c.results, "plackett_burman"),
+                          _results_source("plackett_burman.design_coded, plackett_burman.response")),
+                 formats=("d", *["coded"] * len(cols), ".4g", "d", "mono"))
+
+
+def _anova_rows(anova, effects=None, extra=None):
+    rows = []
+    for a in anova:
+        src = a["source"]
+        row = [src, a["ss"], a["df"], a["ms"], a["f"], a["p"], _MARK.get(a.get("significance"), "")]
+        if effects is not None:
+            row += [effects.get(src), (extra or {}).get(src)]
+        rows.append(tuple(row))
+    return rows
+
+
+def table_pb_anova(c: Campaign) -> Table:
+    """Table 5: Type III ANOVA of the Plackett-Burman test, with effects and contributions."""
+    r = c.results
+    s = r["plackett_burman"]["screening"]
+    noise = r["plackett_burman"].get("effects_vs_noise", {})
+    rows = []
+    for row in _anova_rows(s["anova"], s["effects"], s["contribution_pct"]):
+        ratio = _get(noise, row[0], "ratio")
+        rows.append(row + (ratio,))
+    paper_sig = _get(c.paper, "screening", "significant", default=[])
+    notes = [SIGNIFICANCE_NOTE,
+             f"Significant at p < {s['alpha']:g}: {', '.join(s['significant']) or 'none'}"
+             + (f" (paper: {', '.join(paper_sig)})" if paper_sig else "") + ".",
+             "Effect = mean(+1) - mean(-1); contribution = Design-Expert's % of the model sum of "
+             "squares; effect/noise = |effect| over the standard error the seed-to-seed noise "
+             "alone would give it (Table 5a).",
+             f"Lenth's method over all contrasts: PSE {_get(s, 'lenth', 'pse', default=float('nan')):.4g} deg, "
+             f"ME {_get(s, 'lenth', 'me', default=float('nan')):.4g} deg, active: "
+             f"{', '.join(_get(s, 'lenth', 'active', default=[])) or 'none'}."]
+    note = _get(r, "significant", "note")
+    if note:
+        notes.append(f"Carried forward: {', '.join(r['significant']['carried_forward'])} ({note}).")
+    return Table("5", "Analysis of variance of the Plackett-Burman test",
+                 ("Source", "Sum of squares", "df", "Mean square", "F value", "p-value", "Sig.",
+                  "Effect", "Contribution", "Effect/noise"),
+                 ("", "deg^2", "", "deg^2", "", "", "", "deg", "%", ""), tuple(rows),
+                 notes=tuple(notes),
+                 sources=(_runs_source(r, "plackett_burman"),
+                          _results_source("plackett_burman.screening"))
+                 + tuple(_reference_source(c, "screening.significant")),
+                 formats=("", ".4g", "d", ".4g", ".4g", "p", "", ".4g", ".3g", ".3g"))
+
+
+def table_noise(c: Campaign) -> Table:
+    """Table 5a: seed-to-seed noise of the DEM at the screening centre."""
+    r = c.results
+    n = r["noise"]
+    rows = [(f"centre run, seed {s}", y) for s, y in zip(n["seeds"], n["responses"])]
+    rows.append(("SD between seeds (n - 1)", n["sd"]))
+    se = next(iter(r["plackett_burman"].get("effects_vs_noise", {}).values()), {}).get("se_noise")
+    rows.append(("Standard error of a screening effect from that noise", se))
+    rows.append(("SD of the Box-Behnken centre points", n.get("bbd_centre_sd")))
+    bbd_keys = [run["key"] for run, coded in zip(r["box_behnken"]["runs"], r["box_behnken"]["design_coded"])
+                if not any(coded)]
+    return Table("5a", "Seed-to-seed noise of the simulated angle of repose",
+                 ("Item", "Angle of repose"), ("", "deg"), tuple(rows),
+                 notes=("The screening centre (all factors at the middle of their range) run with "
+                        "different seeds; the paper does not measure this noise.",),
+                 sources=(_runs_source(r, "noise"), {"kind": "runs", "keys": bbd_keys},
+                          _results_source("noise")),
+                 formats=("", ".4g"))
+
+
+# ----------------------------------------------------------------------------------------------
+# Table 6: steepest climb
+
+def table_climb(c: Campaign) -> Table:
+    """Table 6: steepest climb of the significant factors, relative error per level."""
+    r = c.results
+    sc = r["steepest_climb"]
+    plan, res = sc["plan"], sc["result"]
+    stepped = list(plan["stepped"])
+    best = int(res["best_level"])
+    rows = []
+    for i, (lv, y, err) in enumerate(zip(plan["levels"], sc["response"], res["relative_error_pct"]), 1):
+        role = {best: "centre (0)", best - 1: "low (-1)", best + 1: "high (+1)"}.get(i, "")
+        rows.append((i, *[lv[f] for f in stepped], y, err, role))
+    wall = _wall(c.measurement)
+    names = [parameter_label(r["factors"][f]["parameter"], wall)[1] for f in stepped]
+    fixed = [f for f in plan["factors"] if f not in stepped]
+    paper_lv = _get(c.paper, "screening", "steepest_climb", default={})
+    notes = [res.get("note", ""),
+             "Steps: " + ", ".join(f"{f} {'+' if plan['directions'][f] > 0 else '-'}{plan['step'][f]:.4g}"
+                                   for f in stepped)
+             + f"; the other factors ({', '.join(fixed)}) at their measured means; relative error "
+             f"= |angle - {res['target']:.4g}| / {res['target']:.4g}."]
+    if paper_lv:
+        notes.append(f"Paper: level {paper_lv.get('bbd_centre_level')} of its climb was the centre, "
+                     f"levels {paper_lv.get('bbd_low_level')} and {paper_lv.get('bbd_high_level')} "
+                     "the low and high levels (its Table 6 is not available).")
+    if res.get("at_edge"):
+        notes.append("The best level is at the edge of the climb: the optimum may lie beyond it.")
+    return Table("6", "Design and results of the steepest climb test",
+                 ("Level", *[f"{f} ({n})" for f, n in zip(stepped, names)], "Angle of repose",
+                  "Relative error", "Box-Behnken"),
+                 ("", *[""] * len(stepped), "deg", "%", ""), tuple(rows), notes=tuple(n for n in notes if n),
+                 sources=(_runs_source(r, "steepest_climb"), _results_source("steepest_climb"))
+                 + tuple(_reference_source(c, "screening.steepest_climb")),
+                 formats=("d", *[".4g"] * len(stepped), ".4g", ".3g", ""))
+
+
+# ----------------------------------------------------------------------------------------------
+# Tables 7-9b: Box-Behnken
+
+def _bbd_letters(r: dict) -> list[tuple[str, str]]:
+    """(coded letter of the fit, screening letter) pairs, in the fit's order."""
+    return list(_get(r, "box_behnken", "fit", "factors", default={}).items())
+
+
+def table_bbd_levels(c: Campaign) -> Table:
+    """Table 7: Box-Behnken factors and their -1/0/+1 levels (from the steepest climb)."""
+    r = c.results
+    b = r["box_behnken"]
+    wall = _wall(c.measurement)
+    rows = []
+    for j, (code, letter) in enumerate(_bbd_letters(r)):
+        name, symbol = parameter_label(r["factors"][letter]["parameter"], wall)
+        rows.append((code, letter, name, symbol, b["low"][j], b["centre"][j], b["high"][j]))
+    fixed = ", ".join(f"{f} = {v:.4g}" for f, v in b["fixed"].items())
+    return Table("7", "Box-Behnken test: factors and level codes",
+                 ("Code", "Screening factor", "Parameter", "Symbol", "Low (-1)", "Centre (0)", "High (+1)"),
+                 ("",) * 7, tuple(rows),
+                 notes=("Centre = the best level of the steepest climb, -1/+1 = its neighbours "
+                        f"(clipped to the admissible range). Other factors fixed at their measured means: {fixed}.",),
+                 sources=(_results_source("box_behnken.low, box_behnken.centre, box_behnken.high"),
+                          _runs_source(r, "steepest_climb")),
+                 formats=("", "", "", "", ".4g", ".4g", ".4g"))
+
+
+def table_bbd_design(c: Campaign) -> Table:
+    """Table 8: the 17-run Box-Behnken design, actual levels and simulated angle."""
+    r = c.results
+    b = r["box_behnken"]
+    letters = _bbd_letters(r)
+    rows = []
+    for i, (coded, actual, y, run) in enumerate(zip(b["design_coded"], b["design_actual"], b["response"],
+                                                    b["runs"]), 1):
+        rows.append((i, *[int(round(v)) for v in coded], *actual, y, run["seed"], run["key"][:12]))
+    return Table("8", "Design and results of the Box-Behnken test",
+                 ("Run", *[code for code, _ in letters], *[f"{letter} actual" for _, letter in letters],
+                  "Angle of repose", "Seed", "Run key"),
+                 ("", *[""] * len(letters), *[""] * len(letters), "deg", "", ""), tuple(rows),
+                 notes=("Centre points (0, 0, 0) are repeated with different seeds; edge runs "
+                        "share the design seed.",),
+                 sources=(_runs_source(r, "box_behnken"),
+                          _results_source("box_behnken.design_coded, box_behnken.response")),
+                 formats=("d", *["coded"] * len(letters), *[".4g"] * len(letters), ".4g", "d", "mono"))
+
+
+def table_bbd_anova(c: Campaign) -> Table:
+    """Table 9: ANOVA of the quadratic Box-Behnken model (Design-Expert layout)."""
+    r = c.results
+    fit = r["box_behnken"]["fit"]
+    key = ", ".join(f"{code} = {letter}" for code, letter in _bbd_letters(r))
+    return Table("9", "Analysis of variance of the quadratic regression model (Box-Behnken test)",
+                 ("Source", "Sum of squares", "df", "Mean square", "F value", "p-value", "Sig."),
+                 ("", "deg^2", "", "deg^2", "", "", ""), tuple(_anova_rows(fit["anova"])),
+                 notes=(SIGNIFICANCE_NOTE, f"Codes: {key} (Table 7). Fit statistics in Table 9a."),
+                 sources=(_runs_source(r, "box_behnken"), _results_source("box_behnken.fit.anova")),
+                 formats=("", ".4g", "d", ".4g", ".4g", "p", ""))
+
+
+def table_fit_statistics(c: Campaign) -> Table:
+    """Table 9a: fit statistics beside the paper's."""
+    r = c.results
+    fit = r["box_behnken"]["fit"]
+    st = fit["fit"]
+    paper = _get(c.paper, "regression", "fit", default={})
+    model_p = next((a["p"] for a in fit["anova"] if a["source"] == "Model"), None)
+    lof_p = next((a["p"] for a in fit["anova"] if a["source"] == "Lack of Fit"), None)
+    below = _get(c.paper, "regression", "model_p_below")
+    rows = [("Std. Dev.", "deg", st["std_dev"], None),
+            ("Mean", "deg", st["mean"], None),
+            ("C.V.", "%", st["cv_pct"], paper.get("cv_pct")),
+            ("R²", "", st["r2"], paper.get("r2")),
+            ("Adjusted R²", "", st["adj_r2"], paper.get("adj_r2")),
+            ("Predicted R²", "", st["pred_r2"], None),
+            ("PRESS", "deg^2", st["press"], None),
+            ("Adeq Precision", "", st["adeq_precision"], paper.get("adeq_precision")),
+            ("Model p-value", "", model_p, None if below is None else f"< {below:g}"),
+            ("Lack of fit p-value", "", lof_p, None)]
+    return Table("9a", "Fit statistics of the quadratic regression model",
+                 ("Statistic", "Unit", "Ours", "Paper"), ("", "", "row", "row"), tuple(rows),
+                 notes=("Adeq Precision = (max ŷ - min ŷ) / sqrt(p MSE / n), p counting the "
+                        "intercept (Design-Expert). Paper: figures printed in its text.",),
+                 sources=(_runs_source(r, "box_behnken"), _results_source("box_behnken.fit.fit"))
+                 + tuple(_reference_source(c, "regression.fit")),
+                 formats=("", "", ".4g", ".4g"))
+
+
+def _paper_term(term: str, ours_to_quantity: dict, paper: dict) -> float | None:
+    """The paper's eq. (5) coefficient of the same term (matched through the measured quantity)."""
+    pf = _get(paper, "regression", "factors", default={})
+    pc = _get(paper, "regression", "coefficients", default={})
+    if term == "Intercept":
+        return pc.get("Intercept")
+    q_to_paper = {q: letter for letter, q in pf.items()}
+    letters = term.replace("^2", "")
+    mapped = [q_to_paper.get(ours_to_quantity.get(ch)) for ch in letters]
+    if None in mapped:
+        return None
+    if term.endswith("^2"):
+        return pc.get(f"{mapped[0]}^2")
+    return pc.get("".join(sorted(mapped)))
+
+
+def _actual_term(term: str, code_to_letter: dict) -> str:
+    if term == "Intercept":
+        return "Intercept"
+    if term.endswith("^2"):
+        return f"{code_to_letter.get(term[0], term[0])}²"
+    return "·".join(code_to_letter.get(ch, ch) for ch in term)
+
+
+def table_coefficients(c: Campaign) -> Table:
+    """Table 9b: regression coefficients in coded and actual terms, eq. (5) of the paper beside."""
+    r = c.results
+    fit = r["box_behnken"]["fit"]
+    code_to_letter = dict(_bbd_letters(r))
+    wall = _wall(c.measurement)
+    to_quantity = {code: r["factors"][letter]["quantity"].replace(f"-{wall}", "-steel")
+                   .replace(f".{wall}", ".steel") for code, letter in code_to_letter.items()}
+    rows = []
+    for term, coef in fit["coefficients"].items():
+        ci = _get(fit, "ci95", term, default=[None, None])
+        rows.append((term, _actual_term(term, code_to_letter), coef, _get(fit, "std_errors", term),
+                     ci[0], ci[1], _paper_term(term, to_quantity, c.paper),
+                     _get(fit, "coefficients_actual", term)))
+    pf = _get(c.paper, "regression", "factors", default={})
+    notes = ["Coded: each factor scaled to -1/+1 over its Box-Behnken range (Table 7); actual: "
+             "the factors in their own units (" + ", ".join(
+                 f"{letter} = {parameter_label(r['factors'][letter]['parameter'], wall)[1]}"
+                 for letter in code_to_letter.values()) + ")."]
+    if pf:
+        notes.append("Paper eq. (5) is matched term by term through the measured quantity of each "
+                     "factor (paper: " + ", ".join(f"{k} = {v}" for k, v in pf.items()) + "); its "
+                     "coded units span the paper's own ranges, so the coefficients compare in sign "
+                     "and size only.")
+    return Table("9b", "Regression coefficients of the angle of repose (eq. 5)",
+                 ("Term (coded)", "Term (actual)", "Coefficient (coded)", "Std. error", "95 % CI low",
+                  "95 % CI high", "Paper eq. (5)", "Coefficient (actual)"),
+                 ("", "", "deg", "deg", "deg", "deg", "deg", "deg per unit"), tuple(rows),
+                 notes=tuple(notes),
+                 sources=(_runs_source(r, "box_behnken"), _results_source("box_behnken.fit.coefficients"))
+                 + tuple(_reference_source(c, "regression.coefficients")),
+                 formats=("", "", ".4g", ".3g", ".4g", ".4g", ".4g", ".4g"))
+
+
+# ----------------------------------------------------------------------------------------------
+# Tables 10-12: optimisation, calibrated values, validation
+
+def table_solutions(c: Campaign) -> Table:
+    """Table 10: settings whose predicted angle equals the target (they all tie)."""
+    r = c.results
+    o = r["optimisation"]
+    letters = _bbd_letters(r)
+    rows = []
+    for i, s in enumerate(o["solutions"], 1):
+        rows.append((i, *[s["coded"][code] for code, _ in letters],
+                     *[s["actual"][letter] for _, letter in letters], s["predicted"], s["distance"],
+                     "preferred" if s == o["preferred"] else ""))
+    return Table("10", "Optimisation to the measured angle of repose: solutions",
+                 ("Solution", *[code for code, _ in letters], *[f"{letter} actual" for _, letter in letters],
+                  "Predicted angle", "Distance", ""),
+                 ("", *[""] * len(letters), *[""] * len(letters), "deg", "coded", ""), tuple(rows),
+                 notes=(o.get("note", ""), f"Target {o['target']:.4g} deg; distance from the "
+                        "measured means in coded units."),
+                 sources=(_results_source("optimisation"), _runs_source(r, "box_behnken")),
+                 formats=("d", *[".3f"] * len(letters), *[".4g"] * len(letters), ".4g", ".3g", ""))
+
+
+def table_calibrated(c: Campaign) -> Table:
+    """Table 11: calibrated contact parameters, the measured means and the paper's beside."""
+    r = c.results
+    wall = _wall(c.measurement)
+    settings = r["validation"]["settings"]
+    chosen = set(r["box_behnken"]["factors"])
+    paper_cal = _get(c.paper, "calibrated", default={})
+    rows = []
+    for letter, f in r["factors"].items():
+        name, symbol = parameter_label(f["parameter"], wall)
+        pq = f["quantity"].replace(f"-{wall}", "-steel").replace(f".{wall}", ".steel")
+        pm, _ = _paper_measured(c, f["quantity"])
+        if f["quantity"] == "poisson_ratio":
+            pm = _get(c.paper, "segment", "poisson_ratio")
+        rows.append((letter, name, symbol, f["mean"], settings.get(f["parameter"]),
+                     "optimised" if letter in chosen else "measured mean", paper_cal.get(pq), pm))
+    return Table("11", "Calibrated DEM contact parameters",
+                 ("Code", "Parameter", "Symbol", "Measured mean", "Calibrated", "How", "Paper calibrated",
+                  "Paper measured"),
+                 ("",) * 8, tuple(rows),
+                 notes=("Paper: its calibrated values (0.32, 0.36, 0.22 for e_pp, e_pw, μs_pw) and "
+                        "measured means from its text; the non-significant factors kept their "
+                        "measured means there too.",),
+                 sources=(_results_source("validation.settings, factors"), _runs_source(r, "box_behnken"))
+                 + tuple(_reference_source(c, "calibrated")),
+                 formats=("", "", "", ".4g", ".4g", "", ".4g", ".4g"))
+
+
+def _observable_columns(records) -> list[str]:
+    cols = []
+    for rec in records:
+        for k, v in (_get(rec, "result", "observable", default={}) or {}).items():
+            if k.endswith("_deg") and isinstance(v, (int, float)) and k not in cols:
+                cols.append(k)
+    return cols
+
+
+def table_validation(c: Campaign) -> Table:
+    """Table 12: validation runs at the calibrated parameters, the paper's beside."""
+    r = c.results
+    v = r["validation"]
+    res = v["result"]
+    records = [c.runs.get(run["key"], {}) for run in v["runs"]]
+    extra = [k for k in _observable_columns(records) if k != "angle_deg"]
+    paper = _get(c.paper, "validation", default={})
+    paper_runs = list(paper.get("runs_deg", []))
+    rows = []
+    for i, (run, y, rec) in enumerate(zip(v["runs"], v["responses"], records)):
+        obs = _get(rec, "result", "observable", default={}) or {}
+        rows.append((f"run {i + 1}", run["seed"], y, *[obs.get(k) for k in extra],
+                     paper_runs[i] if i < len(paper_runs) else None))
+    blank = [None] * len(extra)
+    rows.append(("mean", None, res["mean"], *blank, paper.get("mean_deg")))
+    rows.append(("SD (n - 1)", None, res["std"], *blank, None))
+    rows.append(("measured angle (target)", None, res["target"], *blank, paper.get("target_deg")))
+    rows.append(("relative error of the mean [%]", None, res["relative_error_pct"], *blank,
+                 paper.get("relative_error_pct")))
+    return Table("12", "Validation: angle of repose simulated with the calibrated parameters",
+                 ("Run", "Seed", "Angle compared (angle_deg)", *extra, "Paper"),
+                 ("", "", "deg", *["deg"] * len(extra), "deg"), tuple(rows),
+                 notes=("'Angle compared' is the observable the campaign compares with the photos "
+                        "(the response of every design); other angles the rig reports are shown "
+                        "beside it. The last row is in %.",),
+                 sources=(_runs_source(r, "validation"), _results_source("validation"))
+                 + tuple(_reference_source(c, "validation")),
+                 formats=("", "d", ".4g", *[".4g"] * len(extra), ".4g"))
+
+
+# ----------------------------------------------------------------------------------------------
+# Critique (generic: its stage renders into critique.json)
+
+def _generic(table_id: str, title: str, items: list, source: dict, path: str) -> Table:
+    cols = []
+    for it in items:
+        for k in it:
+            if k not in cols:
+                cols.append(k)
+    rows = tuple(tuple(it.get(k) for k in cols) for it in items)
+    return Table(table_id, title, tuple(cols) or ("(none)",), ("",) * (len(cols) or 1),
+                 rows, notes=() if items else ("None.",),
+                 sources=({"kind": "critique", **source, "path": path},))
+
+
+def critique_tables(c: Campaign) -> list[Table]:
+    """Tables C1-C3 from ``critique.json``: discrepancies, findings, extensions."""
+    if c.critique is None:
+        return []
+    cr = c.critique
+    return [_generic("C1", "Discrepancies between simulation and measurement",
+                     list(cr.get("discrepancies", [])), c.critique_source, "discrepancies"),
+            _generic("C2", "Candidate mechanisms tested against the residuals",
+                     list(cr.get("findings", [])), c.critique_source, "findings"),
+            _generic("C3", "Model extensions and their gain", list(cr.get("extensions", [])),
+                     c.critique_source, "extensions")]
+
+
+# ----------------------------------------------------------------------------------------------
+# Appendix
+
+def _role(path: str, source: str) -> str:
+    if path == source:
+        return "workbook"
+    suffix = Path(path).suffix.lower()
+    return {".jpg": "photo", ".jpeg": "photo", ".png": "photo", ".tif": "photo", ".tiff": "photo",
+            ".csv": "sheet, track or curve"}.get(suffix, "input")
+
+
+def table_inputs(c: Campaign) -> Table:
+    """Table A1: every input file with its SHA-256."""
+    wb = c.measurement.get("workbook", {})
+    root = Path(wb.get("root", "."))
+    rows = []
+    for path, sha in wb.get("files", {}).items():
+        p = Path(path)
+        rel = str(p.relative_to(root)) if p.is_relative_to(root) else path
+        rows.append((rel, _role(path, wb.get("source")), sha))
+    for name, src in (("paper_defaults.json", c.paper_source), ("critique.json", c.critique_source)):
+        if src:
+            rows.append((name, "the paper's printed numbers" if name.startswith("paper") else
+                         "critique results", src["sha256"]))
+    return Table("A1", "Input files", ("File", "Role", "SHA-256"), ("", "", ""), tuple(rows),
+                 notes=(f"Workbook files relative to {root}; the paper's numbers from {PAPER_FILE.name} "
+                        "(data/).",),
+                 sources=({"kind": "results", "file": "measure.json", "path": "workbook.files"},)
+                 + tuple({"kind": "reference", **src, "path": "(whole file)"}
+                         for src in (c.paper_source, c.critique_source) if src),
+                 formats=("", "", "mono"))
+
+
+def table_runs(c: Campaign) -> Table:
+    """Table A2: every DEM run with its key, seed and wall time (from the run store)."""
+    r = c.results
+    rows, keys = [], []
+    for stage, (part, name) in _RUN_STAGES:
+        for i, run in enumerate(_get(r, part, name, default=[]), 1):
+            rec = c.runs.get(run["key"], {})
+            rows.append((stage, i, run["key"], _get(rec, "inputs", "seed", default=run.get("seed")),
+                         rec.get("wall_s"), rec.get("status"), rec.get("attempts")))
+            keys.append(run["key"])
+    return Table("A2", "DEM runs", ("Stage", "#", "Run key (SHA-256 of the inputs)", "Seed", "Wall time",
+                                    "Status", "Attempts"),
+                 ("", "", "", "", "s", "", ""), tuple(rows),
+                 notes=("Each run's record is runs/<key>.json in the campaign folder; a key repeated "
+                        "within or across stages is one run used again.",),
+                 sources=({"kind": "runs", "keys": list(dict.fromkeys(keys))},),
+                 formats=("", "d", "mono", "d", ".3g", "", "d"))
+
+
+# ----------------------------------------------------------------------------------------------
+
+#: Builders of the tables that need the campaign's analysis (``Campaign.results``).
+RESULT_TABLES = (table_pb_levels, table_pb_design, table_pb_anova, table_noise, table_climb,
+                 table_bbd_levels, table_bbd_design, table_bbd_anova, table_fit_statistics,
+                 table_coefficients, table_solutions, table_calibrated, table_validation)
+
+#: Ids of the tables :data:`RESULT_TABLES` build, in order.
+RESULT_TABLE_IDS = ("3", "4", "5", "5a", "6", "7", "8", "9", "9a", "9b", "10", "11", "12", "A2")
+
+
+def build_tables(c: Campaign) -> list[Table]:
+    """Every table of the report, in the order they appear.
+
+    Without ``c.results`` only the measurement tables (1, 2, 2a, A1) and the critique tables
+    are built.
+    """
+    tables = [table_dimensions(c), table_physical(c), table_methods(c)]
+    if c.results is not None:
+        tables += [f(c) for f in RESULT_TABLES]
+    tables += critique_tables(c)
+    tables.append(table_inputs(c))
+    if c.results is not None:
+        tables.append(table_runs(c))
+    return tables
+
+
+def tables_document(tables: list[Table], inputs: dict) -> dict:
+    """The content of ``tables.json``: the tables and the SHA-256 of every file they rest on."""
+    return {"format": "demcal-tables/1", "inputs": dict(inputs),
+            "tables": [t.to_dict() for t in tables]}
+
+
+def normalised(tables: list[Table]) -> list[dict]:
+    """Tables as they read back from JSON (tuples as lists, NaN as None), for comparison."""
+    return json.loads(json.dumps([t.to_dict() for t in tables], allow_nan=False))
+
+
+def is_missing(x) -> bool:
+    return x is None or (isinstance(x, float) and math.isnan(x))

@@ -1,0 +1,294 @@
+"""Drop rig: the twin of the free-fall restitution test (high-speed camera, rebound height).
+
+One segment is released at rest above a horizontal plate (``simulate.rigs.surfaces``) and
+falls onto it; the rig follows its centre of mass as the lab's camera track does and reports
+
+    apparent_restitution = sqrt(h_rebound / h_drop)                   (paper, eq. 2-4)
+
+with
+- ``h_drop``: the fall of the centre of mass from release to its height at the first contact;
+- ``h_rebound``: the rise of the centre of mass after the first impact, from that same
+  contact height to the apex (the highest point before it falls back below the contact
+  height).
+
+Release height. ``height`` is the gap between the plate and the lowest point of the segment at
+release (what a release stand sets). Released at rest, the body does not rotate in free fall,
+so its centre of mass falls by exactly ``height`` before the first contact (``h_drop`` =
+``height``, up to the time step). That free fall (no air drag in the model) is done
+analytically: the simulation starts ``START_GAP`` above the plate with the free-fall velocity,
+and the record starts with the release point at t = 0.
+
+Orientation. ``orientation_deg`` is the angle of the segment's long axis (template x axis) to
+the horizontal: 0 = lying flat, 90 = end on. ``None`` draws the axis uniformly on the sphere
+of directions (and the spin about it uniformly) from ``seed``.
+
+For a single sphere the apparent restitution equals the contact's coefficient of restitution.
+For an elongated body hitting with one end, part of the energy goes into rotation and the
+apparent restitution falls below the contact value: the rig also reports the first-impact
+velocity ratio (-v_z after the first contact period / v_z before it; negative when the centre
+of mass is still descending as the first contact ends, e.g. one end struck and the body pivots)
+and the rotational share of the kinetic energy after it.
+
+Multi-sphere contacts. Each member sphere makes its own contact, with the mass of the whole
+body in m* (DESIGN.md, as EDEM). A segment landing flat touches with all n spheres at once:
+the body then sees n springs and n dashpots whose damping is set for one, so its damping
+ratio is sqrt(n) times the contact's and the rebound far lower than ``e`` (0.04 instead of
+0.35 for 5 spheres; Kodam et al. 2010). A segment landing end on (one contact through the
+centre of mass) rebounds with the contact's ``e``.
+
+Time step. Contacts must be resolved: by default dt = t_c / 100, t_c the elastic Hertz contact
+duration (Johnson 1985, sec. 11.4) of one member sphere carrying 1/n of the body's mass at the
+impact speed sqrt(2 g h), capped at 0.4 of the Rayleigh time. Far from the plate the rig runs
+in long chunks; near and during contacts it advances one step at a time and records every step.
+
+References
+----------
+Johnson, K. L. (1985). Contact Mechanics. Cambridge University Press.
+Kodam, M., Bharadwaj, R., Curtis, J., Hancock, B., Wassgren, C. (2010). Force model
+considerations for glued-sphere discrete element method simulations. Chem. Eng. Sci. 65,
+5852-5861.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from demcal.errors import InputError
+from demcal.provenance import Provenance
+from simulate.clump import ClumpTemplate, segment_from_parameters
+from simulate.contact.hertz_mindlin import contact_duration_elastic, effective_modulus
+from simulate.engine import Simulation
+from simulate.integrate import axis_angle_quat, matrix_from_quat, quat_multiply
+from simulate.params import DEMParameters
+from simulate.rigs import RigResult, RunTally, check_seed, run_meta
+from simulate.rigs.surfaces import PARTICLE, make_surface, surface_from_pair
+from simulate.walls import Plane
+
+#: The paper's drop height [m] ("fixed at 400 mm").
+PAPER_DROP_HEIGHT = 0.400
+#: Time steps per (shortest) contact for the automatic time step (the apparent restitution of
+#: a single sphere is then within 0.5 % of the contact value).
+STEPS_PER_CONTACT = 100
+#: Gap between the lowest point and the plate at which the simulation starts [m].
+START_GAP = 0.002
+#: Largest time step as a fraction of the Rayleigh time.
+MAX_RAYLEIGH_FRACTION = 0.4
+#: Longest chunk of steps run without a record [steps].
+MAX_CHUNK = 2000
+
+
+def release_orientation(orientation_deg, rng: np.random.Generator):
+    """Quaternion (w, x, y, z) of the template frame at release and the axis angle [deg].
+
+    A given ``orientation_deg`` tilts the template x axis by that angle above the horizontal
+    (a rotation about y); ``None`` draws the x axis uniformly on the unit sphere (normalised
+    Gaussian vector, Muller 1959) and a uniform spin about it.
+    """
+    if orientation_deg is None:
+        u = rng.standard_normal(3)
+        u /= np.linalg.norm(u)
+        spin = rng.uniform(0.0, 2.0 * math.pi)
+        x = np.array([1.0, 0.0, 0.0])
+        axis = np.cross(x, u)
+        s = np.linalg.norm(axis)
+        angle = math.atan2(s, float(x @ u))
+        align = axis_angle_quat(axis / s, angle) if s > 1e-12 else (
+            np.array([1.0, 0.0, 0.0, 0.0]) if u[0] > 0 else axis_angle_quat((0.0, 0.0, 1.0), math.pi))
+        q = quat_multiply(axis_angle_quat(u, spin), align)
+        return q, math.degrees(math.asin(min(1.0, abs(float(u[2])))))
+    try:
+        a = float(orientation_deg)
+    except (TypeError, ValueError):
+        raise InputError(f"orientation_deg must be a number in [0, 90] or None, got {orientation_deg!r}") from None
+    if not 0.0 <= a <= 90.0:
+        raise InputError(f"orientation_deg must be in [0, 90] (angle of the long axis to the "
+                         f"horizontal), got {orientation_deg!r}")
+    return axis_angle_quat((0.0, 1.0, 0.0), -math.radians(a)), a
+
+
+def automatic_time_step(template: ClumpTemplate, surface, height: float, gravity: float = 9.81) -> float:
+    """dt [s]: t_c / STEPS_PER_CONTACT, capped at MAX_RAYLEIGH_FRACTION of the Rayleigh time.
+
+    t_c is the elastic Hertz contact duration of the smallest member sphere against the plate,
+    with 1/n of the body mass (n member spheres), at the impact speed sqrt(2 g height).
+    """
+    from simulate.timestep import rayleigh_time
+    table = surface.materials
+    p = table.material(PARTICLE)
+    w = table.material(surface.plate_material)
+    e_star = effective_modulus(p.youngs_modulus, p.poisson_ratio, w.youngs_modulus, w.poisson_ratio)
+    r_min = float(template.radii.min())
+    speed = math.sqrt(2.0 * gravity * height)
+    t_c = contact_duration_elastic(template.mass / template.n_spheres, r_min, e_star, speed)
+    t_r = rayleigh_time(r_min, p.density, p.shear_modulus, p.poisson_ratio)
+    return min(t_c / STEPS_PER_CONTACT, MAX_RAYLEIGH_FRACTION * t_r)
+
+
+def run_drop(params: DEMParameters, seed: int = 0, *, height: float = PAPER_DROP_HEIGHT,
+             orientation_deg: float | None = None, pair: str = "particle-steel",
+             surface_material: dict | None = None, surface_contact: dict | None = None,
+             template: ClumpTemplate | None = None, dt: float | None = None,
+             callback=None) -> RigResult:
+    """Drop one segment onto a plate and measure its apparent restitution.
+
+    Parameters
+    ----------
+    params : DEMParameters
+        Particle, wall and contact parameters, segment shape and mass model.
+    seed : int
+        Seed of the random orientation (unused when ``orientation_deg`` is given).
+    height : float
+        Gap between the plate and the lowest point of the segment at release [m].
+    orientation_deg : float or None
+        Angle of the long axis to the horizontal at release [deg], 0..90; None = random.
+    pair : str
+        ``particle-steel``, ``particle-particle`` or ``particle-<material>``
+        (``simulate.rigs.surfaces``).
+    surface_material, surface_contact : dict, optional
+        Properties of another plate material and its contact with the particle.
+    template : ClumpTemplate, optional
+        Body shape; default the segment of ``params``.
+    dt : float, optional
+        Time step [s]; default :func:`automatic_time_step`.
+    callback : callable, optional
+        ``callback(sim, t_end, final)`` after each chunk (see ``simulate.rigs``).
+
+    Returns
+    -------
+    RigResult
+        ``observable``: ``apparent_restitution`` [-], ``velocity_ratio`` [-],
+        ``rotational_energy_share`` [-], ``orientation_deg`` [deg], ``drop_height_m`` and
+        ``rebound_height_m`` (of the centre of mass) [m]. ``record``: ``t`` [s], ``com`` [m],
+        ``velocity`` [m/s], ``angular_velocity`` [rad/s], ``gap`` (lowest point above the
+        plate) [m], ``contact`` (bool) per record, and the event times ``t_contact``,
+        ``t_separation``, ``t_apex`` [s] and ``z_contact``, ``z_apex`` [m].
+    """
+    seed = check_seed(seed)
+    if not isinstance(params, DEMParameters):
+        raise InputError(f"params must be a DEMParameters, got {type(params).__name__}")
+    try:
+        height = float(height)
+    except (TypeError, ValueError):
+        raise InputError(f"drop height must be a number [m], got {height!r}") from None
+    if not 0.0 < height <= 5.0:
+        raise InputError(f"drop height must be in (0, 5] m, got {height!r}")
+    surface_name = surface_from_pair(pair)
+    surface = make_surface(params, surface_name, surface_material=surface_material,
+                           surface_contact=surface_contact)
+    tpl = template if template is not None else segment_from_parameters(params)
+    if not isinstance(tpl, ClumpTemplate):
+        raise InputError(f"template must be a ClumpTemplate, got {type(tpl).__name__}")
+    rng = np.random.default_rng(seed)
+    q, angle = release_orientation(orientation_deg, rng)
+    g = 9.81
+    if dt is None:
+        dt = automatic_time_step(tpl, surface, height, g)
+
+    # release with the lowest point `height` above the plate z = 0; fall analytically to
+    # START_GAP above it
+    rel = (tpl.centres - tpl.centre_of_mass) @ matrix_from_quat(q).T
+    lowest = float((rel[:, 2] - tpl.radii).min())
+    z0 = height - lowest
+    fall = max(height - START_GAP, 0.0)
+    t_pre = math.sqrt(2.0 * fall / g)
+    reach = tpl.bounding_radius
+    t_fall = math.sqrt(2.0 * height / g)
+    rise_max = height + 2.0 * reach     # an elastic rebound, plus what a turn can add
+    sim = Simulation(surface.materials, domain_lo=(-0.3, -0.3, -0.05),
+                     domain_hi=(0.3, 0.3, max(z0, rise_max) + reach + 0.05),
+                     dt=dt, gravity=(0.0, 0.0, -g), rolling_lever=params.rolling_lever)
+    tid = sim.add_template(tpl)
+    sim.add_wall(Plane((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), material=surface.plate_material, name="plate"))
+    sim.add_clump(tid, position=(0.0, 0.0, z0 - fall), orientation=q, velocity=(0.0, 0.0, -g * t_pre),
+                  material=PARTICLE)
+    radii = sim.sphere_radii()
+    t_end = 3.0 * t_fall + 0.2 - t_pre    # an elastic rebound is back at the contact height at 2 t_fall
+
+    rows = [(0.0, 0.0, 0.0, z0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, height)]   # the release
+
+    def record():
+        x = sim.positions()[0]
+        gap = float((sim.sphere_positions()[:, 2] - radii).min())
+        rows.append((t_pre + sim.time, *x, *sim.velocities()[0], *sim.angular_velocities()[0], gap))
+        return x[2], gap
+
+    tally = RunTally()
+    record()
+    phase = "fall"
+    ev = {"t_contact": math.nan, "z_contact": math.nan, "vz_in": math.nan, "t_separation": math.nan,
+          "vz_out": math.nan, "rot_share": math.nan, "t_apex": math.nan, "z_apex": math.nan}
+    while sim.time < t_end and sim.n_bodies and sim.active()[0]:
+        gap, vz = rows[-1][10], rows[-1][6]
+        n = _safe_steps(gap, vz, float(np.linalg.norm(rows[-1][7:10])), reach, g, dt)
+        if phase == "rebound" and gap > 0.0 and vz > 0.0:
+            n = min(n, max(1, int(math.ceil(vz / (g * dt)))))   # land on the apex
+        tally.add(sim.run(n_steps=n))
+        z, gap = record()
+        if callback is not None:
+            callback(sim, t_end, False)
+        prev = rows[-2]
+        if phase == "fall" and gap < 0.0:
+            # first contact between the two records: interpolate the crossing of the plate
+            f = prev[-1] / (prev[-1] - gap)
+            ev["t_contact"] = prev[0] + f * (rows[-1][0] - prev[0])
+            ev["z_contact"] = prev[3] + f * (z - prev[3])
+            ev["vz_in"] = prev[6] + f * (rows[-1][6] - prev[6])
+            phase = "impact"
+        elif phase == "impact" and gap >= 0.0:
+            v = sim.velocities()[0]
+            e_rot = 0.5 * float(sim.angular_velocities()[0] @ sim.angular_momenta()[0])
+            e_tr = 0.5 * float(sim.masses()[0]) * float(v @ v)
+            ev["t_separation"] = t_pre + sim.time
+            ev["vz_out"] = float(v[2])
+            ev["rot_share"] = e_rot / (e_rot + e_tr) if e_rot + e_tr > 0 else math.nan
+            phase = "rebound"
+        if phase in ("impact", "rebound") and not z <= ev["z_apex"]:
+            ev["z_apex"], ev["t_apex"] = z, t_pre + sim.time
+        if phase == "rebound" and rows[-1][6] < 0.0 and z < ev["z_contact"]:
+            break
+    if callback is not None:
+        callback(sim, t_end, True)
+
+    data = np.array(rows)
+    h_drop = z0 - ev["z_contact"]
+    notes = []
+    if phase == "rebound":
+        rise = max(ev["z_apex"] - ev["z_contact"], 0.0)
+        apparent = math.sqrt(rise / h_drop)
+    elif phase == "impact":
+        notes.append("the first contact did not end within the run (the body stayed on the plate)")
+        rise, apparent = 0.0, 0.0
+    else:
+        notes.append("the body never reached the plate")
+        rise, apparent = math.nan, math.nan
+    observable = {k: float(v) for k, v in {
+        "apparent_restitution": apparent,
+        "velocity_ratio": -ev["vz_out"] / ev["vz_in"] if ev["vz_in"] < 0 else math.nan,
+        "rotational_energy_share": ev["rot_share"],
+        "orientation_deg": angle,
+        "drop_height_m": h_drop,
+        "rebound_height_m": rise,
+    }.items()}
+    rec = {"t": data[:, 0], "com": data[:, 1:4], "velocity": data[:, 4:7],
+           "angular_velocity": data[:, 7:10], "gap": data[:, 10], "contact": data[:, 10] < 0.0,
+           "t_contact": ev["t_contact"], "t_separation": ev["t_separation"], "t_apex": ev["t_apex"],
+           "z_contact": ev["z_contact"], "z_apex": ev["z_apex"], "z_release": z0}
+    options = {"height": height, "orientation_deg": orientation_deg, "pair": pair,
+               "surface_material": surface_material, "surface_contact": surface_contact,
+               "template": tpl.name if template is not None else None, "dt": dt}
+    meta = run_meta(seed, dt, tally, sim.n_spheres, t_pre + sim.time, notes=notes,
+                    surface=surface.to_dict(), template=tpl.to_dict())
+    return RigResult("drop", observable, rec, meta, params.to_dict(),
+                     Provenance(seed=seed, options=options))
+
+
+def _safe_steps(gap: float, vz: float, w: float, reach: float, g: float, dt: float) -> int:
+    """Steps that cannot bring any point of the body onto the plate: half the time in which a
+    point approaching at |min(vz, 0)| + w reach [m/s] and accelerating at g closes ``gap``."""
+    if gap <= 0.0:
+        return 1
+    a = max(-vz, 0.0) + w * reach
+    t = (-a + math.sqrt(a * a + 2.0 * g * gap)) / g
+    return int(min(max(1, math.floor(0.5 * t / dt)), MAX_CHUNK))

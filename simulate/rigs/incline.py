@@ -1,0 +1,221 @@
+"""Incline rig: the twin of the inclinometer test (a segment on a plate tilted slowly).
+
+The lab lays a segment on the test plane and rotates the plane slowly until the segment
+moves; tan(angle) is then read as the static friction (segment "placed along the length of
+the test plane", so it can only slide) or as the rolling friction (segment across the slope,
+free to roll).
+
+Tilting. The plate stays the plane z = 0 and gravity turns instead,
+
+    g(theta) = |g| (sin theta, 0, -cos theta),   theta = start + rate t,
+
+so +x is down the slope. For a rigid plate this is the same motion seen from the plate's
+frame; the frame's rotation adds inertial accelerations of order omega^2 r and omega v, below
+1e-5 g at 1 deg/s over 0.1 m, which are neglected. theta is held constant over chunks of
+``CHUNK_DEG`` and raised between them.
+
+Onsets, from the centre of mass and the orientation after each chunk:
+- rolled arc = phi_y h, with phi_y the rotation about the across-slope axis (y) since the tilt
+  began and h the height of the centre of mass above the plate (rolling without slip moves
+  the centre by exactly this arc);
+- slip = displacement down the slope minus the rolled arc;
+- ``slide_angle_deg``: tilt at which the slip first exceeds ``threshold`` (moving while not
+  rolling); ``roll_angle_deg``: tilt at which the rolled arc first exceeds it.
+The run stops at the onset asked for by ``mode`` (or when the segment has moved 50 mm, or at
+``max_tilt_deg``). An onset not reached is NaN.
+
+What the lab reads. ``static_friction_apparent`` = tan(slide angle) and
+``rolling_friction_apparent`` = tan(roll angle), as the lab computes them. The first equals
+mu_s; the second equals mu_r only when the rolling lever is the rolling radius: for a sphere,
+or a segment with ``rolling_lever="edem_sphere"``. With ``"edem_com"`` (EDEM's definition for a
+clump) the lever of each member contact is its distance from the clump's centre, so a segment
+across the slope rolls at tan(theta) = mu_r mean(sqrt(a^2 + y_i^2)) / a (a the contact lever
+of a sphere, y_i the member offsets along the axis): 1.32 mu_r for the paper's segment.
+
+Tilt rate. The default 1 deg/s moves the onsets by less than 0.1 deg against 0.25 deg/s (the
+detection lags the true onset by the time the motion needs to grow past ``threshold``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from demcal.errors import InputError
+from demcal.provenance import Provenance
+from simulate.clump import ClumpTemplate, segment_from_parameters
+from simulate.engine import Simulation
+from simulate.integrate import axis_angle_quat, matrix_from_quat
+from simulate.params import DEMParameters
+from simulate.rigs import RigResult, RunTally, check_seed, run_meta
+from simulate.rigs.surfaces import PARTICLE, make_surface
+from simulate.scenes import PAPER_TIME_STEP
+from simulate.walls import Plane
+
+MODES = ("slide", "roll")
+#: Tilt held constant over each chunk [deg].
+CHUNK_DEG = 0.01
+#: Movement after which the run ends [m].
+STOP_DISTANCE = 0.05
+G = 9.81
+
+
+def rotation_vector(R) -> np.ndarray:
+    """Rotation vector (axis times angle [rad]) of a rotation matrix (the matrix logarithm)."""
+    R = np.asarray(R, dtype=float)
+    c = min(1.0, max(-1.0, (np.trace(R) - 1.0) / 2.0))
+    angle = math.acos(c)
+    skew = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if angle < 1e-8:
+        return 0.5 * skew
+    if math.pi - angle < 1e-6:
+        # near a half turn: the axis is the column of R + I of largest norm
+        m = R + np.eye(3)
+        k = int(np.argmax(np.linalg.norm(m, axis=0)))
+        return angle * m[:, k] / np.linalg.norm(m[:, k])
+    return angle * skew / (2.0 * math.sin(angle))
+
+
+def run_incline(params: DEMParameters, seed: int = 0, *, mode: str = "slide", surface: str = "steel",
+                surface_material: dict | None = None, surface_contact: dict | None = None,
+                tilt_rate_deg_s: float = 1.0, start_deg: float = 0.0, max_tilt_deg: float = 60.0,
+                threshold: float = 1.0e-5, settle_time: float = 0.05,
+                template: ClumpTemplate | None = None, dt: float | None = None,
+                callback=None) -> RigResult:
+    """Tilt a plate under one segment and find the angles at which it slides and rolls.
+
+    Parameters
+    ----------
+    params : DEMParameters
+        Particle, wall and contact parameters, segment shape, mass model, rolling lever.
+    seed : int
+        Recorded only: the rig is deterministic.
+    mode : {"slide", "roll"}
+        "slide": long axis down the slope (it can only slide); "roll": long axis across the
+        slope, free to roll.
+    surface : str
+        ``steel``, ``particle`` or another material (``simulate.rigs.surfaces``).
+    surface_material, surface_contact : dict, optional
+        Properties of another plate material and its contact with the particle.
+    tilt_rate_deg_s : float
+        Rotation rate of the plate [deg/s].
+    start_deg : float
+        Tilt at which the segment is laid on the plate and the rotation starts [deg]; the lab
+        starts at 0.
+    max_tilt_deg : float
+        Largest tilt [deg].
+    threshold : float
+        Movement that marks an onset [m] (elastic creep before the onset is below 1e-6 m).
+    settle_time : float
+        Time the segment rests on the plate at ``start_deg`` before the rotation [s].
+    template : ClumpTemplate, optional
+        Body shape; default the segment of ``params``.
+    dt : float, optional
+        Time step [s]; default the paper's 7.43678e-5 s.
+    callback : callable, optional
+        ``callback(sim, t_end, final)`` after each chunk (see ``simulate.rigs``).
+
+    Returns
+    -------
+    RigResult
+        ``observable``: ``slide_angle_deg``, ``roll_angle_deg`` [deg] (NaN if not reached),
+        ``static_friction_apparent``, ``rolling_friction_apparent`` (their tangents) [-],
+        ``mode``. ``record``: per chunk ``t`` [s], ``tilt_deg``, ``displacement`` (down the
+        slope) [m], ``rolled_arc`` [m], ``slip`` [m], ``com`` [m], ``angular_velocity``
+        [rad/s]; ``rolling_height`` [m].
+    """
+    seed = check_seed(seed)
+    if not isinstance(params, DEMParameters):
+        raise InputError(f"params must be a DEMParameters, got {type(params).__name__}")
+    if mode not in MODES:
+        raise InputError(f"unknown incline mode {mode!r}; valid: {', '.join(MODES)}")
+    checks = {"tilt_rate_deg_s": (tilt_rate_deg_s, 1e-3, 30.0), "start_deg": (start_deg, 0.0, 89.0),
+              "max_tilt_deg": (max_tilt_deg, 0.0, 89.9), "threshold": (threshold, 1e-8, 0.01),
+              "settle_time": (settle_time, 0.0, 10.0)}
+    for name, (value, lo, hi) in checks.items():
+        if not (isinstance(value, (int, float)) and lo <= value <= hi):
+            raise InputError(f"{name} must be a number in [{lo:g}, {hi:g}], got {value!r}")
+    if not max_tilt_deg > start_deg:
+        raise InputError(f"max_tilt_deg ({max_tilt_deg!r}) must exceed start_deg ({start_deg!r})")
+    surf = make_surface(params, surface, surface_material=surface_material,
+                        surface_contact=surface_contact)
+    tpl = template if template is not None else segment_from_parameters(params)
+    if not isinstance(tpl, ClumpTemplate):
+        raise InputError(f"template must be a ClumpTemplate, got {type(tpl).__name__}")
+    dt = PAPER_TIME_STEP if dt is None else float(dt)
+
+    # long axis (template x) down the slope (x) to slide, across it (y) to roll
+    q = np.array([1.0, 0.0, 0.0, 0.0]) if mode == "slide" else axis_angle_quat((0.0, 0.0, 1.0), math.pi / 2)
+    rel = (tpl.centres - tpl.centre_of_mass) @ matrix_from_quat(q).T
+    z0 = -float((rel[:, 2] - tpl.radii).min())          # lowest point on the plate
+    reach = tpl.bounding_radius
+    sim = Simulation(surf.materials, domain_lo=(-0.05, -0.05 - reach, -0.02),
+                     domain_hi=(STOP_DISTANCE + 0.05 + reach, 0.05 + reach, 2.0 * reach + 0.05),
+                     dt=dt, gravity=_gravity(start_deg), rolling_lever=params.rolling_lever)
+    tid = sim.add_template(tpl)
+    sim.add_wall(Plane((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), material=surf.plate_material, name="plate"))
+    sim.add_clump(tid, position=(0.0, 0.0, z0), orientation=q, material=PARTICLE)
+
+    tally = RunTally()
+    chunk_s = CHUNK_DEG / tilt_rate_deg_s
+    n_chunk = max(1, int(round(chunk_s / dt)))
+    t_end = settle_time + (max_tilt_deg - start_deg) / tilt_rate_deg_s
+    tally.add(sim.run(duration=settle_time))
+    x0 = sim.positions()[0]
+    R0 = sim.rotation_matrices()[0]
+    height = float(x0[2])
+    t0 = sim.time
+    rows = []
+    onset = {"slide": math.nan, "roll": math.nan}
+    tilt = start_deg
+    while tilt < max_tilt_deg:
+        # tilt at the middle of the coming chunk
+        tilt = start_deg + tilt_rate_deg_s * (sim.time - t0 + 0.5 * n_chunk * dt)
+        sim.gravity = _gravity(tilt)
+        tally.add(sim.run(n_steps=n_chunk))
+        x = sim.positions()[0]
+        phi = rotation_vector(sim.rotation_matrices()[0] @ R0.T)
+        moved = float(x[0] - x0[0])
+        arc = float(phi[1]) * height
+        slip = moved - arc
+        rows.append((sim.time, tilt, moved, arc, slip, *x, *sim.angular_velocities()[0]))
+        if callback is not None:
+            callback(sim, t_end, False)
+        if math.isnan(onset["slide"]) and slip > threshold:
+            onset["slide"] = tilt
+        if math.isnan(onset["roll"]) and arc > threshold:
+            onset["roll"] = tilt
+        if not math.isnan(onset[mode]) or abs(moved) > STOP_DISTANCE or not sim.active()[0]:
+            break
+    if callback is not None:
+        callback(sim, t_end, True)
+
+    data = np.array(rows).reshape(-1, 11)
+    observable = {
+        "slide_angle_deg": float(onset["slide"]),
+        "roll_angle_deg": float(onset["roll"]),
+        "static_friction_apparent": math.tan(math.radians(onset["slide"])),
+        "rolling_friction_apparent": math.tan(math.radians(onset["roll"])),
+        "mode": mode,
+    }
+    rec = {"t": data[:, 0], "tilt_deg": data[:, 1], "displacement": data[:, 2], "rolled_arc": data[:, 3],
+           "slip": data[:, 4], "com": data[:, 5:8], "angular_velocity": data[:, 8:11],
+           "rolling_height": height}
+    options = {"mode": mode, "surface": surface, "surface_material": surface_material,
+               "surface_contact": surface_contact, "tilt_rate_deg_s": tilt_rate_deg_s,
+               "start_deg": start_deg, "max_tilt_deg": max_tilt_deg, "threshold": threshold,
+               "settle_time": settle_time, "template": tpl.name if template is not None else None,
+               "dt": dt}
+    notes = [] if not math.isnan(onset[mode]) else [
+        f"no {mode} onset up to {tilt:.2f} deg" + (" (the segment moved otherwise first)"
+                                                    if rows and abs(rows[-1][2]) > STOP_DISTANCE else "")]
+    meta = run_meta(seed, dt, tally, sim.n_spheres, sim.time, notes=notes, surface=surf.to_dict(),
+                    template=tpl.to_dict())
+    return RigResult("incline", observable, rec, meta, params.to_dict(), Provenance(seed=seed, options=options))
+
+
+def _gravity(tilt_deg: float) -> tuple:
+    """Gravity [m/s2] for a plate tilted by ``tilt_deg``, +x down the slope."""
+    a = math.radians(tilt_deg)
+    return (G * math.sin(a), 0.0, -G * math.cos(a))

@@ -1,0 +1,455 @@
+"""Repose rig: the twin of the plate-withdrawal ("pumping plate") angle-of-repose test.
+
+The lab fills a carton with segments, pulls its end plate up, lets the segments flow out and
+come to rest, and photographs the heap from the side (DESIGN.md, "Rigs"). The twin builds the
+same carton (``simulate.scenes.build_paper_repose_case``: carton of inside ``box_length`` x
+``box_width`` x ``box_height``, x along its length, back wall x = 0, end plate x = L, open top,
+steel floor z = 0), fills it with segments from a particle factory, lifts the plate and lets
+the heap settle. The heap is then measured in three ways:
+
+``angle_deg`` (compared with the lab's photos)
+    The side view of the spheres is rendered to an image (``simulate.render.silhouette``, all
+    spheres projected along y onto the x-z plane, floor included) and measured by the photo
+    estimator ``measure.repose.angle_from_photo`` on its right flank, the slope falling from
+    the crest: simulation and lab are measured the same way.
+``angle_profile_deg``
+    ``measure.repose.angle_from_profile`` on the heap's top profile, the upper envelope over y
+    of the spheres' x-z discs on a 1 mm grid (what the silhouette shows), right flank: the full
+    slope from the crest (inside the carton too) down to the toe.
+``angle_outside_deg``
+    The same fit restricted to the profile beyond the end plate (x > L). With the paper's
+    carton only about 10 % of the segments leave it, so this heap is small and its angle noisy
+    (LIGGGHTS, 5 seeds: 23.1 +- 4.2 deg against 32.6 +- 1.8 deg for the full slope; DESIGN.md);
+    it is reported, not compared.
+
+Profiles (``PROFILES``):
+
+``paper``
+    The source paper's case: the workbook's carton and fill count (default 500 segments in
+    200 x 100 x 250 mm), segments inserted at random during the first second in the upper part
+    of the carton (z from 0.4 to 0.96 of its height), the end plate lifted at t = 4 s at the
+    logged speed, 10 s in all, dt = 7.43678e-5 s.
+``quick``
+    For calibration campaigns (about 45 runs within 15 minutes on 2 cores, so about 20 s per
+    run on one core). The carton is scaled down by ``QUICK_SCALE`` in every dimension and the
+    fill count by its cube (same fill height relative to the carton; 500 -> 108 segments in
+    120 x 60 mm). The segments are inserted over 0.3 s in the lower part of the carton, the
+    plate is lifted at the logged speed as soon as the fill has settled (rms speed below
+    ``SETTLED_SPEED``) and stopped once its lower edge is a segment diameter above the highest
+    sphere, and the run ends when the heap has settled after the plate is clear (or at 4 s).
+    Same time step and contact model as the paper case. The heap is coarser (fewer segments
+    across it), so its angle differs from the paper case's by a few degrees, but it responds
+    to the contact parameters in the same directions (see the module's ``quick`` check in the
+    tests' notes: mu_s particle-steel and mu_r particle-particle up -> angle up, e down ->
+    angle up).
+
+Observable keys: ``angle_deg``, ``angle_profile_deg``, ``angle_outside_deg`` [deg],
+``escaped`` (bodies that left the simulation domain), ``outside_fraction`` (share of the
+bodies whose centre is beyond the end plate) [-].
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, replace
+
+import numpy as np
+
+from demcal.errors import InputError
+from demcal.provenance import Provenance
+from simulate.params import DEMParameters
+from simulate.rigs import RigResult, RunTally, check_seed, run_meta
+from simulate.scenes import PAPER_DURATION, PAPER_TIME_STEP, build_paper_repose_case
+
+#: Linear scale of the quick profile's carton relative to the workbook's.
+QUICK_SCALE = 0.6
+#: rms speed of the bodies below which a fill or a heap counts as settled [m/s].
+SETTLED_SPEED = 0.005
+#: Resolution of the rendered side view [px/m] (0.5 mm per pixel).
+PX_PER_M = 2000.0
+#: Spacing of the top profile [m].
+PROFILE_STEP = 0.001
+
+
+@dataclass(frozen=True)
+class ReposeGeometry:
+    """The repose rig's carton and fill, as in the workbook's ``meta`` sheet.
+
+    Attributes
+    ----------
+    box_length, box_width, box_height : float
+        Inside of the carton [m]; the end plate closes the length.
+    lift_speed : float
+        Speed at which the end plate is pulled up [m/s].
+    fill_count : int
+        Segments poured into the carton.
+    """
+
+    box_length: float = 0.200
+    box_width: float = 0.100
+    box_height: float = 0.250
+    lift_speed: float = 0.100
+    fill_count: int = 500
+
+    #: meta key -> (field, factor to SI)
+    META_KEYS = {"box_length_mm": ("box_length", 1e-3), "box_width_mm": ("box_width", 1e-3),
+                 "box_height_mm": ("box_height", 1e-3), "plate_lift_speed_mm_s": ("lift_speed", 1e-3),
+                 "fill_count": ("fill_count", 1)}
+
+    def __post_init__(self):
+        for name in ("box_length", "box_width", "box_height", "lift_speed"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise InputError(f"repose geometry: {name} must be a positive number, got {value!r}")
+        if int(self.fill_count) != self.fill_count or self.fill_count < 1:
+            raise InputError(f"repose geometry: fill_count must be a positive integer, got {self.fill_count!r}")
+        object.__setattr__(self, "fill_count", int(self.fill_count))
+
+    @classmethod
+    def from_meta(cls, meta: dict) -> "ReposeGeometry":
+        """From a workbook ``meta`` dict (keys ``box_length_mm``, ``box_width_mm``,
+        ``box_height_mm``, ``plate_lift_speed_mm_s``, ``fill_count``; lab-workbook.md); a
+        missing or empty key keeps the default (200, 100, 250 mm, 100 mm/s, 500)."""
+        values = {}
+        for key, (name, factor) in cls.META_KEYS.items():
+            raw = meta.get(key) if meta else None
+            if raw is None or (isinstance(raw, str) and not raw.strip()):
+                continue
+            try:
+                number = float(raw)
+            except (TypeError, ValueError):
+                raise InputError(f"workbook meta {key}: needs a number, got {raw!r}") from None
+            if name == "fill_count":
+                if number != int(number):
+                    raise InputError(f"workbook meta {key}: needs a whole number, got {raw!r}")
+                number = int(number)
+            values[name] = number * factor if name != "fill_count" else number
+        try:
+            return cls(**values)
+        except InputError as exc:
+            raise InputError(f"workbook meta: {exc}") from None
+
+    def scaled(self, factor: float) -> "ReposeGeometry":
+        """The carton scaled by ``factor`` in every dimension, the fill count by its cube (at
+        least 10), the lift speed kept."""
+        return replace(self, box_length=self.box_length * factor, box_width=self.box_width * factor,
+                       box_height=self.box_height * factor,
+                       fill_count=max(10, int(round(self.fill_count * factor ** 3))))
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class ReposeProfile:
+    """How a repose run is carried out (see the module docstring).
+
+    Attributes
+    ----------
+    name : str
+    scale : float
+        Linear scale of the carton (fill count scaled by its cube) [-].
+    dt : float
+        Time step [s].
+    fill_time : float
+        Segments are inserted uniformly over [0, fill_time] [s].
+    fill_bottom, fill_top : float
+        Insertion region height, as fractions of the carton height [-].
+    lift_time : float or None
+        Time the plate starts rising [s]; None: as soon as the fill has settled.
+    duration : float
+        Simulated time [s]; the largest one when ``early_end``.
+    early_end : bool
+        End once the heap has settled after the plate is clear; stop the plate then too.
+    outside_length : float
+        Floor beyond the carton kept in the simulation domain, relative to the carton length [-].
+    """
+
+    name: str
+    scale: float
+    dt: float
+    fill_time: float
+    fill_bottom: float
+    fill_top: float
+    lift_time: float | None
+    duration: float
+    early_end: bool
+    outside_length: float = 2.25
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+PROFILES = {
+    "paper": ReposeProfile("paper", scale=1.0, dt=PAPER_TIME_STEP, fill_time=1.0, fill_bottom=0.4,
+                           fill_top=0.96, lift_time=4.0, duration=PAPER_DURATION, early_end=False),
+    "quick": ReposeProfile("quick", scale=QUICK_SCALE, dt=PAPER_TIME_STEP, fill_time=0.3, fill_bottom=0.1,
+                           fill_top=0.9, lift_time=None, duration=4.0, early_end=True),
+}
+
+
+# ----------------------------------------------------------------------------------------------
+# measuring a heap
+
+
+@dataclass(frozen=True)
+class HeapAngles:
+    """Angles of a heap left by the plate-withdrawal rig (see the module docstring).
+
+    Attributes
+    ----------
+    angle_deg : float
+        Photo method on the rendered side view [deg] (NaN if not measurable).
+    angle_profile_deg : float
+        Profile fit of the full slope [deg].
+    angle_outside_deg : float
+        Profile fit of the heap beyond the carton [deg] (NaN if too small to fit).
+    profile_x, profile_z : numpy.ndarray
+        Top profile [m].
+    crest_height : float
+        Crest height of the profile fit [m].
+    notes : tuple of str
+        Why an angle is NaN.
+    """
+
+    angle_deg: float
+    angle_profile_deg: float
+    angle_outside_deg: float
+    profile_x: np.ndarray
+    profile_z: np.ndarray
+    crest_height: float
+    notes: tuple = ()
+
+    def to_dict(self) -> dict:
+        return {"angle_deg": self.angle_deg, "angle_profile_deg": self.angle_profile_deg,
+                "angle_outside_deg": self.angle_outside_deg, "profile_x": self.profile_x,
+                "profile_z": self.profile_z, "crest_height": self.crest_height, "notes": list(self.notes)}
+
+
+def top_profile(centres, radii, x_min: float, x_max: float, step: float = PROFILE_STEP):
+    """Upper envelope over y of the spheres seen from the side: z(x) = max over spheres of
+    z_i + sqrt(r_i^2 - (x - x_i)^2), 0 (the floor) where no sphere covers x.
+
+    Parameters
+    ----------
+    centres : array (n, 3)
+        Sphere centres [m].
+    radii : array (n,)
+        Sphere radii [m].
+    x_min, x_max : float
+        Range of the profile [m].
+    step : float
+        Spacing [m].
+
+    Returns
+    -------
+    x, z : numpy.ndarray
+    """
+    c = np.asarray(centres, dtype=float).reshape(-1, 3)
+    r = np.broadcast_to(np.asarray(radii, dtype=float), (c.shape[0],))
+    x = np.arange(x_min, x_max + 0.5 * step, step)
+    z = np.zeros_like(x)
+    if c.shape[0] == 0:
+        return x, z
+    lo = np.searchsorted(x, c[:, 0] - r)
+    hi = np.searchsorted(x, c[:, 0] + r, side="right")
+    for i in np.argsort(c[:, 2] + r)[::-1]:
+        # highest spheres first; a column already above this sphere's top cannot change
+        if hi[i] <= lo[i]:
+            continue
+        xs = x[lo[i]:hi[i]]
+        top = c[i, 2] + np.sqrt(np.clip(r[i] ** 2 - (xs - c[i, 0]) ** 2, 0.0, None))
+        np.maximum(z[lo[i]:hi[i]], top, out=z[lo[i]:hi[i]])
+    return x, z
+
+
+def heap_angles(centres, radii, box_length: float, *, px_per_m: float = PX_PER_M,
+                annotate_to=None) -> HeapAngles:
+    """Measure the heap of a plate-withdrawal run from its spheres (demcal's or another code's).
+
+    Parameters
+    ----------
+    centres : array (n, 3)
+        Sphere centres [m] (x along the carton, back wall x = 0, end plate x = ``box_length``,
+        floor z = 0).
+    radii : array (n,)
+        Sphere radii [m].
+    box_length : float
+        Carton length [m].
+    px_per_m : float
+        Scale of the rendered side view [px/m].
+    annotate_to : path, optional
+        Write the annotated side view (photo method) there.
+
+    Returns
+    -------
+    HeapAngles
+    """
+    from measure.repose import angle_from_photo, angle_from_profile
+    from simulate.render import silhouette
+
+    c = np.asarray(centres, dtype=float).reshape(-1, 3)
+    r = np.broadcast_to(np.asarray(radii, dtype=float), (c.shape[0],))
+    on_floor = c[:, 2] > -r          # spheres that fell through nothing; all, in practice
+    c, r = c[on_floor], r[on_floor]
+    if c.shape[0] < 3:
+        raise InputError(f"heap_angles: too few spheres ({c.shape[0]}) to make a heap")
+    notes = []
+    r_max = float(r.max())
+    x_lo = min(0.0, float((c[:, 0] - r).min())) - 0.05 * box_length
+    x_hi = float((c[:, 0] + r).max()) + 0.15 * box_length
+    x, z = top_profile(c, r, x_lo, x_hi)
+
+    def fit(xs, zs, label):
+        try:
+            res = angle_from_profile(xs, zs, side="right")
+        except InputError as exc:
+            notes.append(f"{label}: {exc}")
+            return math.nan, math.nan
+        return res.angle_deg, res.crest_height
+
+    angle_profile, crest = fit(x, z, "profile")
+    outside = x > box_length
+    angle_outside, _ = fit(x[outside], z[outside], "outside heap") if outside.sum() > 10 else (
+        math.nan, None)
+    if not outside.sum() > 10:
+        notes.append("outside heap: no profile beyond the carton")
+
+    # side view: the floor fills the bottom 15 % of the image, a margin above the crest
+    top = float(z.max())
+    z_lo = -0.15 / 0.85 * (top + 2.0 * r_max)
+    img = silhouette(c[:, [0, 2]], r, px_per_m=px_per_m, extent=(x_lo, x_hi, z_lo, top + 2.0 * r_max),
+                     floor_z_m=0.0)
+    try:
+        photo = angle_from_photo(img, side="right", annotate_to=annotate_to,
+                                 scale_mm_per_px=1e3 / px_per_m)
+        angle_photo = photo.angle_deg
+    except InputError as exc:
+        notes.append(f"photo method: {exc}")
+        angle_photo = math.nan
+    return HeapAngles(float(angle_photo), float(angle_profile), float(angle_outside), x, z,
+                      float(crest), tuple(notes))
+
+
+# ----------------------------------------------------------------------------------------------
+# the run
+
+
+def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
+               geometry: ReposeGeometry | None = None, annotate_to=None, force: bool = False,
+               callback=None) -> RigResult:
+    """Run the plate-withdrawal repose test and measure the heap.
+
+    Parameters
+    ----------
+    params : DEMParameters
+        Materials, contact parameters, segment shape, mass model, rolling lever.
+    seed : int
+        Seed of the particle factory.
+    profile : {"paper", "quick"}
+        How the run is carried out (``PROFILES``).
+    geometry : ReposeGeometry, optional
+        Carton, lift speed and fill count; default the paper's (workbook defaults).
+    annotate_to : path, optional
+        Write the annotated side view of the heap there.
+    force : bool
+        Allow a time step above half the Rayleigh time.
+    callback : callable, optional
+        ``callback(sim, t_end, final)`` after each chunk (see ``simulate.rigs``).
+
+    Returns
+    -------
+    RigResult
+        ``observable``: ``angle_deg``, ``angle_profile_deg``, ``angle_outside_deg`` [deg],
+        ``escaped``, ``outside_fraction``. ``record``: ``profile_x``, ``profile_z`` [m],
+        ``sphere_positions`` [m], ``sphere_radii`` [m], ``sphere_body``, ``body_positions``
+        [m], ``geometry`` (the carton simulated), ``t_lift``, ``t_clear``, ``t_end`` [s], and
+        the kinetic-energy history ``ke_t`` [s], ``ke`` [J].
+    """
+    seed = check_seed(seed)
+    if not isinstance(params, DEMParameters):
+        raise InputError(f"params must be a DEMParameters, got {type(params).__name__}")
+    if profile not in PROFILES:
+        raise InputError(f"unknown repose profile {profile!r}; valid: {', '.join(PROFILES)}")
+    prof = PROFILES[profile]
+    base = geometry if geometry is not None else ReposeGeometry()
+    if not isinstance(base, ReposeGeometry):
+        raise InputError(f"geometry must be a ReposeGeometry, got {type(base).__name__}")
+    geo = base.scaled(prof.scale) if prof.scale != 1.0 else base
+    L, W, H = geo.box_length, geo.box_width, geo.box_height
+    seg = params.segment_length_m
+    fill_margin = min(0.010, 0.1 * W)
+    sim = build_paper_repose_case(
+        params, seed, n_clumps=geo.fill_count, box_length=L, box_width=W, box_height=H,
+        lift_speed=geo.lift_speed, lift_time=prof.lift_time if prof.lift_time is not None else math.inf,
+        fill_time=prof.fill_time, fill_margin=fill_margin, fill_bottom=prof.fill_bottom * H,
+        fill_top=prof.fill_top * H, dt=prof.dt, outside_length=prof.outside_length * L, force=force)
+    plate = sim.wall_index("end plate")
+    tally = RunTally()
+    ke_t, ke = [], []
+    chunk = 0.05                      # simulated seconds between checks [s]
+
+    def advance(seconds):
+        tally.add(sim.run(duration=seconds))
+        ke_t.append(sim.time)
+        ke.append(sim.kinetic_energy())
+        if callback is not None:
+            callback(sim, prof.duration, False)
+
+    def rms_speed():
+        act = sim.active()
+        m = sim.masses()[act].sum()
+        return math.sqrt(2.0 * sim.kinetic_energy() / m) if m > 0 else 0.0
+
+    # fill, then (quick) wait for the fill to settle and lift the plate
+    t_lift = prof.lift_time
+    while sim.time < prof.fill_time - 1e-9:
+        advance(min(chunk, prof.fill_time - sim.time))
+    if t_lift is None:
+        while sim.time < 0.5 * prof.duration and rms_speed() > SETTLED_SPEED:
+            advance(chunk)
+        t_lift = sim.time
+    else:
+        while sim.time < t_lift - 1e-9:
+            advance(min(chunk, t_lift - sim.time))
+    # the plate is clear once its lower edge is a segment diameter above the highest sphere
+    z_top = float((sim.sphere_positions()[:, 2] + sim.sphere_radii()).max()) if sim.n_spheres else 0.0
+    t_clear = t_lift + (z_top + params.segment_diameter_m) / geo.lift_speed
+    if prof.early_end:
+        sim.set_wall_motion(plate, (0.0, 0.0, geo.lift_speed), t_lift, t_clear)
+    else:
+        sim.set_wall_motion(plate, (0.0, 0.0, geo.lift_speed), t_lift)
+    # flow and settle
+    while sim.time < prof.duration - 1e-9:
+        advance(min(chunk, prof.duration - sim.time))
+        if prof.early_end and sim.time > t_clear + 0.2 and rms_speed() < SETTLED_SPEED:
+            break
+    if callback is not None:
+        callback(sim, prof.duration, True)
+
+    act = sim.active()
+    keep = act[sim.sphere_body()]
+    pos, rad = sim.sphere_positions()[keep], sim.sphere_radii()[keep]
+    body = sim.positions()
+    heap = heap_angles(pos, rad, L, annotate_to=annotate_to)
+    notes = list(heap.notes)
+    if sim.time < t_clear:
+        notes.append(f"the run ended at {sim.time:.2f} s, before the plate was clear ({t_clear:.2f} s)")
+    n_act = int(act.sum())
+    observable = {
+        "angle_deg": heap.angle_deg,
+        "angle_profile_deg": heap.angle_profile_deg,
+        "angle_outside_deg": heap.angle_outside_deg,
+        "escaped": len(sim.escaped),
+        "outside_fraction": float(np.mean(body[act, 0] > L)) if n_act else math.nan,
+    }
+    rec = {"profile_x": heap.profile_x, "profile_z": heap.profile_z, "crest_height": heap.crest_height,
+           "sphere_positions": pos, "sphere_radii": rad, "sphere_body": sim.sphere_body()[keep],
+           "body_positions": body[act], "geometry": geo.to_dict(), "t_lift": t_lift, "t_clear": t_clear,
+           "t_end": sim.time, "ke_t": np.array(ke_t), "ke": np.array(ke),
+           "escapes": [e.to_dict() for e in sim.escaped]}
+    options = {"profile": profile, "geometry": base.to_dict(), "force": force}
+    meta = run_meta(seed, prof.dt, tally, sim.n_spheres, sim.time, profile=profile, notes=notes,
+                    profile_settings=prof.to_dict(), bodies=sim.n_bodies,
+                    inserted=sum(f.inserted for f in sim.factories))
+    return RigResult("repose", observable, rec, meta, params.to_dict(), Provenance(seed=seed, options=options))

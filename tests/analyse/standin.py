@@ -1,0 +1,31 @@
+"""An analytic stand-in for the repose rig, for fast tests of everything around the DEM.
+
+The angle depends on e_pp, e_pw and mu_s_pw only (factors B, E and F of the screening), plus
+a seed-dependent noise of sd ``NOISE_SD``; the heap profile is a single flank at that angle,
+shaped like the repose rig's (a plateau inside the carton, one slope to the floor)."""
+
+import math
+
+import numpy as np
+
+NOISE_SD = 0.15
+
+
+def standin_angle(p: dict) -> float:
+    zb = (p["e_pp"] - 0.3) / 0.1
+    ze = (p["e_pw"] - 0.35) / 0.05
+    zf = (p["mu_s_pw"] - 0.2) / 0.1
+    return 34.0 - 1.5 * zb - 1.2 * ze + 2.0 * zf + 0.5 * zb * ze - 0.4 * zf**2
+
+
+def standin_runner(inputs: dict) -> dict:
+    noise = np.random.default_rng(inputs["seed"]).normal(0.0, NOISE_SD)
+    angle = standin_angle(inputs["params"]) + noise
+    height = 0.08
+    run = height / math.tan(math.radians(angle))
+    x = [0.0, 0.12, 0.12 + run, 0.12 + run + 0.05]
+    z = [height, height, 0.0, 0.0]
+    return {"rig": "repose", "observable": {"angle_deg": angle, "angle_profile_deg": angle},
+            "record": {"profile": {"x": x, "z": z}},
+            "wall_s": 0.0, "steps": 0, "spheres": 0, "sphere_steps_per_s": 0.0,
+            "seed": inputs["seed"]}

@@ -1,0 +1,47 @@
+"""Rayleigh time-step check: T_R = pi R sqrt(rho/G) / (0.1631 nu + 0.8766)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from demcal.errors import UnsafeTimeStepError
+from simulate import DEMParameters, rayleigh_time
+from simulate.clump import segment_from_parameters
+from tests.simulate.helpers import simulation
+
+
+def test_rayleigh_time_by_hand_and_paper_fraction():
+    t_r = math.pi * 0.0055 * math.sqrt(912 / 1e7) / (0.1631 * 0.25 + 0.8766)
+    assert rayleigh_time(0.0055, 912.0, 1e7, 0.25) == pytest.approx(t_r, rel=1e-14)
+    # the paper's step is 0.41 T_R at G = 1e7 Pa (DESIGN.md)
+    assert 7.43678e-5 / t_r == pytest.approx(0.41, abs=0.005)
+
+
+def _segment_sim(dt, **kwargs):
+    sim = simulation(DEMParameters(), dt=dt, **kwargs)
+    tpl = sim.add_template(segment_from_parameters(DEMParameters()))
+    sim.add_clump(tpl, (0.0, 0.0, 0.1))
+    return sim
+
+
+def test_unsafe_time_step_is_refused_with_its_numbers():
+    t_r = rayleigh_time(0.0055, 912.0, 1e7, 0.25)
+    sim = _segment_sim(0.6 * t_r)
+    with pytest.raises(UnsafeTimeStepError) as info:
+        sim.run(n_steps=1)
+    message = str(info.value)
+    assert f"{t_r:.6g}" in message            # the Rayleigh time
+    assert "0.600 of the Rayleigh time" in message
+    assert "allowed fraction 0.5" in message
+    assert f"{0.5 * t_r:.6g}" in message      # the limit
+    assert sim.time == 0.0
+
+
+def test_forced_and_stricter_limits():
+    t_r = rayleigh_time(0.0055, 912.0, 1e7, 0.25)
+    _segment_sim(0.6 * t_r, force=True).run(n_steps=2)
+    _segment_sim(7.43678e-5).run(n_steps=2)  # the paper's step passes the default limit
+    with pytest.raises(UnsafeTimeStepError):
+        _segment_sim(7.43678e-5, max_dt_fraction=0.3).run(n_steps=1)
