@@ -9,8 +9,12 @@ e 0.32, mu_s 0.65, mu_r 0.53; particle-steel e 0.36, mu_s 0.22, mu_r 0.15.
     python benchmarks/dem_throughput.py                 # the full 10 s case
     python benchmarks/dem_throughput.py --duration 2    # shorter, while tuning
 
-Prints the import/compile time, the simulation throughput and wall time, and a sanity summary
-(segments outside the carton, escapes, kinetic energy).
+Prints the time to the first step (imports, scene, kernel load or compile), then the wall and
+CPU time of the simulation and two throughputs: sphere-steps per second counting the spheres
+present at each step (the carton fills during the first second), and the figure LIGGGHTS'
+number is quoted in, all 2500 spheres times the steps over the wall time (LIGGGHTS-PUBLIC 3.8:
+2500 x 134 467 / 69 s = 4.9e6 on one core of this machine). Last a sanity summary: segments
+outside the carton, escapes, kinetic energy over time.
 """
 
 from __future__ import annotations
@@ -53,11 +57,17 @@ def main(argv=None) -> int:
     first = sim.run(n_steps=1)
     t_ready = time.perf_counter() - T_START
     print(f"ready to simulate after {t_ready:.2f} s (imports, scene, kernel load or compile)")
+    cpu0 = time.process_time()
     summary = sim.run(duration=max(args.duration - sim.time, 0.0), progress=progress)
+    cpu = time.process_time() - cpu0
     steps = summary.steps + first.steps
+    full = sim.templates[0].n_spheres * args.n_clumps
     print(f"simulated {sim.time:.3f} s in {steps} steps, {sim.n_spheres} spheres at the end")
-    print(f"wall time {summary.wall_time:.1f} s, {summary.sphere_steps_per_second:.3e} sphere-steps/s, "
-          f"{summary.n_rebuilds} neighbour-list rebuilds")
+    print(f"wall time {summary.wall_time:.1f} s (CPU {cpu:.1f} s), "
+          f"{summary.n_rebuilds} sphere-list rebuilds, {sim.total_wall_rebuilds} wall-list rebuilds")
+    print(f"  {summary.sphere_steps_per_second:.3e} sphere-steps/s (spheres present at each step)")
+    print(f"  {full * summary.steps / summary.wall_time:.3e} sphere-steps/s as LIGGGHTS is quoted "
+          f"({full} spheres x steps / wall time); {full * summary.steps / cpu:.3e} per CPU second")
 
     x = sim.positions()
     act = sim.active()

@@ -11,7 +11,8 @@ from demcal import __version__
 from demcal.errors import DemcalError
 
 #: Stage modules that contribute sub-commands, in the order of the pipeline.
-STAGE_CLIS = ("measure.cli", "simulate.cli", "analyse.cli", "report.cli")
+STAGE_CLIS = ("measure.cli", "measure.repose_cli", "simulate.cli", "analyse.cli",
+              "analyse.critique.cli", "report.cli")
 
 EXIT_INPUT = 2     # bad input or a domain error
 EXIT_FAILURE = 1   # the job ran but failed a check (e.g. audit found differences)
@@ -28,7 +29,7 @@ def build_parser() -> argparse.ArgumentParser:
         try:
             module = importlib.import_module(name)
         except ModuleNotFoundError as exc:
-            if exc.name == name:
+            if exc.name and name.startswith(exc.name):
                 continue  # stage without commands yet
             raise
         module.register(sub)

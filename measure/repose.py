@@ -22,18 +22,21 @@ does the whole chain on the photo, step by step:
 6. *Floor line*: a Hough-type search [DudaHart1972]_ over near-horizontal lines for the one
    supported by most boundary points with (almost) none below it (the floor is the lower
    envelope of the boundary; a flat heap top is not), refined by the robust line of step 8
-   through the locally flat boundary points near it. Its tilt is the camera roll; it is reported and removed: heights are measured
-   perpendicular to the floor and distances along it.
+   through the locally flat boundary points near it. Its tilt is the camera roll; it is
+   reported and removed: heights are measured perpendicular to the floor and distances
+   along it.
 7. *Flanks*: on the boundary smoothed by a running median and a Gaussian, the crest is the
    highest point and each toe is where the boundary falls to the floor (half the lower band
    height) walking out from the crest. A flank is fitted between the *outermost* point above
    ``band[1]`` of the crest height and the next point below ``band[0]`` (15 % .. 85 % by
    default), which excludes the rounded crest and the concave toe.
-8. *Robust straight line* through the raw boundary points of the band: least squares with
-   outlier rejection (3.5 robust standard deviations), started from the Theil-Sen line
-   [Theil1950]_ [Sen1968]_. It is the mean (least-squares) slope of a rough flank, but gives
-   no weight to outliers such as a segment sticking out. The flank angle is the arctangent of
-   the slope, and the angle of repose the mean of the measured flanks.
+8. *Robust straight line* through the raw boundary points of the band: least squares
+   without the spikes (narrow excursions beyond 3.5 robust standard deviations: specks, a
+   stick standing up), started from the Theil-Sen line [Theil1950]_ [Sen1968]_. It is the
+   mean (least-squares) slope of a rough flank: the wider waviness of the surface is kept.
+   The band's ends are then moved to where the fitted line crosses the band heights and the
+   line refitted (so that a bump at an end does not choose the range). The flank angle is the
+   arctangent of the slope, and the angle of repose the mean of the measured flanks.
 
 :func:`angle_from_profile` applies steps 7-8 to a height profile (e.g. the surface of a
 simulated heap), and :func:`angle_from_drum` measures the dynamic angle of the free surface
@@ -57,7 +60,7 @@ References
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -91,9 +94,11 @@ class FlankFit:
     h_range : tuple of float
         Height band used, ``band`` times the crest height [px or m].
     residual_sd : float
-        Standard deviation of the residuals about the line [px or m].
+        Standard deviation of the residuals of the points fitted [px or m].
     n_points : int
         Number of boundary points fitted.
+    n_rejected : int
+        Points of the band set aside as outliers by the robust fit.
     """
 
     side: str
@@ -105,6 +110,7 @@ class FlankFit:
     h_range: tuple
     residual_sd: float
     n_points: int
+    n_rejected: int = 0
 
     @property
     def angle_ci_deg(self) -> tuple:
@@ -116,7 +122,8 @@ class FlankFit:
         return {"side": self.side, "angle_deg": self.angle_deg, "angle_ci_deg": list(self.angle_ci_deg),
                 "slope": self.slope, "intercept": self.intercept, "slope_ci": list(self.slope_ci),
                 "u_range": list(self.u_range), "h_range": list(self.h_range),
-                "residual_sd": self.residual_sd, "n_points": self.n_points}
+                "residual_sd": self.residual_sd, "n_points": self.n_points,
+                "n_rejected": self.n_rejected}
 
 
 @dataclass(frozen=True)
@@ -256,6 +263,9 @@ def angle_from_photo(image, side="both", annotate_to=None, scale_mm_per_px=None,
     if side not in SIDES:
         raise InputError(f"side must be one of {SIDES}, got {side!r}")
     band = _check_band(band)
+    _check_options(smooth, min_points)
+    if not 0.0 < float(max_tilt_deg) <= 45.0:
+        raise InputError(f"max_tilt_deg must be in (0, 45], got {max_tilt_deg!r}")
     scale = _check_scale(scale_mm_per_px)
     bgr, name = _read_image(image)
     h, w = bgr.shape[:2]
@@ -313,6 +323,7 @@ def angle_from_profile(x, z, side="both", *, band=(0.15, 0.85), smooth=0.02, flo
     if side not in SIDES:
         raise InputError(f"side must be one of {SIDES}, got {side!r}")
     band = _check_band(band)
+    _check_options(smooth, min_points)
     x = np.asarray(x, dtype=float).ravel()
     z = np.asarray(z, dtype=float).ravel()
     if x.shape != z.shape:
@@ -337,10 +348,11 @@ def angle_from_drum(image, *, chord=0.5, rim_margin=0.04, annotate_to=None):
     """Dynamic angle of repose in a rotating drum from a side image of its free surface [deg].
 
     The drum rim is found as the strongest circle of the Hough gradient method
-    [DudaHart1972]_ with a radius of 35-55 % of the frame. Inside the drum, less a ``rim_margin`` ring, the dark powder is
-    thresholded (Otsu) and cleaned; the free surface is its top boundary in each column. A
-    robust line (as for the heap flanks) is fitted to the central ``chord`` fraction of the free surface's
-    horizontal extent; its angle to the image rows is the dynamic angle of repose.
+    [DudaHart1972]_ with a radius of 35-55 % of the frame. Inside the drum, less a
+    ``rim_margin`` ring, the dark powder is thresholded (Otsu) and cleaned; the free surface
+    is its top boundary in each column. A robust line (as for the heap flanks) is fitted to
+    the central ``chord`` fraction of the free surface's horizontal extent; its angle to the
+    image rows is the dynamic angle of repose.
 
     Parameters
     ----------
@@ -391,14 +403,15 @@ def angle_from_drum(image, *, chord=0.5, rim_margin=0.04, annotate_to=None):
         raise InputError(f"{name}: no free surface found in the drum")
     mid, span = 0.5 * (bx.min() + bx.max()), bx.max() - bx.min()
     sel = np.abs(bx - mid) <= 0.5 * chord * span
-    slope, intercept, lo, hi = _robust_line(bx[sel], -by[sel])
-    res = -by[sel] - (intercept + slope * bx[sel])
+    slope, intercept, lo, hi, kept = _robust_line(bx[sel], -by[sel])
+    res = (-by[sel] - (intercept + slope * bx[sel]))[kept]
     angle = abs(math.degrees(math.atan(slope)))
     fit = FlankFit(side="left" if slope > 0 else "right", angle_deg=angle, slope=slope,
                    intercept=intercept, slope_ci=(lo, hi),
                    u_range=(float(bx[sel].min()), float(bx[sel].max())),
                    h_range=(float(-by[sel].max()), float(-by[sel].min())),
-                   residual_sd=float(np.std(res, ddof=2)), n_points=int(sel.sum()))
+                   residual_sd=float(np.std(res, ddof=2)), n_points=int(kept.sum()),
+                   n_rejected=int((~kept).sum()))
     annotated = None
     if annotate_to is not None:
         img = bgr.copy()
@@ -416,6 +429,13 @@ def angle_from_drum(image, *, chord=0.5, rim_margin=0.04, annotate_to=None):
 
 # ----------------------------------------------------------------------------------------
 # Checks and image input
+
+def _check_options(smooth, min_points):
+    if not 0.0 < float(smooth) < 0.5:
+        raise InputError(f"smooth must be a fraction in (0, 0.5), got {smooth!r}")
+    if int(min_points) != min_points or min_points < 3:
+        raise InputError(f"min_points must be an integer >= 3, got {min_points!r}")
+
 
 def _check_band(band):
     try:
@@ -655,40 +675,57 @@ def _floor_line(x, y, max_tilt_deg, tol, name):
 # ----------------------------------------------------------------------------------------
 # Steps 7-8: crest, toes, band, robust line
 
-def _robust_line(u, h, clip=3.5, max_iter=20):
-    """Straight line h = intercept + slope u by least squares with outlier rejection.
+def _robust_line(u, h, clip=3.5, max_width=0.05, max_iter=10):
+    """Straight line h = intercept + slope u: least squares without the spikes.
 
-    Started from the Theil-Sen line [Theil1950]_ [Sen1968]_, which no outlier can pull far;
-    then points farther than ``clip`` robust standard deviations (1.4826 x the median absolute
-    residual) from the line are set aside and the line refitted by least squares until the set
-    is stable. A rough flank keeps all its points (the result is its mean, least-squares
-    slope), while a segment sticking out or a remnant of the background is rejected.
+    Started from the Theil-Sen line [Theil1950]_ [Sen1968]_, which no outlier can pull far.
+    A spike is an excursion from the line (a run of consecutive points, in u order, on one
+    side of it by more than one robust standard deviation, 1.4826 x the median absolute
+    deviation) that is narrower than ``max_width`` times the u-span fitted and reaches more
+    than ``clip`` robust standard deviations: a speck, a stick standing up, a remnant of the
+    background. Spikes are set aside and the line refitted by least squares until the set is
+    stable. Wider excursions are the roughness of the surface and are kept, so the result is
+    the mean (least-squares) slope of a rough flank.
 
-    Returns slope, intercept and the 95 % interval of the slope (t distribution).
+    Returns slope, intercept, the 95 % interval of the slope (t distribution) and the mask
+    of the points kept (in the order given).
     """
     u = np.asarray(u, dtype=float)
     h = np.asarray(h, dtype=float)
-    step = max(1, u.size // 2000)                # Theil-Sen's pairwise slopes grow as n^2
-    slope, intercept = stats.theilslopes(h[::step], u[::step])[:2]
-    keep = np.ones(u.size, bool)
-    for _ in range(max_iter):
-        res = h - (intercept + slope * u)
-        scale = 1.4826 * np.median(np.abs(res[keep] - np.median(res[keep])))
-        new = np.abs(res) <= clip * scale if scale > 0 else np.ones(u.size, bool)
-        if new.sum() < 3:
-            break
-        if np.array_equal(new, keep) and _ > 0:
+    order = np.argsort(u, kind="stable")
+    us, hs = u[order], h[order]
+    step = max(1, us.size // 2000)               # Theil-Sen's pairwise slopes grow as n^2
+    slope, intercept = stats.theilslopes(hs[::step], us[::step])[:2]
+    width = max_width * (us[-1] - us[0])
+    tiny = 1e-9 * max(float(np.ptp(hs)), 1e-300)     # scale floor for an exact line
+    keep = np.ones(us.size, bool)
+    for it in range(max_iter):
+        res = hs - (intercept + slope * us)
+        scale = max(1.4826 * float(np.median(np.abs(res[keep] - np.median(res[keep])))), tiny)
+        spike = np.zeros(us.size, bool)
+        for sign in (1.0, -1.0):
+            runs, _ = ndimage.label(sign * res > scale)
+            for sl in ndimage.find_objects(runs):
+                run = sl[0]
+                if (us[run.stop - 1] - us[run.start] <= width
+                        and np.max(sign * res[run]) > clip * scale):
+                    spike[run] = True
+        new = ~spike
+        # (the first pass always refits: the start is Theil-Sen, the answer least squares)
+        if new.sum() < 3 or (it > 0 and np.array_equal(new, keep)):
             break
         keep = new
-        slope, intercept = np.polyfit(u[keep], h[keep], 1)
+        slope, intercept = np.polyfit(us[keep], hs[keep], 1)
     n = int(keep.sum())
-    res = h[keep] - (intercept + slope * u[keep])
+    res = hs[keep] - (intercept + slope * us[keep])
     if n > 2:
-        se = math.sqrt(np.sum(res ** 2) / (n - 2) / np.sum((u[keep] - u[keep].mean()) ** 2))
+        se = math.sqrt(np.sum(res ** 2) / (n - 2) / np.sum((us[keep] - us[keep].mean()) ** 2))
         half = float(stats.t.ppf(0.975, n - 2)) * se
     else:
         half = float("nan")
-    return float(slope), float(intercept), float(slope - half), float(slope + half)
+    kept = np.empty(u.size, bool)
+    kept[order] = keep
+    return float(slope), float(intercept), float(slope - half), float(slope + half), kept
 
 
 def _flank_fits(u, h, band, smooth, min_points):
@@ -697,9 +734,10 @@ def _flank_fits(u, h, band, smooth, min_points):
     order = np.argsort(u, kind="stable")
     u, h = u[order], h[order]
     span = u[-1] - u[0]
-    du = np.median(np.diff(u))
-    if not (span > 0 and du > 0):
+    steps = np.diff(u)
+    if not (span > 0 and np.any(steps > 0)):
         raise InputError("the boundary/profile has no horizontal extent")
+    du = np.median(steps[steps > 0])
     grid = np.arange(u[0], u[-1] + 0.5 * du, du)
     hg = np.interp(grid, u, h)
     win = max(3, int(round(smooth * span / du)) | 1)
@@ -721,21 +759,38 @@ def _flank_fits(u, h, band, smooth, min_points):
         k_hi = np.nonzero(hs[walk] >= hi * crest)[0][-1]
         k_lo = k_hi + np.nonzero(hs[walk[k_hi:]] <= lo * crest)[0][0]
         ua, ub = sorted((grid[walk[k_hi]], grid[walk[k_lo]]))
+        if ub - ua < 2 * win * du:
+            # The band is no wider than the smoothing: a vertical face (the wall of the box
+            # the heap came from, the frame edge), not a flank.
+            reasons[side] = (f"is too steep or too short to fit (its band spans "
+                             f"{ub - ua:.3g}, less than twice the smoothing width)")
+            continue
         sel = (u >= ua) & (u <= ub)
         if sel.sum() < min_points:
             reasons[side] = f"too few boundary points in the fitting band ({int(sel.sum())} < {min_points})"
             continue
-        slope, intercept, s_lo, s_hi = _robust_line(u[sel], h[sel])
+        slope, intercept, s_lo, s_hi, kept = _robust_line(u[sel], h[sel])
+        # The band's ends where the fitted line, not the rough boundary, crosses the band
+        # heights: a bump or dip at an end would otherwise choose the range and bias the slope.
+        for _ in range(3):
+            if slope == 0 or not (math.degrees(math.atan(abs(slope))) > 0):
+                break
+            ends = sorted(((lo * crest - intercept) / slope, (hi * crest - intercept) / slope))
+            new_sel = (u >= ends[0]) & (u <= ends[1])
+            if new_sel.sum() < min_points or np.array_equal(new_sel, sel):
+                break
+            sel, (ua, ub) = new_sel, ends
+            slope, intercept, s_lo, s_hi, kept = _robust_line(u[sel], h[sel])
         angle = math.degrees(math.atan(slope if side == "left" else -slope))
         if angle <= 0:
             reasons[side] = f"is not a slope down to the floor (fitted angle {angle:.1f} deg)"
             continue
-        res = h[sel] - (intercept + slope * u[sel])
+        res = (h[sel] - (intercept + slope * u[sel]))[kept]
         fits[side] = FlankFit(side=side, angle_deg=angle, slope=slope, intercept=intercept,
                               slope_ci=(s_lo, s_hi), u_range=(float(ua), float(ub)),
                               h_range=(lo * crest, hi * crest),
-                              residual_sd=float(np.std(res, ddof=2)) if sel.sum() > 2 else 0.0,
-                              n_points=int(sel.sum()))
+                              residual_sd=float(np.std(res, ddof=2)) if res.size > 2 else 0.0,
+                              n_points=int(kept.sum()), n_rejected=int((~kept).sum()))
     return fits, crest, reasons
 
 
@@ -772,11 +827,16 @@ def _line(img, p, q, colour, t):
              (int(round(q[0] * 16)), int(round(q[1] * 16))), colour, t, cv2.LINE_AA, 4)
 
 
-def _label(img, text, org, t, colour=(255, 255, 255)):
-    scale = 0.5 * t + 0.2
-    org = (int(org[0]), int(org[1]))
-    cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0), 3 * t, cv2.LINE_AA)
-    cv2.putText(img, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, colour, t, cv2.LINE_AA)
+def _label(img, text, org, t, colour=(255, 255, 255), scale=None):
+    """Text with a black outline (the same text shifted around it) for any background."""
+    scale = 0.5 * t + 0.2 if scale is None else scale
+    x0, y0 = int(org[0]), int(org[1])
+    for dx in (-t, 0, t):
+        for dy in (-t, 0, t):
+            if dx or dy:
+                cv2.putText(img, text, (x0 + dx, y0 + dy), cv2.FONT_HERSHEY_SIMPLEX, scale,
+                            (0, 0, 0), t, cv2.LINE_AA)
+    cv2.putText(img, text, (x0, y0), cv2.FONT_HERSHEY_SIMPLEX, scale, colour, t, cv2.LINE_AA)
 
 
 def _write(img, path):
@@ -818,4 +878,6 @@ def _annotate_photo(bgr, x, y, a, b, fits, crest, angle, tilt, path):
         px = px - tw - 10 * t if side == "left" else px + 10 * t
         _label(img, text, (min(max(px, 5), w - tw - 5), max(py, 20 * t)), t)
     _label(img, f"angle of repose {angle:.1f} deg   floor tilt {tilt:+.2f} deg", (10, 10 + 14 * t), t)
+    _label(img, "yellow: top boundary   cyan: floor line   magenta: fitted band   red: fitted line",
+           (10, img.shape[0] - 8 * t), 1, scale=0.25 * t + 0.2)
     return _write(img, path)

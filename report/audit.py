@@ -21,6 +21,7 @@ critique stage's own re-derivation is not part of this audit.
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,7 +29,7 @@ from pathlib import Path
 from demcal.errors import DemcalError, InputError
 from demcal.jsonio import read_json
 from demcal.provenance import sha256_file
-from report.tables import (RESULT_TABLE_IDS, Campaign, build_tables, load_critique, load_paper,
+from report.tables import (PAPER_FILE, RESULT_TABLE_IDS, Campaign, build_tables, load_critique, load_paper,
                            normalised, run_keys)
 
 #: Relative and absolute tolerance of a float cell.
@@ -206,13 +207,29 @@ def _same(a, b) -> bool:
     return a == b
 
 
+def _source_differences(tid: str, stored: list, derived: list) -> list[CellDifference]:
+    """Differing fields of the sources, one line per distinct change (a changed workbook hash
+    shows once, with the number of source entries it appears in)."""
+    if len(stored) != len(derived):
+        return [CellDifference(tid, None, "sources", "number of entries", len(stored), len(derived))]
+    changes: dict = {}
+    for a, b in zip(stored, derived):
+        for key in dict.fromkeys(list(a) + list(b)):
+            if not _same(a.get(key), b.get(key)):
+                what = (key, json.dumps(a.get(key), sort_keys=True), json.dumps(b.get(key), sort_keys=True))
+                changes[what] = changes.get(what, 0) + 1
+    return [CellDifference(tid, None, f"sources ({n} entr{'y' if n == 1 else 'ies'})", key,
+                           json.loads(x), json.loads(y)) for (key, x, y), n in changes.items()]
+
+
 def compare_tables(stored: dict, derived: dict) -> list[CellDifference]:
     """Differences between one stored and one re-derived table (both as JSON dicts)."""
     tid = stored["id"]
     diffs = []
-    for item in ("title", "columns", "units", "notes", "sources"):
+    for item in ("title", "columns", "units", "notes"):
         if not _same(stored.get(item), derived.get(item)):
             diffs.append(CellDifference(tid, None, item, item, stored.get(item), derived.get(item)))
+    diffs += _source_differences(tid, stored.get("sources", []), derived.get("sources", []))
     columns = derived.get("columns", [])
     s_rows, d_rows = stored.get("rows", []), derived.get("rows", [])
     if len(s_rows) != len(d_rows):
@@ -280,7 +297,10 @@ def audit(out_dir) -> AuditResult:
         raise InputError(f"{out} holds no results.json")
     stored_doc = read_json(tables_path)
     files = check_files(stored_doc.get("inputs", {}), out)
-    missing_inputs = [f.file for f in files if f.status == "missing" and Path(f.file).is_absolute()]
+    # a missing workbook file (absolute path) stops the measurement; run records, critique.json
+    # (relative) and the paper's numbers only stop the tables that use them
+    missing_inputs = [f.file for f in files if f.status == "missing" and Path(f.file).is_absolute()
+                      and f.file != str(PAPER_FILE)]
     if missing_inputs:
         campaign, problems = None, ["workbook input(s) missing: " + ", ".join(missing_inputs)]
     else:

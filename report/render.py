@@ -130,10 +130,9 @@ def describe_sources(sources) -> list[str]:
     if files:
         out.append("files read by those rows (SHA-256, first 16 hex digits; all in Table A1): " + ", ".join(files))
     if runs:
-        out.append(f"{len(runs)} DEM run record(s), runs/&lt;key&gt;.json (Table A2): "
+        out.append(f"{len(runs)} DEM run record(s), runs/<key>.json (Table A2): "
                    + ", ".join(k[:10] for k in runs))
-    return [html.escape(x, quote=False).replace("&amp;lt;", "&lt;").replace("&amp;gt;", "&gt;")
-            for x in out + lines]
+    return [html.escape(x, quote=False) for x in out + lines]
 
 
 # ----------------------------------------------------------------------------------------------

@@ -905,7 +905,7 @@ def table_runs(c: Campaign) -> Table:
                  notes=("Each run's record is runs/<key>.json in the campaign folder; a key repeated "
                         "within or across stages is one run used again.",),
                  sources=({"kind": "runs", "keys": list(dict.fromkeys(keys))},),
-                 formats=("", "d", "mono", "d", ".3g", "", "d"))
+                 formats=("", "d", "mono", "d", ".4f", "", "d"))
 
 
 # ----------------------------------------------------------------------------------------------

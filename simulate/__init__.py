@@ -19,9 +19,12 @@ from simulate.engine import Escape, RunSummary, Simulation
 from simulate.factory import ParticleFactory
 from simulate.materials import MaterialTable
 from simulate.params import DEMParameters
+from simulate.scenes import build_paper_repose_case
 from simulate.timestep import rayleigh_time
+from simulate.vtk import write_vtp
 from simulate.walls import Plane, Rectangle, box_rectangles
 
 __all__ = ["ClumpTemplate", "DEMParameters", "Escape", "MaterialTable", "ParticleFactory", "Plane",
-           "Rectangle", "RunSummary", "Simulation", "box_rectangles", "make_template",
-           "rayleigh_time", "segment_from_parameters", "segment_template"]
+           "Rectangle", "RunSummary", "Simulation", "box_rectangles", "build_paper_repose_case",
+           "make_template", "rayleigh_time", "segment_from_parameters", "segment_template",
+           "write_vtp"]

@@ -30,15 +30,18 @@ torque on each body at the last step [N], [N m]), ``wall_origins()``, ``time`` [
 ``simulate.vtk.write_vtp(path, sim)``.
 
 The step (``run`` pseudocode; the whole loop runs in numba, returning to Python every
-``chunk_steps`` steps for the checks, factories and progress):
+``chunk_steps`` steps, or sooner when a factory has a clump due):
 
     for each step:
-        for each active body: half kick (forces, torques, capped rolling torque), drift
+        for each active body: kick (forces, torques, rolling torque with its cap), drift
         move the walls that are in their motion window; t += dt
-        sphere positions from the bodies; if a sphere moved > skin/2 (or a sphere and a wall
-            > skin together) since the last rebuild: rebuild the Verlet lists (history kept)
+        sphere positions from the bodies; rebuild the sphere-sphere Verlet list if a sphere
+            moved more than skin/2 since its last rebuild, the sphere-wall list if a sphere and
+            a wall moved more than skin together (contact history carried over)
         contact forces: sphere-sphere pairs, then sphere-wall pairs (Hertz-Mindlin, rolling)
-        for each active body: second half kick
+    (kicks are half steps at the start and end of a chunk and whole steps in between: the
+     velocity Verlet scheme of ``simulate.integrate``; Python always sees synchronous
+     positions and velocities)
     every chunk: stop with SimulationError on non-finite state or runaway kinetic energy;
         deactivate and record bodies outside the domain; run the factories
 
@@ -51,7 +54,7 @@ from __future__ import annotations
 
 import math
 import time as _time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -59,7 +62,8 @@ from demcal.errors import InputError, SimulationError
 from simulate._jit import kernel
 from simulate.clump import ClumpTemplate
 from simulate.contact.hertz_mindlin import normal_force, tangential_force
-from simulate.contact.rolling import EDEM_COM, EDEM_SPHERE, lever_index, relative_rolling_torque
+from simulate.contact.rolling import (EDEM_COM, EDEM_SPHERE, LIGGGHTS_REFF, lever_index,
+                                      relative_rolling_torque)
 from simulate.integrate import (drift, half_kick, matrix_from_quat, quat_from_matrix, quat_multiply,
                                 refresh_rotation)
 from simulate.materials import MaterialTable
@@ -207,6 +211,8 @@ def _contact_forces(hist_dt, lever_mode, n_bodies, bx, bv, bw, bf, bt, brm, brv,
                 brm[bi] += mr * f_el * a
                 brm[bj] += mr * f_el * (rj - 0.5 * overlap)
             else:
+                brm[bi] += mr * f_el * r_star
+                brm[bj] += mr * f_el * r_star
                 tx, ty, tz = relative_rolling_torque(mr, f_el, r_star, wxi - wxj, wyi - wyj,
                                                      wzi - wzj, nx, ny, nz)
                 brv[bi, 0] -= tx
@@ -269,6 +275,7 @@ def _contact_forces(hist_dt, lever_mode, n_bodies, bx, bv, bw, bf, bt, brm, brv,
             elif lever_mode == EDEM_SPHERE:
                 brm[bi] += mr * f_el * a
             else:
+                brm[bi] += mr * f_el * ri
                 tx, ty, tz = relative_rolling_torque(mr, f_el, ri, wxi, wyi, wzi, nx, ny, nz)
                 brv[bi, 0] -= tx
                 brv[bi, 1] -= ty
@@ -300,6 +307,7 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, need_rebuild, need_fo
     lists and the numbers of pair-list and wall-list rebuilds.
     """
     h = 0.5 * dt
+    relative = lever_mode == LIGGGHTS_REFF
     n_walls = wkind.shape[0]
     n_rebuilds = 0
     n_wall_rebuilds = 0
@@ -308,7 +316,7 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, need_rebuild, need_fo
             tau = h if step == 0 else dt
             for b in range(n_bodies):
                 if bactive[b]:
-                    half_kick(b, tau, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi)
+                    half_kick(b, tau, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, relative)
                     drift(b, dt, bx, bv, bq, bL, bw, bR, binvi)
             _wall_velocities(t + h, wvel, wwin, wvel_now)
             for k in range(n_walls):
@@ -346,7 +354,7 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, need_rebuild, need_fo
     if n_steps > 0:
         for b in range(n_bodies):
             if bactive[b]:
-                half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi)
+                half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, relative)
     return t, pstart, ppi, pj, ph, wstart, ws, wk, wh, n_rebuilds, n_wall_rebuilds
 
 
@@ -746,7 +754,7 @@ class Simulation:
             chunk = min(self.chunk_steps, n_steps - done)
             for f in self.factories:
                 chunk = min(chunk, max(1, f.steps_until_next(self)))
-            active_spheres = int(self._b["bactive"][self._s["sbody"][:self.n_spheres]].sum()) if self.n_spheres else 0
+            active_spheres = self._active_spheres()
             rebuilds += self._advance(chunk)
             sphere_steps += active_spheres * chunk
             done += chunk
@@ -760,9 +768,12 @@ class Simulation:
         return RunSummary(steps=n_steps, start_time=start_time, end_time=self.time, wall_time=wall,
                           sphere_steps_per_second=sphere_steps / wall if wall > 0 else 0.0,
                           n_rebuilds=rebuilds, n_bodies=int(self._b["bactive"][:self.n_bodies].sum()),
-                          n_spheres=int(self._b["bactive"][self._s["sbody"][:self.n_spheres]].sum()),
+                          n_spheres=self._active_spheres(),
                           kinetic_energy=self.kinetic_energy(),
                           escaped=len(self.escaped) - n_escaped0)
+
+    def _active_spheres(self) -> int:
+        return int(self._b["bactive"][self._s["sbody"][:self.n_spheres]].sum())
 
     def evaluate_forces(self) -> None:
         """Recompute the contact forces at the current state without advancing time or the
@@ -899,9 +910,8 @@ class Simulation:
 
     def rolling_resistance(self) -> tuple[np.ndarray, np.ndarray]:
         """Rolling-friction terms of each body at the last force evaluation: the summed torque
-        magnitude sum(mu_r F_n R_lever) [N m] of the EDEM conventions (applied against the
-        body's rotation) and the summed torque vector [N m] of the ``liggghts_reff`` convention,
-        both before the cap (``simulate.contact.rolling``)."""
+        magnitude sum(mu_r F_n R_lever) [N m] over its contacts, and (``liggghts_reff`` only)
+        the summed torque vector [N m], both before the cap (``simulate.contact.rolling``)."""
         return self._b["brm"][:self.n_bodies].copy(), self._b["brv"][:self.n_bodies].copy()
 
     def wall_origins(self) -> np.ndarray:

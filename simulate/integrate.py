@@ -11,9 +11,11 @@ One step of length dt (kick-drift-kick, as LIGGGHTS' ``nve`` integrators):
     ... contact forces at the new positions ...
     v    += (F/m + g) dt/2;   L += T dt/2 (+ capped rolling torque)
 
-The angular momentum L is kept in the world frame, so a torque-free body conserves it exactly;
-the inertia tensor enters only through w = R I_p^-1 R^T L. Quaternions are (w, x, y, z), rotating
-principal-frame vectors into the world frame.
+Within a chunk of steps the closing half kick of one step and the opening half kick of the next
+are applied as one kick over dt (leapfrog form of the same scheme). The angular momentum L is
+kept in the world frame, so a torque-free body conserves it exactly; the inertia tensor enters
+only through w = R I_p^-1 R^T L. Quaternions are (w, x, y, z), rotating principal-frame
+vectors into the world frame.
 
 References
 ----------
@@ -90,13 +92,17 @@ def rotate_quat(q0, q1, q2, q3, wx, wy, wz, dt):
 
 
 @evaluator
-def half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi):
+def half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, relative):
     """Kick of body ``b`` over ``h`` (dt/2, or dt for two merged half kicks): forces, torques,
-    then the capped rolling torque.
+    then the rolling torque (see ``simulate.contact.rolling``).
 
-    The rolling torque is ``brv[b]`` (a vector, LIGGGHTS convention) minus ``brm[b]`` (a
-    magnitude, EDEM conventions) along the unit angular velocity after the other torques.
-    Updates v, L and w of the body.
+    ``brm[b]`` is the summed magnitude of the body's rolling torques. With the EDEM conventions
+    (``relative`` False) the torque is ``brm[b]`` against the unit angular velocity after the
+    other torques; with the LIGGGHTS convention (``relative`` True) it is the vector ``brv[b]``
+    summed over the contacts. If the resistance ``brm[b]`` over ``h`` could absorb the body's
+    whole angular momentum, the rotation stops (the torque acts as a static constraint up to
+    its magnitude); otherwise the torque acts in full, scaled down only so that it never
+    reverses the spin about the current axis. Updates v, L and w of the body.
     """
     im = binvm[b]
     bv[b, 0] += (bf[b, 0] * im + gx) * h
@@ -105,27 +111,39 @@ def half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi):
     lx = bL[b, 0] + bt[b, 0] * h
     ly = bL[b, 1] + bt[b, 1] * h
     lz = bL[b, 2] + bt[b, 2] * h
-    wx, wy, wz = apply_inverse_inertia(bR, b, binvi, lx, ly, lz)
-    tx = brv[b, 0]
-    ty = brv[b, 1]
-    tz = brv[b, 2]
     m = brm[b]
-    if m > 0.0:
-        wmag = math.sqrt(wx * wx + wy * wy + wz * wz)
-        if wmag > 0.0:
-            c = m / wmag
-            tx -= c * wx
-            ty -= c * wy
-            tz -= c * wz
-    if tx != 0.0 or ty != 0.0 or tz != 0.0:
-        dwx, dwy, dwz = apply_inverse_inertia(bR, b, binvi, tx * h, ty * h, tz * h)
-        s = cap_rolling_impulse(wx, wy, wz, dwx, dwy, dwz)
-        lx += s * tx * h
-        ly += s * ty * h
-        lz += s * tz * h
-        wx += s * dwx
-        wy += s * dwy
-        wz += s * dwz
+    if m > 0.0 and lx * lx + ly * ly + lz * lz <= (m * h) ** 2:
+        lx = 0.0
+        ly = 0.0
+        lz = 0.0
+        wx = 0.0
+        wy = 0.0
+        wz = 0.0
+    else:
+        wx, wy, wz = apply_inverse_inertia(bR, b, binvi, lx, ly, lz)
+        tx = 0.0
+        ty = 0.0
+        tz = 0.0
+        if relative:
+            tx = brv[b, 0]
+            ty = brv[b, 1]
+            tz = brv[b, 2]
+        elif m > 0.0:
+            wmag = math.sqrt(wx * wx + wy * wy + wz * wz)
+            if wmag > 0.0:
+                c = m / wmag
+                tx = -c * wx
+                ty = -c * wy
+                tz = -c * wz
+        if tx != 0.0 or ty != 0.0 or tz != 0.0:
+            dwx, dwy, dwz = apply_inverse_inertia(bR, b, binvi, tx * h, ty * h, tz * h)
+            s = cap_rolling_impulse(wx, wy, wz, dwx, dwy, dwz)
+            lx += s * tx * h
+            ly += s * ty * h
+            lz += s * tz * h
+            wx += s * dwx
+            wy += s * dwy
+            wz += s * dwz
     bL[b, 0] = lx
     bL[b, 1] = ly
     bL[b, 2] = lz

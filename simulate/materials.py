@@ -146,7 +146,8 @@ class MaterialTable:
         try:
             return list(self._materials).index(name)
         except ValueError:
-            raise InputError(f"unknown material {name!r}; defined: {', '.join(self._materials) or 'none'}") from None
+            defined = ", ".join(self._materials) or "none"
+            raise InputError(f"unknown material {name!r}; defined: {defined}") from None
 
     def material(self, name: str) -> Material:
         return self._materials[self.names[self.index(name)]]

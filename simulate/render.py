@@ -175,9 +175,9 @@ def heap_profile(angle_left_deg, angle_right_deg, *, height_m=0.10, crest_width_
     cx, cz = np.array(corners).T
     n = int(round((cx[-1] - cx[0]) / step_m)) + 1
     x = np.linspace(cx[0], cx[-1], n)
-    z = np.interp(x, cx, cz)
     # Keep the corners exactly (the flanks must be exact straight lines between them).
-    x = np.union1d(x, cx)
+    far = np.min(np.abs(x[:, None] - cx[None, :]), axis=1) > 1e-3 * step_m
+    x = np.union1d(x[far], cx)
     z = np.interp(x, cx, cz)
 
     if roughness_m > 0.0:
@@ -191,7 +191,8 @@ def heap_profile(angle_left_deg, angle_right_deg, *, height_m=0.10, crest_width_
         r *= roughness_m / r.std()
         # Taper to zero at the floor and at the crest height, so that the toes stay on the
         # floor and the crest keeps its height.
-        rough = r * np.clip(z / (3.0 * roughness_m), 0.0, 1.0) * np.clip((h - z) / (3.0 * roughness_m), 0.0, 1.0)
+        taper = np.clip(z / (3.0 * roughness_m), 0.0, 1.0) * np.clip((h - z) / (3.0 * roughness_m), 0.0, 1.0)
+        rough = r * taper
         on_flanks = np.zeros(x.size, bool)
         for a, b in flanks:
             rough = _trend_free(x, z, rough, a, b, h, trend_free_band)
@@ -211,14 +212,14 @@ def _trend_free(x, z, rough, a, b, height, band):
     part = flank & (z >= band[0] * height) & (z <= band[1] * height)
     xm = x - 0.5 * (a + b)
     cols, rows = [], []
-    for rng_mask in (flank, part):
-        xs = x[rng_mask]
+    for on in (flank, part):
+        xs = x[on]
         if xs.size < 3:
             continue
         bump = np.zeros_like(x)
-        bump[rng_mask] = np.sin(np.pi * (xs - xs[0]) / (xs[-1] - xs[0]))
+        bump[on] = np.sin(np.pi * (xs - xs[0]) / (xs[-1] - xs[0]))
         cols += [bump, bump * xm]
-        rows += [rng_mask, rng_mask]
+        rows += [on, on]
     # Constraint k: sum over range_k of (rough - sum_j c_j col_j) * basis_k = 0.
     basis = [np.ones_like(x), xm] * (len(rows) // 2)
     m = np.array([[np.sum((col * bk)[rk]) for col in cols] for bk, rk in zip(basis, rows)])
@@ -329,13 +330,15 @@ def heap_photo(profile_x_m, profile_z_m, *, rng, px_per_m=2500.0, camera_roll_de
 
     img = _backdrop(ch, cw, scene, grid, s, col0, row0, rng)
     img = cv2.GaussianBlur(img, (0, 0), 0.8)     # the backdrop is behind the focal plane
-    _floor(img, scene, row0, s, rng)
     px = col0 + x * s
     pz = row0 - z * s
     _shadow(img, px, pz, row0, seg_dia, light)
     _heap(img, px, pz, row0, seg_len, seg_dia, scene, texture, rng)
     if strays and texture:
         _strays(img, px, pz, row0, seg_len, seg_dia, scene, int(strays), rng)
+    # The floor plate is in front of the heap's base: drawn last, it hides whatever of the
+    # segments at the toes reaches below its far edge.
+    _floor(img, scene, row0, s, rng)
 
     # Scene illumination (a gradient across the frame), then the camera.
     xx = np.arange(cw, dtype=np.float32)[None, :] - 0.5 * cw
@@ -371,7 +374,8 @@ def silhouette(centres_xz_m, radii_m, *, px_per_m, extent, floor_z_m=0.0):
 
     Each sphere projects to a disc; the floor (z <= ``floor_z_m``) is drawn as part of the
     object so that :func:`measure.repose.angle_from_photo` finds the floor line as it does in a
-    photo. Edges are anti-aliased.
+    photo. Edges are anti-aliased: a pixel's grey level is its covered fraction, from the
+    distance of its centre to the circle (exact area to a fraction of a pixel per disc).
 
     Parameters
     ----------
@@ -408,22 +412,24 @@ def silhouette(centres_xz_m, radii_m, *, px_per_m, extent, floor_z_m=0.0):
     if w < 8 or h < 8 or w * h > 64e6:
         raise InputError(f"silhouette: image of {h} x {w} px from extent {extent!r} and "
                          f"px_per_m {px_per_m!r} is out of range")
-    img = np.full((h, w), 255, np.uint8)
+    # Coverage of each pixel (0..1); pixel (i, j) is the square [j, j+1) x [i, i+1).
+    cover = np.zeros((h, w), np.float32)
     if floor_z_m is not None:
-        fr = (z1 - float(floor_z_m)) * s
-        if fr < h:
-            top = max(int(math.ceil(fr)), 0)
-            img[top:] = 0
-            if 0 < top and top - fr > 0:          # partial row: its covered fraction
-                img[top - 1] = np.uint8(round(255 * (1.0 - (top - fr))))
+        fr = (z1 - float(floor_z_m)) * s              # floor line, in rows from the top
+        rows = np.arange(h, dtype=np.float32)
+        cover[:] = np.clip(rows + 1.0 - fr, 0.0, 1.0)[:, None]
     cols = (c[:, 0] - x0) * s
     rows = (z1 - c[:, 1]) * s
     rad = r * s
     keep = (cols + rad > 0) & (cols - rad < w) & (rows + rad > 0) & (rows - rad < h)
     for cc, rr, ra in zip(cols[keep], rows[keep], rad[keep]):
-        cv2.circle(img, (int(round(cc * _ONE)), int(round(rr * _ONE))), int(round(ra * _ONE)),
-                   0, -1, cv2.LINE_AA, _SHIFT)
-    return img
+        # Anti-aliased disc: coverage from the distance of the pixel centre to the circle.
+        i0, i1 = max(int(rr - ra) - 1, 0), min(int(rr + ra) + 2, h)
+        j0, j1 = max(int(cc - ra) - 1, 0), min(int(cc + ra) + 2, w)
+        dist = np.hypot(np.arange(j0, j1, dtype=np.float32)[None, :] + 0.5 - cc,
+                        np.arange(i0, i1, dtype=np.float32)[:, None] + 0.5 - rr)
+        np.maximum(cover[i0:i1, j0:j1], np.clip(ra - dist + 0.5, 0.0, 1.0), out=cover[i0:i1, j0:j1])
+    return np.rint(255.0 * (1.0 - cover)).astype(np.uint8)
 
 
 # ----------------------------------------------------------------------------------------
@@ -434,7 +440,8 @@ def _pt(x, y):
 
 
 def _backdrop(ch, cw, scene, grid, s, col0, row0, rng):
-    """Backdrop with mottled light, paper grain and grid lines every 5 mm (bold every 10 mm)."""
+    """Backdrop with mottled light, paper grain and grid lines every 5 mm (stronger every
+    10 mm, thicker every 50 mm), aligned with the floor."""
     base = np.array(scene["backdrop"], np.float32)
     img = np.empty((ch, cw, 3), np.float32)
     img[:] = base
@@ -451,7 +458,6 @@ def _backdrop(ch, cw, scene, grid, s, col0, row0, rng):
             colour = scene["major"] if k % 2 == 0 else scene["minor"]
             thick = 2 if (k % 10 == 0 and pitch > 8) else 1
             cv2.line(img, _pt(c, 0), _pt(c, row0), colour, thick, cv2.LINE_AA, _SHIFT)
-        k0 = int(math.floor(-(ch - row0) / pitch)) - 1
         for k in range(1, int(row0 / pitch) + 2):
             r = row0 - k * pitch
             colour = scene["major"] if k % 2 == 0 else scene["minor"]
@@ -463,7 +469,8 @@ def _backdrop(ch, cw, scene, grid, s, col0, row0, rng):
 def _floor(img, scene, row0, s, rng):
     """Floor plate below z = 0: top face seen at a grazing angle, front edge, then the bench."""
     ch, cw = img.shape[:2]
-    r0 = int(round(row0))
+    r0 = int(math.ceil(row0))
+    above = img[r0 - 1].copy() if r0 > 0 else None
     top = max(int(0.035 * s), 6)                # visible depth of the top face [px]
     edge = max(int(0.004 * s), 2)               # plate thickness [px]
     rows = np.arange(r0, ch, dtype=np.float32)
@@ -476,7 +483,11 @@ def _floor(img, scene, row0, s, rng):
     img[r0:] = colour[:, None, :]
     # Brushed / grained texture: horizontal streaks.
     streak = ndimage.gaussian_filter(rng.standard_normal((ch - r0, cw)), (0.6, 25.0))
-    img[r0:] *= (1.0 + 0.25 * streak / (streak.std() + 1e-12) * 0.1)[..., None].astype(np.float32)
+    img[r0:] *= (1.0 + 0.025 * streak / (streak.std() + 1e-12))[..., None].astype(np.float32)
+    if above is not None:
+        # The row cut by the floor line: blend backdrop and floor by the covered fraction.
+        f = r0 - row0
+        img[r0 - 1] = (1.0 - f) * above + f * img[r0]
 
 
 def _shadow(img, px, pz, row0, seg_dia, light):
@@ -511,14 +522,14 @@ def _bgr(c, gain=1.0, add=0.0):
 def _draw_segment(img, cx, cy, phi, seg_len, seg_dia, tilt, colour, rng, floor_row=None):
     """One root segment: a shaded capsule with bark wrinkles and, when tilted toward the
     camera by ``tilt`` [rad], an elliptical cut face at one end; seen end-on it is a disc.
-    A segment that would reach below ``floor_row`` is lifted onto the floor."""
+    With ``floor_row`` it rests on the floor (its lowest point on that row)."""
     dia = seg_dia * rng.uniform(0.85, 1.15)
     proj = max(seg_len * rng.uniform(0.85, 1.15) * math.cos(tilt), dia)
     u = np.array([math.cos(phi), -math.sin(phi)])          # axis, image coordinates
     v = np.array([math.sin(phi), math.cos(phi)])           # across the axis
     half = 0.5 * (proj - dia)
     if floor_row is not None:
-        cy = min(cy, floor_row - half * abs(u[1]) - 0.5 * dia)
+        cy = floor_row - half * abs(u[1]) - 0.5 * dia  # resting on the floor
     p1 = (cx - half * u[0], cy - half * u[1])
     p2 = (cx + half * u[0], cy + half * u[1])
     # Cylinder shading: nested strokes from the dark limb to the lit middle, shifted toward
@@ -620,7 +631,7 @@ def _heap(img, px, pz, row0, seg_len, seg_dia, scene, texture, rng):
             phi = math.atan2(-ty, tx) + rng.normal(0.0, math.radians(spread))
             tilt = min(abs(rng.normal(0.0, 0.4)), 1.3)
             _draw_segment(img, x + nx * depth_in, y + ny * depth_in, phi, seg_len, seg_dia,
-                          tilt, _segment_colour(scene, rng), rng, floor_row=row0)
+                          tilt, _segment_colour(scene, rng), rng)
 
 
 def _strays(img, px, pz, row0, seg_len, seg_dia, scene, n, rng):

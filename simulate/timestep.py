@@ -9,6 +9,11 @@ rho, G and nu its material's density, shear modulus and Poisson's ratio.
 demcal refuses a step above ``DEFAULT_MAX_FRACTION`` = 0.5 of T_R unless forced. The paper's
 7.43678e-5 s is 0.41 T_R for its 5.5 mm spheres at G = 1e7 Pa, nu = 0.25, rho = 912 kg/m3.
 
+Accuracy at that step: a Hertz impact of these spheres at 0.5-2 m/s lasts only 6-8 steps, so
+the restitution the integrator realises differs from the set one: measured for a sphere on
+steel and two spheres, e = 0.3 gives 0.30-0.32, e = 0.35 gives 0.36-0.37, e = 0.5 gives
+0.51-0.52 and e = 0.1 gives 0.07-0.08. At dt < 0.01 T_R it is within 1 % (the tests).
+
 References
 ----------
 Li, Y., Xu, Y., Thornton, C. (2005). A comparison of discrete element simulations and

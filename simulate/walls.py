@@ -133,7 +133,8 @@ def pack_walls(walls, material_index) -> dict:
             raise InputError(f"not a wall: {w!r}")
         out["velocity"][k] = np.asarray(w.velocity, float).reshape(3)
         if not w.move_stop >= w.move_start:
-            raise InputError(f"wall {w.name!r}: move_stop ({w.move_stop!r}) before move_start ({w.move_start!r})")
+            raise InputError(f"wall {w.name!r}: move_stop ({w.move_stop!r}) is before "
+                             f"move_start ({w.move_start!r})")
         out["window"][k] = (w.move_start, w.move_stop)
         out["material"][k] = material_index(w.material)
     return out

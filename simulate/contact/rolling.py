@@ -17,19 +17,27 @@ k_n d_n), and the lever arm ``R_lever`` chosen by name (``ROLLING_LEVERS``):
     LIGGGHTS ``rolling_friction cdt``: R_eff = R_i R_j / (R_i + R_j) between particles and the
     sphere radius against walls; ``w`` is the relative angular velocity w_i - w_j (the body's
     own against a wall), the torque has its component along the contact normal removed and is
-    applied as an equal and opposite pair (so it conserves angular momentum).
+    applied as an equal and opposite pair (so it conserves angular momentum while both bodies
+    roll).
 
 For a clump the three differ several-fold: a segment touching the floor at its end sphere has
 a lever of about 12 mm with ``edem_com``, 5.5 mm with ``edem_sphere`` and 2.75 mm with
 ``liggghts_reff`` against another sphere.
 
 Cap. A constant torque does not vanish as w -> 0, so an explicit step makes the body spin back
-and forth. The engine therefore applies the summed rolling torque of a body after its other
-torques, with the direction w taken from the angular velocity those other torques give, and
-scales the rolling impulse down so that it at most brings the spin about the current rotation
-axis to zero within the (half) step; it never reverses the rotation. A body whose driving
-torque is below the rolling resistance thus comes to rest exactly, as the continuous model
-says (``cap_rolling_impulse``).
+and forth (Ai et al. 2011). The engine therefore applies the rolling torque of a body after its
+other torques, in each half step of the integrator (``simulate.integrate.half_kick``):
+
+1. if the summed resistance sum(mu_r F_n R_lever) over the half step could absorb the body's
+   whole angular momentum, the rotation stops: the torque acts as a static constraint up to
+   its magnitude, so a body whose driving torque is below the rolling resistance rests
+   exactly, as the continuous model says;
+2. otherwise the torque acts in full, with w the angular velocity the other torques give, its
+   impulse scaled down only so that it never reverses the spin about the current rotation axis
+   (``cap_rolling_impulse``; this matters for the anisotropic inertia of a clump).
+
+Without step 1 a pile of clumps creeps: each body's spin is driven to a nearby axis instead of
+to zero every step, and the contacts slip a little each time.
 
 References
 ----------

@@ -55,7 +55,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from demcal.errors import InputError
+from demcal.errors import InputError, WorkbookError
 from demcal.provenance import Provenance
 from simulate.params import DEMParameters
 from simulate.rigs import RigResult, RunTally, check_seed, run_meta
@@ -106,28 +106,33 @@ class ReposeGeometry:
         object.__setattr__(self, "fill_count", int(self.fill_count))
 
     @classmethod
-    def from_meta(cls, meta: dict) -> "ReposeGeometry":
+    def from_meta(cls, meta: dict, file=None) -> "ReposeGeometry":
         """From a workbook ``meta`` dict (keys ``box_length_mm``, ``box_width_mm``,
         ``box_height_mm``, ``plate_lift_speed_mm_s``, ``fill_count``; lab-workbook.md); a
-        missing or empty key keeps the default (200, 100, 250 mm, 100 mm/s, 500)."""
+        missing or empty key keeps the default (200, 100, 250 mm, 100 mm/s, 500). A bad value
+        raises ``WorkbookError`` naming the sheet, the key and the value (and ``file``)."""
         values = {}
         for key, (name, factor) in cls.META_KEYS.items():
             raw = meta.get(key) if meta else None
             if raw is None or (isinstance(raw, str) and not raw.strip()):
                 continue
+
+            def bad(why):
+                return WorkbookError(f"meta {key}: {why}", file=file, sheet="meta", column="value", value=raw)
+
             try:
                 number = float(raw)
             except (TypeError, ValueError):
-                raise InputError(f"workbook meta {key}: needs a number, got {raw!r}") from None
+                raise bad("needs a number") from None
+            if not (math.isfinite(number) and number > 0):
+                raise bad("must be positive")
             if name == "fill_count":
                 if number != int(number):
-                    raise InputError(f"workbook meta {key}: needs a whole number, got {raw!r}")
-                number = int(number)
-            values[name] = number * factor if name != "fill_count" else number
-        try:
-            return cls(**values)
-        except InputError as exc:
-            raise InputError(f"workbook meta: {exc}") from None
+                    raise bad("needs a whole number")
+                values[name] = int(number)
+            else:
+                values[name] = number * factor
+        return cls(**values)
 
     def scaled(self, factor: float) -> "ReposeGeometry":
         """The carton scaled by ``factor`` in every dimension, the fill count by its cube (at
@@ -346,7 +351,7 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
         Materials, contact parameters, segment shape, mass model, rolling lever.
     seed : int
         Seed of the particle factory.
-    profile : {"paper", "quick"}
+    profile : {"paper", "quick"} or ReposeProfile
         How the run is carried out (``PROFILES``).
     geometry : ReposeGeometry, optional
         Carton, lift speed and fill count; default the paper's (workbook defaults).
@@ -369,9 +374,12 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
     seed = check_seed(seed)
     if not isinstance(params, DEMParameters):
         raise InputError(f"params must be a DEMParameters, got {type(params).__name__}")
-    if profile not in PROFILES:
+    if isinstance(profile, ReposeProfile):
+        prof = profile
+    elif profile in PROFILES:
+        prof = PROFILES[profile]
+    else:
         raise InputError(f"unknown repose profile {profile!r}; valid: {', '.join(PROFILES)}")
-    prof = PROFILES[profile]
     base = geometry if geometry is not None else ReposeGeometry()
     if not isinstance(base, ReposeGeometry):
         raise InputError(f"geometry must be a ReposeGeometry, got {type(base).__name__}")
@@ -390,11 +398,19 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
     chunk = 0.05                      # simulated seconds between checks [s]
 
     def advance(seconds):
-        tally.add(sim.run(duration=seconds))
+        n = int(round(seconds / prof.dt))
+        if n < 1:
+            return False
+        tally.add(sim.run(n_steps=n))
         ke_t.append(sim.time)
         ke.append(sim.kinetic_energy())
         if callback is not None:
             callback(sim, prof.duration, False)
+        return True
+
+    def advance_to(t_target):
+        while advance(min(chunk, t_target - sim.time)):
+            pass
 
     def rms_speed():
         act = sim.active()
@@ -402,16 +418,14 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
         return math.sqrt(2.0 * sim.kinetic_energy() / m) if m > 0 else 0.0
 
     # fill, then (quick) wait for the fill to settle and lift the plate
+    advance_to(prof.fill_time)
     t_lift = prof.lift_time
-    while sim.time < prof.fill_time - 1e-9:
-        advance(min(chunk, prof.fill_time - sim.time))
     if t_lift is None:
         while sim.time < 0.5 * prof.duration and rms_speed() > SETTLED_SPEED:
             advance(chunk)
         t_lift = sim.time
     else:
-        while sim.time < t_lift - 1e-9:
-            advance(min(chunk, t_lift - sim.time))
+        advance_to(t_lift)
     # the plate is clear once its lower edge is a segment diameter above the highest sphere
     z_top = float((sim.sphere_positions()[:, 2] + sim.sphere_radii()).max()) if sim.n_spheres else 0.0
     t_clear = t_lift + (z_top + params.segment_diameter_m) / geo.lift_speed
@@ -420,8 +434,7 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
     else:
         sim.set_wall_motion(plate, (0.0, 0.0, geo.lift_speed), t_lift)
     # flow and settle
-    while sim.time < prof.duration - 1e-9:
-        advance(min(chunk, prof.duration - sim.time))
+    while advance(min(chunk, prof.duration - sim.time)):
         if prof.early_end and sim.time > t_clear + 0.2 and rms_speed() < SETTLED_SPEED:
             break
     if callback is not None:
@@ -448,8 +461,8 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
            "body_positions": body[act], "geometry": geo.to_dict(), "t_lift": t_lift, "t_clear": t_clear,
            "t_end": sim.time, "ke_t": np.array(ke_t), "ke": np.array(ke),
            "escapes": [e.to_dict() for e in sim.escaped]}
-    options = {"profile": profile, "geometry": base.to_dict(), "force": force}
-    meta = run_meta(seed, prof.dt, tally, sim.n_spheres, sim.time, profile=profile, notes=notes,
+    options = {"profile": prof.name, "geometry": base.to_dict(), "force": force}
+    meta = run_meta(seed, prof.dt, tally, sim.n_spheres, sim.time, profile=prof.name, notes=notes,
                     profile_settings=prof.to_dict(), bodies=sim.n_bodies,
                     inserted=sum(f.inserted for f in sim.factories))
     return RigResult("repose", observable, rec, meta, params.to_dict(), Provenance(seed=seed, options=options))

@@ -53,7 +53,7 @@ def heap_photo_params(k, n=N_PHOTOS, seed=20240):
     h, w = PHOTO_SIZE
     angle = 20.0 + 30.0 * (k + rng.uniform()) / n
     kind = ("cone", "right", "left")[k % 3]
-    p = {"kind": kind, "height_m": rng.uniform(0.12, 0.18), "roughness_m": rng.uniform(0.0, 0.001)}
+    p = {"kind": kind, "height_m": rng.uniform(0.14, 0.2), "roughness_m": rng.uniform(0.0, 0.001)}
     height = p["height_m"]
     if kind == "cone":
         other = float(np.clip(angle + rng.uniform(-5, 5), 20, 50))
@@ -221,13 +221,28 @@ def test_profile_single_flank_and_band_argument():
         angle_from_profile(x, z, side="both")
 
 
-def test_profile_outlier_is_rejected():
-    """A spike (a segment standing on the flank) does not move the robust line."""
+def test_profile_spike_is_rejected_but_waviness_is_not():
+    """A narrow spike (a stick standing 15 mm up, 4 mm wide) does not move the robust line,
+    while plain least squares through the same band would; a wide bump is roughness and is
+    kept (the fit is then the least-squares line, computed here with numpy.polyfit)."""
     x, z = heap_profile(30.0, 30.0, height_m=0.1, step_m=0.0005)
     spiky = z.copy()
-    i = np.argmin(np.abs(x - (-0.09)))                        # mid left flank
-    spiky[i - 10:i + 10] += 0.012
-    assert angle_from_profile(x, spiky).flanks["left"] == pytest.approx(30.0, abs=0.05)
+    mid = (x > -0.042) & (x < -0.038)                         # high on the left flank
+    spiky[mid] += 0.015
+    result = angle_from_profile(x, spiky)
+    assert result.flanks["left"] == pytest.approx(30.0, abs=0.01)
+    assert result.fits["left"].n_rejected == mid.sum()
+    lo, hi = result.fits["left"].u_range
+    band = (x >= lo) & (x <= hi)
+    naive = math.degrees(math.atan(np.polyfit(x[band], spiky[band], 1)[0]))
+    assert abs(naive - 30.0) > 0.1
+    wavy = z + np.where(np.abs(x + 0.09) < 0.02, 0.004 * np.cos(np.pi * (x + 0.09) / 0.04) ** 2, 0.0)
+    result = angle_from_profile(x, wavy)
+    assert result.fits["left"].n_rejected == 0
+    lo, hi = result.fits["left"].u_range
+    band = (x >= lo) & (x <= hi)
+    expected = math.degrees(math.atan(np.polyfit(x[band], wavy[band], 1)[0]))
+    assert result.flanks["left"] == pytest.approx(expected, abs=1e-9)
 
 
 def test_roughness_is_trend_free_over_flank_and_band():
@@ -266,6 +281,24 @@ def test_dem_silhouette_of_spheres_in_a_cone():
     assert result.base_tilt_deg == pytest.approx(0.0, abs=0.05)
 
 
+def test_dem_single_flank_against_the_box_wall():
+    """The plate-withdrawal heap of the DEM rig: spheres held by the box's back wall (a
+    vertical face at x = 0) and one 32 deg slope. "auto" measures the slope only; "both"
+    refuses the wall face, naming it."""
+    rng = np.random.default_rng(1)
+    radius, height, angle = 0.0055, 0.12, 32.0
+    xs, zs = rng.uniform(0, 0.4, 8000), rng.uniform(0, height, 8000)
+    top = np.minimum(height, height - math.tan(math.radians(angle)) * (xs - 0.05))
+    inside = (zs <= top - radius) & (xs >= radius)
+    centres = np.c_[xs[inside], np.maximum(zs[inside], radius)]
+    img = silhouette(centres, radius, px_per_m=2500, extent=(-0.1, 0.4, -0.05, 0.2))
+    result = angle_from_photo(img, side="auto")
+    assert result.flanks["left"] is None
+    assert result.flanks["right"] == pytest.approx(angle, abs=0.5)
+    with pytest.raises(InputError, match="left flank is too steep"):
+        angle_from_photo(img, side="both")
+
+
 def test_silhouette_disc_area_position_and_floor():
     img = silhouette([[0.01, 0.02]], 0.004, px_per_m=5000, extent=(0.0, 0.04, -0.01, 0.03))
     assert img.shape == (200, 200)
@@ -274,9 +307,9 @@ def test_silhouette_disc_area_position_and_floor():
     assert np.all(floor_rows == 1.0)
     disc = cover[:149]
     assert disc.sum() == pytest.approx(math.pi * 20.0 ** 2, rel=0.01)   # r = 20 px
-    rows, cols = np.indices(disc.shape)
-    assert (disc * cols).sum() / disc.sum() == pytest.approx(50.0, abs=0.5)   # x = 10 mm
-    assert (disc * rows).sum() / disc.sum() == pytest.approx(50.0, abs=0.5)   # z = 20 mm
+    rows, cols = np.indices(disc.shape) + 0.5                 # pixel centres
+    assert (disc * cols).sum() / disc.sum() == pytest.approx(50.0, abs=0.02)  # x = 10 mm
+    assert (disc * rows).sum() / disc.sum() == pytest.approx(50.0, abs=0.02)  # z = 20 mm
     assert silhouette([[0.01, 0.02]], 0.004, px_per_m=5000, extent=(0.0, 0.04, -0.01, 0.03),
                       floor_z_m=None)[180:].min() == 255
 

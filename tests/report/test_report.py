@@ -77,8 +77,9 @@ def test_pdf_holds_the_nine_tables_the_equation_and_the_figures(campaign):
         assert f"Table {tid}" in text, tid
     assert "0.01<P<0.05, significant effect" in flat and "P<0.01, highly significant" in flat
     # eq. (5): ours in coded terms (intercept as stored) and the paper's beside it
-    b0 = campaign["results"]["box_behnken"]["fit"]["coefficients"]["Intercept"]
-    assert f"θ = {b0:.4g}" in flat
+    fit = campaign["results"]["box_behnken"]["fit"]
+    assert f"θ = {fit['coefficients']['Intercept']:.4g}" in flat
+    assert f"R² {fit['fit']['r2']:.4g} 0.9717" in flat  # Table 9a: ours beside the paper's
     assert "θ = 35.65 − 0.5775 A − 0.66 B + 0.22 C + 2.45 AB" in flat
     for n, words in enumerate(("Image processing of the heap photos", "Pareto chart",
                                "Steepest climb", "Response surfaces", "Validation"), 1):
@@ -261,10 +262,7 @@ def test_html_works_offline(campaign):
     assert not re.search(r"url\(\s*['\"]?(https?:)?//", text)
 
 
-def test_critique_section_renders_critique_json(campaign, tmp_path):
-    from report.render import render_html
-    from report.tables import build_tables, load_campaign
-
+def test_report_command_renders_critique_json(campaign, tmp_path, capsys):
     out = tmp_path / "copy"
     shutil.copytree(campaign["out"], out)
     critique = {"discrepancies": [{"observable": "restitution.particle-steel", "measured": 0.35,
@@ -274,13 +272,15 @@ def test_critique_section_renders_critique_json(campaign, tmp_path):
                               "ci95": [-0.2, -0.04], "p_adjusted": 0.003}],
                 "extensions": []}
     (out / "critique.json").write_text(json.dumps(critique))
-    c = load_campaign(out)
-    tables = {t.id: t for t in build_tables(c)}
-    assert tables["C2"].columns == ("mechanism", "verdict", "sheet", "covariate", "effect", "ci95",
-                                    "p_adjusted")
-    assert tables["C2"].rows == (("velocity-dependent restitution", "supported", "drop",
-                                  "drop_height_mm", -0.12, [-0.2, -0.04], 0.003),)
-    assert tables["C3"].rows == ()
-    html = render_html(c, [t.to_dict() for t in tables.values()], [])
+    assert main(["report", str(out), "--no-pdf"]) == 0
+    assert f"report: {out / 'report.html'}" in capsys.readouterr().out
+    tables = {t["id"]: t for t in json.loads((out / "tables.json").read_text())["tables"]}
+    assert tables["C2"]["columns"] == ["mechanism", "verdict", "sheet", "covariate", "effect", "ci95",
+                                       "p_adjusted"]
+    assert tables["C2"]["rows"] == [["velocity-dependent restitution", "supported", "drop",
+                                     "drop_height_mm", -0.12, [-0.2, -0.04], 0.003]]
+    assert tables["C1"]["rows"][0][0] == "restitution.particle-steel" and tables["C3"]["rows"] == []
+    html = (out / "report.html").read_text(encoding="utf-8")
     assert "Critique of the calibrated model" in html and "velocity-dependent restitution" in html
     assert "Table C3" in html
+    assert (out / "tables.json").read_text().count("critique.json") >= 3  # hashed and named as source

@@ -53,3 +53,16 @@ def test_polynomial_evaluates_design_expert_terms():
     #                                   + 0.7408 + 0.6557 - 0.2775
     expected = 35.65 - 0.5775 + 0.66 + 0.11 - 2.45 - 0.24625 - 0.705 + 0.7408 + 0.6557 - 0.2775
     assert polynomial(coef, x) == pytest.approx([35.65, expected], rel=1e-12)
+
+
+def test_heap_profile_reads_both_record_layouts():
+    from report.figures import heap_profile
+
+    standin = {"result": {"record": {"profile": {"x": [0.0, 0.1, 0.2], "z": [0.08, 0.08, 0.0]}}}}
+    rig = {"result": {"record": {"profile_x": [0.0, 0.1, 0.2, 0.3], "profile_z": [0.05, float("nan"), 0.02, 0.0],
+                                 "geometry": {"box_length": 0.12}}}}
+    a, b = heap_profile(standin), heap_profile(rig)
+    assert a["x"].tolist() == [0.0, 0.1, 0.2] and a["plate_x"] is None
+    assert b["x"].tolist() == [0.0, 0.2, 0.3] and b["z"].tolist() == [0.05, 0.02, 0.0]
+    assert b["plate_x"] == 0.12
+    assert heap_profile({"result": {"record": {}}}) is None

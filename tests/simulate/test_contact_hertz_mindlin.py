@@ -35,7 +35,7 @@ def beta(e):
 
 # ---------------------------------------------------------------- restitution (velocity ratio)
 @pytest.mark.parametrize("e", [0.1, 0.3, 0.5, 0.7, 0.9])
-def test_sphere_on_plate_rebounds_with_set_restitution(e):
+def test_restitution_damping_tsuji1992_sphere_on_plate(e):
     # dt = 1e-6 s resolves the ~0.5 ms contact in ~500 steps; no gravity: the pure impact
     sim = simulation(DEMParameters(e_pw=e), dt=1e-6)
     tpl = sphere_template(sim)
@@ -46,7 +46,7 @@ def test_sphere_on_plate_rebounds_with_set_restitution(e):
 
 
 @pytest.mark.parametrize("e", [0.1, 0.3, 0.5, 0.7, 0.9])
-def test_sphere_on_sphere_rebounds_with_set_restitution(e):
+def test_restitution_damping_tsuji1992_sphere_on_sphere(e):
     sim = simulation(DEMParameters(e_pp=e), dt=1e-6)
     tpl = sphere_template(sim)
     sim.add_clump(tpl, (0.0, 0.0, 0.0), velocity=(0.6, 0.0, 0.0))
@@ -80,7 +80,8 @@ def test_hertz_contact_time_johnson1985_sphere_on_plate():
     t_c = 2.868 * (sphere_mass() ** 2 / (R * e_star(PARTICLE, STEEL) ** 2 * v)) ** 0.2
     assert steps * 2e-7 == pytest.approx(t_c, rel=0.03)
     # the library's own formula is the same expression
-    assert contact_duration_elastic(sphere_mass(), R, e_star(PARTICLE, STEEL), v) == pytest.approx(t_c, rel=1e-12)
+    ours = contact_duration_elastic(sphere_mass(), R, e_star(PARTICLE, STEEL), v)
+    assert ours == pytest.approx(t_c, rel=1e-12)
 
 
 def test_hertz_contact_time_johnson1985_two_spheres():
@@ -127,7 +128,7 @@ def _hand_forces(v_a, v_b, w_a, w_b, overlap=1e-4, e=0.3, mu_s=0.65):
     return force, np.cross(arm_a, force), f_n
 
 
-def test_two_sphere_forces_by_hand():
+def test_two_sphere_forces_by_hand_from_design_formulas():
     case = dict(v_a=(0.3, 0.2, 0.0), v_b=(-0.1, 0.0, 0.05), w_a=(0.0, 0.0, 5.0), w_b=(1.0, 0.0, 0.0))
     sim = _two_sphere_state(**case)
     force, torque = sim.contact_forces()
@@ -138,7 +139,7 @@ def test_two_sphere_forces_by_hand():
     np.testing.assert_allclose(torque[0], t_hand, rtol=1e-10, atol=1e-14)
 
 
-def test_two_sphere_coulomb_cap_by_hand():
+def test_two_sphere_coulomb_cap_by_hand_from_design_formulas():
     # a fast sideways slip: the tangential dashpot alone would exceed mu_s F_n
     case = dict(v_a=(0.0, 3.0, 0.0), v_b=(0.0, -3.0, 0.0), w_a=(0.0, 0.0, 0.0), w_b=(0.0, 0.0, 0.0))
     sim = _two_sphere_state(**case)

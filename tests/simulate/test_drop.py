@@ -16,7 +16,7 @@ import pytest
 from simulate import DEMParameters
 from simulate.clump import segment_template
 from simulate.integrate import matrix_from_quat, random_quaternions
-from tests.simulate.helpers import R, floor, simulation, sphere_template
+from tests.simulate.helpers import floor, simulation, sphere_template
 
 G = 9.81
 
@@ -25,7 +25,8 @@ def _apparent_restitution(sim, template, orientation, drop_height):
     """Release the body with its lowest point 1 mm above the plate, moving at the speed of a
     fall from ``drop_height`` [m]; returns sqrt(h_rebound / h_drop) of the centre of mass."""
     tpl = sim.templates[template]
-    lowest = ((tpl.centres - tpl.centre_of_mass) @ matrix_from_quat(orientation).T)[:, 2].min() - tpl.radii.min()
+    arms = (tpl.centres - tpl.centre_of_mass) @ matrix_from_quat(orientation).T
+    lowest = (arms[:, 2] - tpl.radii).min()
     z_start = -lowest + 1e-3
     v0 = math.sqrt(2 * G * (drop_height - 1e-3))
     sim.add_clump(template, (0.0, 0.0, z_start), orientation, velocity=(0.0, 0.0, -v0))

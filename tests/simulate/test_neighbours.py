@@ -8,7 +8,6 @@ import pytest
 
 from simulate import DEMParameters
 from simulate.clump import segment_template
-from simulate.integrate import random_quaternions
 from simulate.neighbours import build_pair_list, build_wall_list, grid_shape, padded_cell_count
 from simulate.walls import Plane, Rectangle, pack_walls, wall_distances
 from tests.simulate.helpers import R, floor, simulation

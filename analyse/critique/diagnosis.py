@@ -1,0 +1,556 @@
+"""Residual structure: every per-row value and twin residual tested against every covariate.
+
+A *series* is one quantity's per-row values (``restitution.particle-steel`` from the drop
+sheet), or the residuals of a twin (measured minus simulated, per trial), or a per-photo
+difference (left minus right flank). Each series is tested against each covariate of its rows:
+the sheet's own covariates, the design columns that vary (``drop_height_mm``), and, for rows
+that name a ``specimen_id``, the specimen's calliper size and covariates from the
+``specimens`` sheet (``length_mm``, ``diameter_mm``, ``mass_g``, ``moisture_pct``, ``batch``).
+
+Tests (one p-value per series and covariate):
+
+numeric covariate (``trend``)
+    Least squares y = b0 + b1 x + b2 x^2 (x centred and scaled); the p-value is the F-test of
+    b1 = b2 = 0 (a trend or a curvature); with only two distinct values, the t-test of the
+    straight line's slope. The effect is the slope of the straight line y = a + b x [unit of y
+    per unit of x] with its Student-t 95 % interval; the curvature's own p-value is reported.
+categorical covariate (``anova``)
+    One-way analysis of variance over the levels with at least two rows (Fisher 1925). The
+    effect is the range of the level means (largest minus smallest); its interval is the
+    pooled-variance t interval of the difference of those two levels (optimistic: the two
+    extreme levels are chosen after seeing the data).
+paired difference or offset (``mean``)
+    One-sample t-test of the mean (flank difference, floor tilt, twin-minus-contact).
+
+Multiple testing. The p-values of all tests of a workbook are adjusted together, by
+Benjamini & Hochberg (1995) (``"bh"``, default; false discovery rate) or Holm (1979)
+(``"holm"``; family-wise error rate). A test is *significant* when its adjusted p-value is
+below ``alpha`` and *relevant* when its effect over the covariate's observed range (numeric:
+|slope| x range; block: the range of level means; mean: |mean|) reaches the practical
+threshold of its quantity (``PRACTICAL_THRESHOLDS``), so that a tiny but significant effect is
+not reported as a cause.
+
+Identifiers (``*_id``), file columns, and labels that are unique to almost every row are not
+covariates; a covariate with no variation, or too few rows (``MIN_ROWS``), is listed as
+untestable with the reason.
+
+References
+----------
+Benjamini, Y., Hochberg, Y. (1995). Controlling the false discovery rate: a practical and
+powerful approach to multiple testing. J. R. Stat. Soc. B 57(1), 289-300.
+Holm, S. (1979). A simple sequentially rejective multiple test procedure. Scand. J. Stat. 6,
+65-70.
+Fisher, R. A. (1925). Statistical Methods for Research Workers. Oliver & Boyd (analysis of
+variance).
+Montgomery, D. C., Peck, E. A., Vining, G. G. (2012). Introduction to Linear Regression
+Analysis, 5th ed. Wiley, sec. 2.3 and 3.3 (t and F tests of regression coefficients).
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import asdict, dataclass, field, replace
+
+import numpy as np
+from scipy import stats
+
+from demcal.errors import InputError
+
+#: Practical threshold of each quantity family [its unit]: the smallest change over the
+#: covariate's range that matters for a calibration. Restitution and friction: 0.03, about a
+#: third of the spread the source paper reports between specimens (e 0.3 +- 0.1, mu_s 0.65 +-
+#: 0.03, mu_r 0.53 +- 0.03) and the step that moves the paper's regression by about 0.5 deg;
+#: angles: 1 deg, the repose-angle error the paper calls a good validation (0.39 %, 0.14 deg,
+#: with a spread of about 0.3 deg between seeds, is well inside); sizes: 0.5 mm / 0.3 mm /
+#: 0.1 g, the calliper and balance reading a lab reports. Quantities not listed use 5 % of the
+#: series mean (``RELATIVE_THRESHOLD``).
+PRACTICAL_THRESHOLDS = {
+    "restitution": 0.03, "static_friction": 0.03, "rolling_friction": 0.03,
+    "repose_angle_deg": 1.0, "flank_difference_deg": 1.0, "base_tilt_deg": 1.0,
+    "length_mm": 0.5, "diameter_mm": 0.3, "mass_g": 0.1, "poisson_ratio": 0.03,
+}
+RELATIVE_THRESHOLD = 0.05
+
+#: Fewest rows for a test.
+MIN_ROWS = 6
+
+CORRECTIONS = ("bh", "holm")
+
+#: Covariates that are never tested (files and identifiers are recognised by name too).
+NOT_COVARIATES = {"id", "file", "track_file", "curve_file", "side", "annotated"}
+
+#: Specimen columns joined to rows that name a specimen.
+SPECIMEN_SIZE = ("length_mm", "diameter_mm", "mass_g")
+
+
+@dataclass(frozen=True)
+class Series:
+    """Per-row values to test.
+
+    Attributes
+    ----------
+    name : str
+        Quantity name (``restitution.particle-steel``), ``residual:<quantity>`` for a twin
+        residual, or ``flank_difference_deg`` / ``base_tilt_deg`` / ``twin_minus_contact:<q>``.
+    sheet : str
+        Workbook sheet of the rows.
+    source : str
+        ``measured``, ``twin residual`` or ``twin``.
+    family : str
+        Key of its practical threshold (``restitution``, ``static_friction``...).
+    unit : str
+        Unit of the values.
+    rows : tuple of int
+        Data rows (1 = first row under the header).
+    values : tuple of float
+    covariates : dict
+        Covariate name -> tuple of values (None where missing), one per row.
+    test : str
+        ``covariates`` (against each covariate) or ``mean`` (one-sample test of the mean).
+    """
+
+    name: str
+    sheet: str
+    source: str
+    family: str
+    unit: str
+    rows: tuple
+    values: tuple
+    covariates: dict = field(default_factory=dict)
+    test: str = "covariates"
+
+    @property
+    def threshold(self) -> float:
+        if self.family in PRACTICAL_THRESHOLDS:
+            return PRACTICAL_THRESHOLDS[self.family]
+        y = np.asarray(self.values, dtype=float)
+        return RELATIVE_THRESHOLD * abs(float(np.mean(y))) if y.size else math.nan
+
+
+@dataclass(frozen=True)
+class CovariateTest:
+    """One test of a series against a covariate (or of its mean).
+
+    Attributes
+    ----------
+    series, sheet, source : str
+        As in :class:`Series`.
+    covariate : str
+        Covariate tested (``side`` for a flank difference, ``floor`` for a floor tilt,
+        ``orientation_deg`` for the twin-minus-contact offset).
+    method : str
+        ``trend``, ``line``, ``anova`` or ``mean``.
+    n : int
+        Rows used.
+    effect : float
+        Slope [unit per covariate unit], range of level means [unit] or mean [unit].
+    ci95 : tuple of float
+        95 % interval of ``effect``.
+    effect_unit : str
+    span : float or None
+        Range of the covariate over the rows (numeric covariates).
+    practical : float
+        Size of the effect over the covariate's range [unit].
+    threshold : float
+        Practical threshold [unit].
+    p_value : float
+        Unadjusted p-value.
+    p_curvature : float or None
+        p-value of the quadratic term (``trend``).
+    p_adjusted : float
+        After the multiple-testing correction (NaN before :func:`adjust`).
+    significant : bool
+        ``p_adjusted < alpha``.
+    relevant : bool
+        ``practical >= threshold``.
+    levels : dict
+        Level -> (mean, n) for ``anova``.
+    """
+
+    series: str
+    sheet: str
+    source: str
+    covariate: str
+    method: str
+    n: int
+    effect: float
+    ci95: tuple
+    effect_unit: str
+    span: float | None
+    practical: float
+    threshold: float
+    p_value: float
+    p_curvature: float | None = None
+    p_adjusted: float = math.nan
+    significant: bool = False
+    relevant: bool = False
+    levels: dict = field(default_factory=dict)
+
+    @property
+    def quantity(self) -> str:
+        """The quantity behind the series (``residual:`` and similar prefixes removed)."""
+        return self.series.split(":", 1)[-1]
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["ci95"] = list(self.ci95)
+        return d
+
+
+@dataclass(frozen=True)
+class Untestable:
+    """A series-covariate pair that could not be tested, and why."""
+
+    series: str
+    sheet: str
+    source: str
+    covariate: str
+    reason: str
+    kind: str = "numeric"
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+# ----------------------------------------------------------------------------------------------
+# multiple testing
+
+
+def adjust_pvalues(p, method: str = "bh") -> np.ndarray:
+    """Adjusted p-values of a family of tests.
+
+    ``"bh"``: Benjamini & Hochberg (1995) step-up, p_(i) m / i made monotone from the largest;
+    ``"holm"``: Holm (1979) step-down, (m - i + 1) p_(i) made monotone from the smallest; both
+    capped at 1. NaN p-values are returned as NaN and do not count in m.
+    """
+    if method not in CORRECTIONS:
+        raise InputError(f"unknown multiple-testing correction {method!r}; valid: {', '.join(CORRECTIONS)}")
+    p = np.asarray(p, dtype=float)
+    out = np.full(p.shape, np.nan)
+    ok = np.isfinite(p)
+    q = p[ok]
+    m = q.size
+    if m == 0:
+        return out
+    order = np.argsort(q)
+    ranked = q[order]
+    i = np.arange(1, m + 1)
+    if method == "bh":
+        adj = np.minimum.accumulate((ranked * m / i)[::-1])[::-1]
+    else:
+        adj = np.maximum.accumulate(ranked * (m - i + 1))
+    adj = np.minimum(adj, 1.0)
+    back = np.empty(m)
+    back[order] = adj
+    out[ok] = back
+    return out
+
+
+def adjust(tests, *, method: str = "bh", alpha: float = 0.05) -> list:
+    """The tests with ``p_adjusted``, ``significant`` and ``relevant`` set, all adjusted together."""
+    if not 0 < alpha < 1:
+        raise InputError(f"alpha must be in (0, 1), got {alpha!r}")
+    tests = list(tests)
+    adj = adjust_pvalues([t.p_value for t in tests], method)
+    return [replace(t, p_adjusted=float(a), significant=bool(np.isfinite(a) and a < alpha),
+                    relevant=bool(np.isfinite(t.practical) and t.practical >= t.threshold))
+            for t, a in zip(tests, adj)]
+
+
+# ----------------------------------------------------------------------------------------------
+# single tests
+
+
+def _t95(dof: int) -> float:
+    return float(stats.t.ppf(0.975, dof)) if dof > 0 else math.nan
+
+
+def trend_test(x, y) -> dict:
+    """Straight line and quadratic of y on a numeric x (see the module docstring).
+
+    Returns ``{"method", "n", "effect", "ci95", "p_value", "p_curvature", "span"}``.
+    """
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    n = x.size
+    span = float(x.max() - x.min())
+    xc = x - x.mean()
+    sxx = float(xc @ xc)
+    b = float(xc @ (y - y.mean())) / sxx
+    resid1 = y - y.mean() - b * xc
+    rss1 = float(resid1 @ resid1)
+    dof1 = n - 2
+    se_b = math.sqrt(rss1 / dof1 / sxx) if dof1 > 0 else math.nan
+    t = _t95(dof1)
+    ci = (b - t * se_b, b + t * se_b)
+    if np.unique(x).size >= 3 and n >= 4:
+        z = xc / math.sqrt(sxx / n)
+        X = np.column_stack([np.ones(n), z, z * z])
+        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+        resid2 = y - X @ coef
+        rss2 = float(resid2 @ resid2)
+        rss0 = float(((y - y.mean()) ** 2).sum())
+        dof2 = n - 3
+        if rss2 > 0:
+            F = ((rss0 - rss2) / 2.0) / (rss2 / dof2)
+            p = float(stats.f.sf(F, 2, dof2))
+            cov = rss2 / dof2 * np.linalg.pinv(X.T @ X)
+            tc = coef[2] / math.sqrt(cov[2, 2]) if cov[2, 2] > 0 else math.inf
+            p_curv = float(2.0 * stats.t.sf(abs(tc), dof2))
+        else:
+            p, p_curv = (0.0, 0.0) if rss0 > 0 else (1.0, 1.0)
+        return {"method": "trend", "n": n, "effect": b, "ci95": ci, "p_value": p,
+                "p_curvature": p_curv, "span": span}
+    if se_b > 0:
+        p = float(2.0 * stats.t.sf(abs(b / se_b), dof1))
+    else:
+        p = 0.0 if b != 0 else 1.0
+    return {"method": "line", "n": n, "effect": b, "ci95": ci, "p_value": p, "p_curvature": None,
+            "span": span}
+
+
+def block_test(levels, y) -> dict:
+    """One-way ANOVA of y over the levels with at least two rows (see the module docstring).
+
+    Returns ``{"method", "n", "effect", "ci95", "p_value", "levels"}``.
+    """
+    y = np.asarray(y, dtype=float)
+    labels = [str(v) for v in levels]
+    groups: dict = {}
+    for lab, v in zip(labels, y):
+        groups.setdefault(lab, []).append(v)
+    groups = {k: np.asarray(v) for k, v in groups.items() if len(v) >= 2}
+    if len(groups) < 2:
+        raise InputError("a block test needs two levels with at least two rows each")
+    n = sum(g.size for g in groups.values())
+    k = len(groups)
+    means = {lev: float(g.mean()) for lev, g in groups.items()}
+    ss_within = sum(float(((g - g.mean()) ** 2).sum()) for g in groups.values())
+    dof = n - k
+    mse = ss_within / dof if dof > 0 else math.nan
+    grand = float(np.concatenate(list(groups.values())).mean())
+    ss_between = sum(g.size * (g.mean() - grand) ** 2 for g in groups.values())
+    if mse > 0:
+        F = ss_between / (k - 1) / mse
+        p = float(stats.f.sf(F, k - 1, dof))
+    else:
+        p = 0.0 if ss_between > 0 else 1.0
+    hi = max(means, key=means.get)
+    lo = min(means, key=means.get)
+    effect = means[hi] - means[lo]
+    half = _t95(dof) * math.sqrt(mse * (1.0 / groups[hi].size + 1.0 / groups[lo].size))
+    return {"method": "anova", "n": n, "effect": effect, "ci95": (effect - half, effect + half),
+            "p_value": p, "levels": {lev: [means[lev], int(groups[lev].size)] for lev in groups}}
+
+
+def mean_test(y) -> dict:
+    """One-sample t-test of the mean of y against 0. Returns ``{"method", "n", "effect", "ci95",
+    "p_value"}``."""
+    y = np.asarray(y, dtype=float)
+    n = y.size
+    m = float(y.mean())
+    sd = float(y.std(ddof=1)) if n > 1 else math.nan
+    half = _t95(n - 1) * sd / math.sqrt(n)
+    if sd > 0:
+        p = float(2.0 * stats.t.sf(abs(m / (sd / math.sqrt(n))), n - 1))
+    else:
+        p = 0.0 if m != 0 else 1.0
+    return {"method": "mean", "n": n, "effect": m, "ci95": (m - half, m + half), "p_value": p}
+
+
+# ----------------------------------------------------------------------------------------------
+# series against covariates
+
+
+def _unit_of(name: str) -> str:
+    for suffix, unit in (("_mm", "mm"), ("_deg", "deg"), ("_pct", "%"), ("_g", "g"), ("_s", "s"),
+                         ("_n", "N"), ("_ml", "ml")):
+        if name.lower().endswith(suffix):
+            return unit
+    return "trial" if "order" in name.lower() else "unit"
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(float(v))
+
+
+def is_identifier(name: str) -> bool:
+    """Whether a column names files or identifiers rather than conditions."""
+    low = name.lower()
+    return low in NOT_COVARIATES or low.endswith("_id") or low.endswith("_file")
+
+
+def series_tests(series: Series) -> tuple[list, list]:
+    """Test one series against each of its covariates (or its mean).
+
+    Returns
+    -------
+    (list of CovariateTest, list of Untestable)
+        Unadjusted tests and the pairs that could not be tested.
+    """
+    y_all = np.asarray(series.values, dtype=float)
+    tests, skipped = [], []
+
+    def skip(cov, reason, kind="numeric"):
+        skipped.append(Untestable(series.name, series.sheet, series.source, cov, reason, kind))
+
+    def make(cov, res, unit):
+        span = res.get("span")
+        practical = abs(res["effect"]) * span if span is not None else abs(res["effect"])
+        tests.append(CovariateTest(
+            series=series.name, sheet=series.sheet, source=series.source, covariate=cov,
+            method=res["method"], n=int(res["n"]), effect=float(res["effect"]),
+            ci95=tuple(float(c) for c in res["ci95"]), effect_unit=unit, span=span,
+            practical=float(practical), threshold=float(series.threshold),
+            p_value=float(res["p_value"]), p_curvature=res.get("p_curvature"),
+            levels=res.get("levels", {})))
+
+    if series.test == "mean":
+        cov = next(iter(series.covariates), "mean")
+        if y_all.size < 3:
+            skip(cov, f"{y_all.size} values; a mean test needs at least 3", "mean")
+        else:
+            make(cov, mean_test(y_all), series.unit)
+        return tests, skipped
+    for cov, raw in series.covariates.items():
+        if is_identifier(cov):
+            continue
+        keep = [i for i, v in enumerate(raw) if v is not None and not (isinstance(v, float) and math.isnan(v))]
+        vals = [raw[i] for i in keep]
+        numeric = all(_is_number(v) for v in vals)
+        if len(keep) < MIN_ROWS:
+            skip(cov, f"{len(keep)} rows with a value; at least {MIN_ROWS} needed",
+                 "numeric" if numeric else "categorical")
+            continue
+        y = y_all[keep]
+        if numeric:
+            x = np.asarray(vals, dtype=float)
+            if np.unique(x).size < 2:
+                skip(cov, f"no variation (every row {x[0]:g})")
+                continue
+            make(cov, trend_test(x, y), f"{series.unit}/{_unit_of(cov)}")
+        else:
+            labels = [str(v) for v in vals]
+            distinct = set(labels)
+            if len(distinct) < 2:
+                skip(cov, f"no variation (every row {labels[0]!r})", "categorical")
+                continue
+            if len(distinct) > 0.5 * len(labels):
+                skip(cov, f"{len(distinct)} labels for {len(labels)} rows: an identifier, not a block",
+                     "categorical")
+                continue
+            counts = {lab: labels.count(lab) for lab in distinct}
+            if sum(c >= 2 for c in counts.values()) < 2:
+                skip(cov, "fewer than two levels with two rows or more", "categorical")
+                continue
+            make(cov, block_test(labels, y), series.unit)
+    return tests, skipped
+
+
+def test_all(series_list, *, method: str = "bh", alpha: float = 0.05) -> tuple[list, list]:
+    """Test every series and adjust all p-values together.
+
+    Returns
+    -------
+    (list of CovariateTest, list of Untestable)
+    """
+    tests, skipped = [], []
+    for s in series_list:
+        t, u = series_tests(s)
+        tests += t
+        skipped += u
+    return adjust(tests, method=method, alpha=alpha), skipped
+
+
+# ----------------------------------------------------------------------------------------------
+# series from a measured workbook
+
+
+def _family(quantity: str) -> str:
+    return quantity.split(".", 1)[0]
+
+
+def specimen_lookup(workbook) -> dict:
+    """``specimen_id`` -> covariates of that specimen (its calliper size and the ``specimens``
+    sheet's covariates), from a ``measure.workbook.Workbook``."""
+    sheet = workbook.sheet("specimens") if workbook is not None else None
+    if sheet is None:
+        return {}
+    f = sheet.frame
+    out = {}
+    for r in sheet.rows:
+        rec = {c: _plain(f.at[r, c]) for c in SPECIMEN_SIZE if c in f}
+        rec.update({c: v for c, v in sheet.covariates_of(r).items() if not is_identifier(c)})
+        out[str(f.at[r, "specimen_id"])] = rec
+    return out
+
+
+def _plain(v):
+    if isinstance(v, (float, np.floating)):
+        return None if math.isnan(v) else float(v)
+    if isinstance(v, np.integer):
+        return int(v)
+    return v
+
+
+def row_covariates(record: dict, sheet: str, specimens: dict) -> dict:
+    """Covariates of one per-row record: its own, the design columns that may vary
+    (``drop_height_mm``), and its specimen's (size and ``specimens`` covariates)."""
+    cov = dict(record.get("covariates") or {})
+    if sheet == "drop" and record.get("drop_height_m") is not None:
+        cov.setdefault("drop_height_mm", round(float(record["drop_height_m"]) * 1e3, 6))
+    spec = cov.get("specimen_id")
+    if spec is not None and sheet != "specimens" and str(spec) in specimens:
+        for k, v in specimens[str(spec)].items():
+            cov.setdefault(k, v)
+    return cov
+
+
+def measured_series(measurement, workbook=None) -> list:
+    """Series of the per-row values of every measured quantity, and the flank difference and
+    floor tilt of the heap photos.
+
+    Parameters
+    ----------
+    measurement : measure.pipeline.Measurement
+    workbook : measure.workbook.Workbook, optional
+        For the specimen join (sizes and covariates of the specimen each row names).
+    """
+    specimens = specimen_lookup(workbook)
+    out = []
+    for name, est in measurement.quantities.items():
+        used = [r for r in est.per_row if r.get("used", True) and r.get("value") is not None]
+        if not used:
+            continue
+        sheet = est.source.get("sheet", "")
+        covs = [row_covariates(r, sheet, specimens) for r in used]
+        names = []
+        for c in covs:
+            names += [k for k in c if k not in names]
+        out.append(Series(name=name, sheet=sheet, source="measured", family=_family(name), unit=est.unit,
+                          rows=tuple(int(r["row"]) for r in used),
+                          values=tuple(float(r["value"]) for r in used),
+                          covariates={k: tuple(c.get(k) for c in covs) for k in names}))
+        if name == "repose_angle_deg":
+            out += _photo_series(used, sheet)
+    return out
+
+
+def _photo_series(records, sheet: str) -> list:
+    """Left-minus-right flank difference (two-flank photos) and floor tilt of the heap photos."""
+    out = []
+    both = [r for r in records if (r.get("flanks") or {}).get("left") is not None
+            and (r.get("flanks") or {}).get("right") is not None]
+    if both:
+        out.append(Series(name="flank_difference_deg", sheet=sheet, source="measured",
+                          family="flank_difference_deg", unit="deg", rows=tuple(r["row"] for r in both),
+                          values=tuple(r["flanks"]["left"] - r["flanks"]["right"] for r in both),
+                          covariates={"side": tuple("left-right" for _ in both)}, test="mean"))
+    tilt = [r for r in records if r.get("base_tilt_deg") is not None]
+    if tilt:
+        out.append(Series(name="base_tilt_deg", sheet=sheet, source="measured", family="base_tilt_deg",
+                          unit="deg", rows=tuple(r["row"] for r in tilt),
+                          values=tuple(float(r["base_tilt_deg"]) for r in tilt),
+                          covariates={"floor": tuple("floor" for _ in tilt)}, test="mean"))
+    return out

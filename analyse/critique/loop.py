@@ -1,0 +1,394 @@
+"""The critique loop end to end: twins, discrepancies, residual structure, mechanisms, extensions.
+
+:func:`run_critique` takes a lab workbook or a calibration campaign folder and returns a
+:class:`Critique`, whose :meth:`Critique.to_dict` is ``critique.json``::
+
+    {"discrepancies": [{"observable", "measured", "measured_ci95", "simulated", "simulated_ci95",
+                        "difference", "combined_u95", "exceeds", ...}],
+     "findings": [{"mechanism", "verdict", "sheet", "covariate", "effect", "ci95",
+                   "p_adjusted", "quantity", "source", "effect_unit", "evidence"}],
+     "extensions": [{"name", "mechanism", "before", "after", "gain", "ci95", "measure",
+                     "held_out", ...}],
+     "summary": [str], "tests": [...], "untestable": [...], "parameters": {...},
+     "twin_runs": [...], "provenance": {...}}
+
+Steps (DESIGN.md, "The critique loop"):
+
+1. the workbook measured (or the campaign's ``measure.json``), and the parameters of the
+   model under critique (the campaign's calibrated parameters, else the measured means);
+2. the twin of every drop and incline trial, the campaign's repose validation runs, and the
+   discrepancy table;
+3. every per-row value and twin residual tested against every covariate, all p-values
+   adjusted together (``diagnosis``);
+4. the catalogue's verdicts (``mechanisms``), ``ill_conditioned_parameter`` from the campaign;
+5. for each found mechanism that a model extension answers, its gain on held-out trials
+   (``gain``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from analyse.critique.diagnosis import CORRECTIONS, Series, measured_series, test_all
+from analyse.critique.mechanisms import CATALOGUE, Finding, ill_conditioned, judge
+from analyse.critique.twins import (TwinRunner, constant_discrepancy, drop_trials, incline_groups,
+                                    incline_twin_runner, independent_discrepancy, paired_discrepancy,
+                                    repose_validation_angles, rig_pair, run_drop_twins, twin_parameters,
+                                    wall_of)
+from demcal.errors import InputError
+from demcal.jsonio import read_json
+from demcal.provenance import Provenance
+
+RIGS = ("drop", "incline", "repose")
+#: Extensions evaluated by default (the others need engine hooks or a new campaign).
+DEFAULT_EXTENSIONS = ("inverted_restitution", "velocity_dependent_restitution", "size_distribution")
+
+
+@dataclass(frozen=True)
+class Critique:
+    """Everything the critique found.
+
+    Attributes
+    ----------
+    discrepancies : list of Discrepancy
+    findings : list of Finding
+    extensions : list of ExtensionGain
+    tests : list of CovariateTest
+        Every test of the residual structure (adjusted).
+    untestable : list of Untestable
+    summary : list of str
+        The conclusions in sentences, with numbers.
+    parameters : dict
+        ``{"values": DEMParameters as dict, "source": str}``.
+    twin_runs : list of dict
+        Per stage: runs asked, run, reused from the store.
+    provenance : Provenance
+    """
+
+    discrepancies: list
+    findings: list
+    extensions: list
+    tests: list
+    untestable: list
+    summary: list
+    parameters: dict
+    twin_runs: list = field(default_factory=list)
+    provenance: Provenance = field(default_factory=Provenance)
+
+    def found(self) -> list:
+        """The findings with verdict ``found``."""
+        return [f for f in self.findings if f.verdict == "found"]
+
+    def to_dict(self) -> dict:
+        return {"discrepancies": [d.to_dict() for d in self.discrepancies],
+                "findings": [f.to_dict() for f in self.findings],
+                "extensions": [e.to_dict() for e in self.extensions],
+                "summary": list(self.summary),
+                "tests": [t.to_dict() for t in self.tests],
+                "untestable": [u.to_dict() for u in self.untestable],
+                "catalogue": [m.to_dict() for m in CATALOGUE],
+                "parameters": dict(self.parameters), "twin_runs": list(self.twin_runs),
+                "provenance": self.provenance.to_dict()}
+
+
+def load_source(source):
+    """(measurement, workbook or None, results or None, campaign folder or None) of a workbook
+    path or a campaign folder (one holding ``results.json``)."""
+    from measure.pipeline import Measurement, measure_workbook
+    from measure.workbook import read_workbook
+
+    path = Path(source)
+    if path.is_dir() and (path / "results.json").is_file():
+        results = read_json(path / "results.json")
+        if (path / "measure.json").is_file():
+            measurement = Measurement.from_dict(read_json(path / "measure.json"))
+        elif results.get("measurement"):
+            measurement = Measurement.from_dict(results["measurement"])
+        else:
+            raise InputError(f"campaign {path}: neither measure.json nor a measurement in results.json")
+        wb_path = measurement.workbook.get("source")
+        workbook = read_workbook(wb_path) if wb_path and Path(wb_path).exists() else None
+        return measurement, workbook, results, path
+    if not path.exists():
+        raise InputError(f"workbook or campaign folder not found: {path}")
+    workbook = read_workbook(path)
+    return measure_workbook(workbook), workbook, None, None
+
+
+def _fmt(x, d=3):
+    return "n/a" if x is None or not np.isfinite(x) else f"{x:.{d}g}"
+
+
+def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EXTENSIONS,
+                 alpha: float = 0.05, correction: str = "bh", store_dir=None, workers: int = 1,
+                 progress: bool = False, repose_seeds: int = 0, seed: int = 0) -> Critique:
+    """Critique the model calibrated from a workbook (see the module docstring).
+
+    Parameters
+    ----------
+    source : str or Path
+        Lab workbook (``.xlsx``, CSV folder) or calibration campaign folder (``results.json``).
+    twins : bool
+        Run the twins (False: only the measured data's residual structure).
+    rigs : sequence of str
+        Twins to run, among ``drop``, ``incline``, ``repose``.
+    extensions : sequence of str
+        Extensions to evaluate for found mechanisms (``DEFAULT_EXTENSIONS``); empty for none.
+    alpha : float
+        Significance level after the correction.
+    correction : {"bh", "holm"}
+    store_dir : path, optional
+        Run store of the twins; default ``DIR/critique_runs`` for a campaign, else temporary.
+    workers : int
+        Worker processes for the twin runs.
+    progress : bool
+        Progress bars.
+    repose_seeds : int
+        Repose twins to run when no campaign gives validation runs (0: none).
+    seed : int
+        Seed of the bootstrap intervals.
+
+    Returns
+    -------
+    Critique
+    """
+    if correction not in CORRECTIONS:
+        raise InputError(f"correction must be one of {', '.join(CORRECTIONS)}, got {correction!r}")
+    unknown = sorted(set(rigs) - set(RIGS))
+    if unknown:
+        raise InputError(f"unknown rig(s) {unknown}; valid: {', '.join(RIGS)}")
+    measurement, workbook, results, campaign = load_source(source)
+    params, param_source = twin_parameters(measurement, results)
+    wall = wall_of(measurement.meta)
+    series = measured_series(measurement, workbook)
+    discrepancies, summary = [], []
+    drop_state: dict = {}
+    runner = None
+    if twins:
+        if store_dir is None and campaign is not None:
+            store_dir = campaign / "critique_runs"
+        runner = TwinRunner(store_dir, workers=workers, progress=progress)
+    try:
+        if twins and "drop" in rigs:
+            series += _drop_twins(runner, measurement, workbook, params, wall, discrepancies, drop_state)
+        if twins and "incline" in rigs:
+            _incline_twins(runner, measurement, workbook, params, wall, discrepancies)
+        if twins and "repose" in rigs:
+            _repose_twins(runner, measurement, results, campaign, params, repose_seeds, discrepancies)
+        tests, untestable = test_all(series, method=correction, alpha=alpha)
+        findings = judge(tests, untestable) + ill_conditioned(results, alpha=alpha)
+        gains = []
+        if twins and extensions:
+            gains = _extensions(runner, params, findings, drop_state, tuple(extensions), seed, summary)
+        summary[:0] = _drop_statements(drop_state, params)
+        summary += _finding_statements(findings)
+        runs = list(runner.log) if runner is not None else []
+    finally:
+        if runner is not None:
+            runner.close()
+    opts = {"twins": twins, "rigs": list(rigs), "extensions": list(extensions), "alpha": alpha,
+            "correction": correction, "repose_seeds": repose_seeds, "source": str(source)}
+    return Critique(discrepancies=discrepancies, findings=findings, extensions=gains, tests=tests,
+                    untestable=untestable, summary=summary,
+                    parameters={"values": params.to_dict(), "source": param_source}, twin_runs=runs,
+                    provenance=Provenance(inputs=dict(measurement.provenance.inputs), seed=seed, options=opts))
+
+
+# ----------------------------------------------------------------------------------------------
+# twins
+
+
+def _drop_twins(runner, measurement, workbook, params, wall, discrepancies, state) -> list:
+    from simulate.extensions import restitution_parameter
+
+    out = []
+    for pair, trials in drop_trials(measurement, workbook).items():
+        quantity = f"restitution.{pair}"
+        rp = rig_pair(pair, wall)
+        if rp is None or len(trials) < 2:
+            y = [t[1] for t in trials]
+            why = (f"no DEM contact parameters for {pair} (the DEM knows particle-particle and "
+                   f"particle-{wall})" if rp is None else "fewer than 2 drops")
+            discrepancies.append(constant_discrepancy(f"{quantity} (drop twin, apparent)", "drop", y, None,
+                                                      f"not simulated: {why}"))
+            continue
+        param = restitution_parameter(rp)
+        e_contact = float(getattr(params, param))
+        twin = run_drop_twins(runner, params, trials, rp, quantity=quantity, desc=f"drop twins ({pair})")
+        logged = sum(t[3] is not None for t in trials)
+        note = (f"contact {param} = {e_contact:.3g}; each drop at its height and "
+                f"{'logged' if logged == len(trials) else f'logged ({logged}) or random'} orientation")
+        discrepancies.append(paired_discrepancy(f"{quantity} (drop twin, apparent sqrt(h2/h1))", "drop",
+                                                [t.measured for t in twin], [t.simulated for t in twin], note))
+        ok = [t for t in twin if math.isfinite(t.simulated)]
+        names = []
+        for t in ok:
+            names += [k for k in t.covariates if k not in names]
+        covs = {k: tuple(t.covariates.get(k) for t in ok) for k in names}
+        out.append(Series(f"residual:{quantity}", "drop", "twin residual", "restitution", "1",
+                          tuple(t.row for t in ok), tuple(t.residual for t in ok), covs))
+        out.append(Series(f"twin_minus_contact:{quantity}", "drop", "twin", "restitution", "1",
+                          tuple(t.row for t in ok), tuple(t.simulated - e_contact for t in ok),
+                          {"orientation_deg": tuple(t.covariates.get("orientation_deg") for t in ok)},
+                          test="mean"))
+        state[pair] = {"rig_pair": rp, "trials": trials, "twins": {t.row: t for t in twin},
+                       "parameter": param, "contact": e_contact}
+    return out
+
+
+def _incline_twins(runner, measurement, workbook, params, wall, discrepancies):
+    groups = incline_groups(measurement, workbook)
+    tasks, keys = [], []
+    for (quantity, surface, mode), rows in groups.items():
+        rig_surface = "steel" if surface == wall else surface if surface == "particle" else None
+        if rig_surface is None:
+            discrepancies.append(constant_discrepancy(f"{quantity} (incline twin)", "incline",
+                                                      [r[1] for r in rows], None,
+                                                      f"not simulated: no DEM parameters for surface {surface}"))
+            continue
+        tasks.append({"rig": "incline", "params": params.to_dict(), "mode": mode, "surface": rig_surface,
+                      "seed": 0})
+        keys.append((quantity, surface, mode))
+    results = runner(incline_twin_runner, tasks, "incline twins")
+    for key, res in zip(keys, results):
+        quantity, surface, mode = key
+        ob = res["observable"]
+        value = ob["static_friction_apparent" if mode == "slide" else "rolling_friction_apparent"]
+        note = f"tan(onset angle) of the {mode} twin on {surface}"
+        if value is None or not math.isfinite(value):
+            other = ob.get("slide_angle_deg") if mode == "roll" else ob.get("roll_angle_deg")
+            note += (f"; no {mode} onset" + (f" (it {'slid' if mode == 'roll' else 'rolled'} first, at "
+                                             f"{other:.3g} deg)" if other is not None and math.isfinite(other) else ""))
+            value = None
+        discrepancies.append(constant_discrepancy(f"{quantity} (incline twin)", "incline",
+                                                  [r[1] for r in groups[key]], value, note))
+
+
+def _repose_twins(runner, measurement, results, campaign, params, repose_seeds, discrepancies):
+    est = measurement.quantities.get("repose_angle_deg")
+    if est is None:
+        return
+    photo = est.extra.get("photo_estimate") if est.extra.get("override") else None
+    measured = [r["value"] for r in est.per_row if r.get("used", True)] if est.per_row else [est.value]
+    if results is not None:
+        angles, note = repose_validation_angles(campaign, results)
+    elif repose_seeds > 0:
+        from analyse.campaign import repose_geometry, repose_runner
+        tasks = [{"rig": "repose", "profile": "quick", "params": params.to_dict(),
+                  "geometry": repose_geometry(measurement.meta), "seed": 9000 + i} for i in range(repose_seeds)]
+        angles = [r["observable"]["angle_deg"] for r in runner(repose_runner, tasks, "repose twins")]
+        note = f"{repose_seeds} quick-profile repose runs"
+    else:
+        discrepancies.append(independent_discrepancy("repose_angle_deg (photo method)", "repose", measured, [],
+                                                     "not simulated: give the campaign folder (its validation "
+                                                     "runs) or repose_seeds"))
+        return
+    if photo is not None:
+        note += "; measured: the photos (the meta target_repose_deg overrides them in the campaign)"
+    discrepancies.append(independent_discrepancy("repose_angle_deg (photo method)", "repose", measured, angles,
+                                                 note))
+
+
+# ----------------------------------------------------------------------------------------------
+# extensions and statements
+
+
+def _pairs_named(findings, mechanism: str, state: dict) -> list:
+    pairs = []
+    for f in findings:
+        if f.mechanism == mechanism and f.verdict == "found" and f.sheet == "drop" and f.quantity:
+            pair = f.quantity.split(":", 1)[-1].split(".", 1)[-1]
+            if pair in state and pair not in pairs:
+                pairs.append(pair)
+    return pairs
+
+
+def _extensions(runner, params, findings, state, chosen, seed, summary) -> list:
+    from analyse.critique.gain import inverted_restitution_gain, size_gain, velocity_gain
+
+    gains = []
+    rng = np.random.default_rng(seed)
+    scale = {}
+    if "inverted_restitution" in chosen:
+        for pair in _pairs_named(findings, "orientation_rotation", state):
+            s = state[pair]
+            try:
+                g, inv = inverted_restitution_gain(runner, params, pair, s["rig_pair"], s["trials"], s["twins"],
+                                                   rng=rng)
+            except InputError as exc:
+                summary.append(f"inverted_restitution ({pair}) not evaluated: {exc}")
+                continue
+            gains.append(g)
+            s["inverted"] = inv
+            if inv.converged and inv.target > 0:
+                scale[pair] = inv.contact / inv.target
+    if "velocity_dependent_restitution" in chosen:
+        for pair in _pairs_named(findings, "velocity_dependent_restitution", state):
+            s = state[pair]
+            try:
+                gains.append(velocity_gain(runner, params, pair, s["rig_pair"], s["trials"], rng=rng,
+                                           contact_scale=scale.get(pair, 1.0)))
+            except InputError as exc:
+                summary.append(f"velocity_dependent_restitution ({pair}) not evaluated: {exc}")
+    if "size_distribution" in chosen:
+        for pair in _pairs_named(findings, "size_dependence", state):
+            s = state[pair]
+            try:
+                gains.append(size_gain(runner, params, pair, s["rig_pair"], s["trials"], s["twins"], rng=rng))
+            except InputError as exc:
+                summary.append(f"size_distribution ({pair}) not evaluated: {exc}")
+    for g in gains:
+        verdict = ("helps" if g.ci95[0] > 0 else "makes it worse" if g.ci95[1] < 0 else "has no clear gain")
+        summary.append(f"Extension {g.name} ({g.quantity}): {g.measure} on {g.held_out} {_fmt(g.before)} "
+                       f"before, {_fmt(g.after)} after, gain {_fmt(g.gain)} [{_fmt(g.ci95[0])}, {_fmt(g.ci95[1])}]: "
+                       f"it {verdict}. Fitted: {g.fitted}.")
+    return gains
+
+
+def _drop_statements(state: dict, params) -> list:
+    """Whether sqrt(h2/h1) may feed the DEM directly, per pair, with the numbers."""
+    out = []
+    for pair, s in state.items():
+        tw = [t for t in s["twins"].values() if math.isfinite(t.simulated)]
+        if len(tw) < 2:
+            continue
+        y = np.array([t.measured for t in tw])
+        sim = np.array([t.simulated for t in tw])
+        e = s["contact"]
+        from scipy import stats
+        n = sim.size
+        half = float(stats.t.ppf(0.975, n - 1)) * float(sim.std(ddof=1)) / math.sqrt(n)
+        offset = float(sim.mean()) - e
+        direct = abs(offset) <= max(half, 0.03)
+        text = (f"restitution.{pair}: the lab's sqrt(h2/h1) is {y.mean():.3g}; the drop twin with contact "
+                f"{s['parameter']} = {e:.3g}, at the lab's {n} drop heights and orientations, rebounds with an "
+                f"apparent {sim.mean():.3g} [{sim.mean() - half:.3g}, {sim.mean() + half:.3g}] "
+                f"(ratio {sim.mean() / e:.3g}). ")
+        if direct:
+            text += ("sqrt(h2/h1) may feed the DEM directly: the twin's apparent restitution equals its "
+                     "contact restitution within the uncertainty and the 0.03 practical threshold.")
+        else:
+            text += ("sqrt(h2/h1) may not feed the DEM directly: the twin's apparent restitution differs from "
+                     f"its contact restitution by {offset:.3g} (part of the energy goes into rotation).")
+            inv = s.get("inverted")
+            if inv is not None and inv.converged:
+                text += (f" The contact restitution that reproduces the drops is {s['parameter']} = "
+                         f"{inv.contact:.3g} [{inv.contact_ci95[0]:.3g}, {inv.contact_ci95[1]:.3g}].")
+            elif inv is not None:
+                text += f" Inverting the twin failed: {inv.note}."
+        out.append(text)
+    return out
+
+
+def _finding_statements(findings) -> list:
+    found = [f for f in findings if f.verdict == "found"]
+    if not found:
+        return ["No mechanism of the catalogue is found in this data (every testable signature was "
+                "ruled out after the multiple-testing correction)."]
+    names = sorted({f.mechanism for f in found})
+    return [f"Found: {', '.join(names)}. " + " ".join(
+        f"{f.mechanism}: {f.evidence}." for f in found[:6])]

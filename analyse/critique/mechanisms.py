@@ -1,0 +1,336 @@
+"""The catalogue of candidate mechanisms: what could make the calibrated model wrong, the
+statistical signature that tests each one, and its verdict.
+
+Every mechanism is judged from tests (``analyse.critique.diagnosis``), never asserted:
+
+- ``found``: at least one test of its signature is significant after the multiple-testing
+  correction *and* reaches the practical threshold (and has the expected sign, where the
+  mechanism has one); one finding per such test, the strongest first;
+- ``ruled_out``: its signature was tested and no test passed both bars; the finding shows the
+  closest test (effect and interval), so the reader sees how large an effect is excluded;
+- ``not_testable``: the data lack the covariate or its variation (one drop height, no
+  orientation logged, no two-flank photo, no campaign), with the reason.
+
+Catalogue (``CATALOGUE``):
+
+=================================  ==========================================================
+mechanism                          signature
+=================================  ==========================================================
+velocity_dependent_restitution     a drop sheet series (restitution or its twin residual)
+                                   falls with ``drop_height_mm`` (slope < 0)
+orientation_rotation               a drop series varies with ``orientation_deg``, or the drop
+                                   twin's apparent restitution differs from its contact
+                                   restitution at the lab's orientations (an elongated body
+                                   turns part of its energy into rotation: sqrt(h2/h1) is not
+                                   the contact restitution)
+size_dependence                    a series of a test sheet varies with the specimen's
+                                   ``length_mm``, ``diameter_mm`` or ``mass_g``
+block_effect                       a series differs between the levels of a categorical
+                                   covariate (operator, date, batch, ...)
+trial_order_drift                  a series trends with trial order
+moisture_dependence                a series tracks ``moisture_pct``
+camera_tilt                        the heap photos' left and right flanks differ on average,
+                                   or the floor is tilted on average
+ill_conditioned_parameter          a parameter carried into the response-surface design has
+                                   no term exceeding the DEM's seed-to-seed noise (the repose
+                                   response cannot identify it), from the campaign's
+                                   ``effects_vs_noise`` / ``terms_vs_noise``
+=================================  ==========================================================
+
+A significant and relevant test that matches no signature (a numeric covariate the catalogue
+does not know, or a rising restitution with drop height) is reported as ``other_covariate``
+so that nothing found is hidden.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy import stats
+
+from analyse.critique.diagnosis import SPECIMEN_SIZE, adjust_pvalues
+
+#: Column-name patterns of trial order.
+ORDER_NAMES = re.compile(r"(^|_)(trial_?order|order|sequence|run_?order|trial_?no|trial_?number)$")
+
+
+@dataclass(frozen=True)
+class Mechanism:
+    """A catalogue entry.
+
+    Attributes
+    ----------
+    id : str
+    title : str
+    signature : str
+        What is tested.
+    remedy : str
+        Model extension (``simulate.extensions``) or lab action that answers it.
+    sign : int
+        Expected sign of the effect (-1, +1), 0 for any.
+    """
+
+    id: str
+    title: str
+    signature: str
+    remedy: str
+    sign: int = 0
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+CATALOGUE = (
+    Mechanism("velocity_dependent_restitution", "restitution falls with impact speed",
+              "drop restitution (or its twin residual) against drop_height_mm, slope < 0",
+              "extension velocity_dependent_restitution (e(v) fitted from the drops)", sign=-1),
+    Mechanism("orientation_rotation", "elongated body: energy into rotation at impact",
+              "drop restitution or twin residual against orientation_deg; twin apparent vs contact e",
+              "extension inverted_restitution (contact e from the drop twin); more_spheres"),
+    Mechanism("size_dependence", "response depends on segment size",
+              "series against the specimen's length_mm, diameter_mm, mass_g",
+              "extension size_distribution (segments drawn from the callipers)"),
+    Mechanism("block_effect", "operator, day or batch effect",
+              "one-way ANOVA over a categorical covariate",
+              "lab: correct or randomise the blocks; calibrate per block"),
+    Mechanism("trial_order_drift", "drift with trial order (wear, drying, fatigue)",
+              "series against trial order", "lab: randomise the order, renew specimens"),
+    Mechanism("moisture_dependence", "friction or restitution tracks moisture",
+              "series against moisture_pct", "lab: condition the specimens; calibrate at the target moisture"),
+    Mechanism("camera_tilt", "camera roll or floor tilt in the heap photos",
+              "mean left-minus-right flank difference; mean floor tilt",
+              "lab: level the camera and floor, photograph both flanks"),
+    Mechanism("ill_conditioned_parameter", "calibrated parameter not identifiable by the repose angle",
+              "response-surface terms of the parameter against the seed-to-seed noise",
+              "fix the parameter from its own test (e.g. restitution from the drop twin)"),
+)
+
+MECHANISMS = {m.id: m for m in CATALOGUE}
+
+
+def classify(series: str, sheet: str, covariate: str, categorical: bool) -> str:
+    """Catalogue id whose signature a test of ``series`` against ``covariate`` belongs to
+    (``other_covariate`` if none)."""
+    cov = covariate.lower()
+    if series.endswith("flank_difference_deg") or series.endswith("base_tilt_deg"):
+        return "camera_tilt"
+    if series.startswith("twin_minus_contact:") or cov == "orientation_deg":
+        return "orientation_rotation"
+    if cov == "drop_height_mm" and sheet == "drop":
+        return "velocity_dependent_restitution"
+    if categorical:
+        return "block_effect"
+    if cov in SPECIMEN_SIZE and sheet != "specimens":
+        return "size_dependence"
+    if ORDER_NAMES.search(cov):
+        return "trial_order_drift"
+    if "moisture" in cov:
+        return "moisture_dependence"
+    return "other_covariate"
+
+
+def mechanism_of(test) -> str:
+    """Catalogue id of a :class:`~analyse.critique.diagnosis.CovariateTest`."""
+    return classify(test.series, test.sheet, test.covariate, test.method == "anova")
+
+
+@dataclass(frozen=True)
+class Finding:
+    """The verdict on a mechanism, with the evidence of one test.
+
+    Attributes
+    ----------
+    mechanism : str
+    verdict : str
+        ``found``, ``ruled_out`` or ``not_testable``.
+    sheet, covariate, quantity : str or None
+        Where the evidence is (``quantity``: the series, e.g. ``restitution.particle-steel``,
+        ``residual:restitution.particle-steel``).
+    source : str or None
+        ``measured``, ``twin residual``, ``twin`` or ``campaign``.
+    effect : float or None
+        Effect size in natural units (slope per covariate unit, range of level means, mean).
+    ci95 : list of float or None
+    effect_unit : str or None
+    p_adjusted : float or None
+    evidence : str
+        One sentence with the numbers.
+    """
+
+    mechanism: str
+    verdict: str
+    sheet: str | None = None
+    covariate: str | None = None
+    quantity: str | None = None
+    source: str | None = None
+    effect: float | None = None
+    ci95: list | None = None
+    effect_unit: str | None = None
+    p_adjusted: float | None = None
+    evidence: str = ""
+
+    def to_dict(self) -> dict:
+        """Flat, JSON-ready (the keys the report's critique table shows)."""
+        return {"mechanism": self.mechanism, "verdict": self.verdict, "sheet": self.sheet,
+                "covariate": self.covariate, "effect": self.effect,
+                "ci95": None if self.ci95 is None else [float(c) for c in self.ci95],
+                "p_adjusted": self.p_adjusted, "quantity": self.quantity, "source": self.source,
+                "effect_unit": self.effect_unit, "evidence": self.evidence}
+
+
+def _fmt(x, digits=3) -> str:
+    return "nan" if x is None or not np.isfinite(x) else f"{x:.{digits}g}"
+
+
+def _evidence(t, verdict: str) -> str:
+    size = (f"{_fmt(t.effect)} {t.effect_unit} [{_fmt(t.ci95[0])}, {_fmt(t.ci95[1])}]")
+    over = (f", {_fmt(t.practical)} over the observed range of {t.covariate}" if t.span is not None
+            else "")
+    bar = f"practical threshold {_fmt(t.threshold)}"
+    return (f"{t.series} ({t.source}, sheet {t.sheet}) vs {t.covariate}: {t.method} effect {size}{over}; "
+            f"p {_fmt(t.p_value)}, adjusted {_fmt(t.p_adjusted)}; {bar}")
+
+
+def _finding(mech: str, verdict: str, t, note: str = "") -> Finding:
+    return Finding(mechanism=mech, verdict=verdict, sheet=t.sheet, covariate=t.covariate,
+                   quantity=t.series, source=t.source, effect=float(t.effect),
+                   ci95=[float(t.ci95[0]), float(t.ci95[1])], effect_unit=t.effect_unit,
+                   p_adjusted=float(t.p_adjusted), evidence=(note + _evidence(t, verdict)))
+
+
+def judge(tests, untestable=(), *, notes: dict | None = None) -> list:
+    """Verdicts of the catalogue's workbook mechanisms (every entry but
+    ``ill_conditioned_parameter``) and ``other_covariate`` findings.
+
+    Parameters
+    ----------
+    tests : list of CovariateTest
+        Adjusted tests (``diagnosis.test_all``).
+    untestable : list of Untestable
+        Pairs that could not be tested (their reasons feed ``not_testable``).
+    notes : dict, optional
+        Mechanism -> reason to use for ``not_testable`` when no test of it exists.
+
+    Returns
+    -------
+    list of Finding
+        Found ones first (by adjusted p), then ruled out, then not testable.
+    """
+    notes = dict(notes or {})
+    by_mech: dict = {}
+    for t in tests:
+        by_mech.setdefault(mechanism_of(t), []).append(t)
+    skipped: dict = {}
+    for u in untestable:
+        skipped.setdefault(classify(u.series, u.sheet, u.covariate, u.kind == "categorical"), []).append(u)
+
+    found, ruled, untest = [], [], []
+    for mech in [m.id for m in CATALOGUE if m.id != "ill_conditioned_parameter"] + ["other_covariate"]:
+        ts = by_mech.get(mech, [])
+        sign = MECHANISMS[mech].sign if mech in MECHANISMS else 0
+        hits = [t for t in ts if t.significant and t.relevant and (sign == 0 or np.sign(t.effect) == sign)]
+        if mech == "velocity_dependent_restitution":
+            # a significant rise with height is not this mechanism: report it as unexplained
+            for t in ts:
+                if t.significant and t.relevant and np.sign(t.effect) > 0:
+                    found.append(_finding("other_covariate", "found", t,
+                                          "restitution rises with drop height, against the catalogue's "
+                                          "signature: "))
+        for t in sorted(hits, key=lambda t: t.p_adjusted):
+            found.append(_finding(mech, "found", t))
+        if hits or mech == "other_covariate":
+            continue
+        if ts:
+            best = min(ts, key=lambda t: (t.p_adjusted, -t.practical))
+            ruled.append(_finding(mech, "ruled_out", best,
+                                  f"{len(ts)} test(s), none significant and above the threshold; closest: "))
+            continue
+        reason = notes.get(mech)
+        if reason is None:
+            reasons = [f"{u.series} vs {u.covariate}: {u.reason}" for u in skipped.get(mech, [])]
+            reason = "; ".join(reasons[:3]) if reasons else _missing_reason(mech)
+        untest.append(Finding(mechanism=mech, verdict="not_testable", evidence=reason))
+    return found + ruled + untest
+
+
+def _missing_reason(mech: str) -> str:
+    return {"velocity_dependent_restitution": "no drop sheet with drops from two or more heights",
+            "orientation_rotation": "no drop sheet with an orientation_deg covariate, and no drop twin",
+            "size_dependence": "no test rows naming a specimen of the specimens sheet",
+            "block_effect": "no categorical covariate (operator, date, batch) with two levels",
+            "trial_order_drift": "no trial order covariate",
+            "moisture_dependence": "no moisture covariate",
+            "camera_tilt": "no heap photo with both flanks or a measured floor line"}.get(
+        mech, "no covariate for its signature")
+
+
+# ----------------------------------------------------------------------------------------------
+# ill-conditioned parameters (from a campaign)
+
+
+def ill_conditioned(results: dict | None, *, alpha: float = 0.05) -> list:
+    """Verdict on ``ill_conditioned_parameter`` from a campaign's ``results.json``.
+
+    A parameter carried into the Box-Behnken design is ill-conditioned when none of its terms
+    (linear, interactions, quadratic) exceeds twice its standard error under the seed-to-seed
+    noise alone (``terms_vs_noise``); if the design's terms are missing, its screening effect
+    against the noise (``effects_vs_noise``) decides. The effect reported is the linear
+    coefficient [deg per coded unit] with the interval coefficient +- 1.96 se_noise; the
+    p-value is the normal test of coefficient / se_noise, Holm-adjusted over the carried
+    parameters.
+    """
+    mech = "ill_conditioned_parameter"
+    if not results:
+        return [Finding(mech, "not_testable", evidence="no calibration campaign given (pass the "
+                        "campaign folder holding results.json)")]
+    factors = results.get("factors", {})
+    bbd = results.get("box_behnken", {})
+    carried = list(bbd.get("factors") or results.get("significant", {}).get("carried_forward", []))
+    terms = bbd.get("terms_vs_noise") or {}
+    pb = (results.get("plackett_burman") or {}).get("effects_vs_noise") or {}
+    if not carried or not (terms or pb):
+        return [Finding(mech, "not_testable", evidence="the campaign has no noise comparison of its terms")]
+    rows = []
+    for f in carried:
+        param = factors.get(f, {}).get("parameter", f)
+        own = {name: v for name, v in terms.items() if name != "Intercept" and f in name}
+        if own:
+            lin = own.get(f, next(iter(own.values())))
+            coef, se = float(lin["coefficient"]), float(lin["se_noise"])
+            exceeds = any(bool(v["exceeds_noise"]) for v in own.values())
+            what = (f"{sum(bool(v['exceeds_noise']) for v in own.values())} of {len(own)} response-surface "
+                    f"terms of {f} exceed 2 x their noise se")
+        elif f in pb:
+            coef, se = float(pb[f]["effect"]), float(pb[f]["se_noise"])
+            exceeds = bool(pb[f]["exceeds_noise"])
+            what = f"screening effect of {f} {'exceeds' if exceeds else 'within'} 2 x noise se"
+        else:
+            continue
+        z = abs(coef) / se if se > 0 else math.inf
+        rows.append({"factor": f, "parameter": param, "coef": coef, "se": se, "exceeds": exceeds,
+                     "p": float(2.0 * stats.norm.sf(z)), "what": what})
+    if not rows:
+        return [Finding(mech, "not_testable", evidence="no carried parameter has a noise comparison")]
+    adj = adjust_pvalues([r["p"] for r in rows], "holm")
+    out = []
+    for r, a in zip(rows, adj):
+        ci = [r["coef"] - 1.96 * r["se"], r["coef"] + 1.96 * r["se"]]
+        text = (f"{r['parameter']} (factor {r['factor']}): linear coefficient {_fmt(r['coef'])} deg per coded "
+                f"unit, noise se {_fmt(r['se'])}; {r['what']}")
+        if not r["exceeds"]:
+            out.append(Finding(mech, "found", sheet="campaign", covariate=r["parameter"], quantity="angle_deg",
+                               source="campaign", effect=r["coef"], ci95=ci, effect_unit="deg per coded unit",
+                               p_adjusted=float(a), evidence=text + ": the repose angle cannot identify it "
+                               "beyond seed noise"))
+    if out:
+        return out
+    best = min(zip(rows, adj), key=lambda ra: abs(ra[0]["coef"]) / ra[0]["se"] if ra[0]["se"] > 0 else math.inf)
+    r, a = best
+    return [Finding(mech, "ruled_out", sheet="campaign", covariate=r["parameter"], quantity="angle_deg",
+                    source="campaign", effect=r["coef"],
+                    ci95=[r["coef"] - 1.96 * r["se"], r["coef"] + 1.96 * r["se"]],
+                    effect_unit="deg per coded unit", p_adjusted=float(a),
+                    evidence=f"every carried parameter has a term above the seed noise; weakest: {r['what']}")]

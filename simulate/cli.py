@@ -1,0 +1,246 @@
+"""``demcal simulate``: run one lab-rig twin (repose, drop, incline) and store its result.
+
+    demcal simulate repose --profile quick --set e_pp=0.32 --seed 3 --json run.json
+    demcal simulate drop --height 400 --orientation random --pair particle-steel --json drop.json
+    demcal simulate incline --mode roll --surface steel --json incline.json
+
+Lengths on the command line are in the lab's units (mm, deg), as in the workbook; the JSON
+holds SI values. ``--set NAME=VALUE`` changes one ``DEMParameters`` field (SI names, e.g.
+``mu_s_pw=0.22``, ``shear_modulus_pa=2e7``, ``rolling_lever=liggghts_reff``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from demcal.errors import InputError
+from demcal.jsonio import write_json
+
+RIG_NAMES = ("repose", "drop", "incline")
+#: Frames written by --vtk over a run (besides the last).
+VTK_FRAMES = 50
+#: Arrays longer than this are summarised in the JSON unless --full-record.
+RECORD_INLINE_MAX = 2000
+
+
+def register(subparsers) -> None:
+    """Add the ``simulate`` sub-command."""
+    p = subparsers.add_parser(
+        "simulate", help="run a lab-rig twin (repose, drop, incline) with given DEM parameters",
+        description="Run the DEM twin of one lab test and print its observable; --json writes "
+                    "the observable, the run metadata, the parameters, a summary of the record "
+                    "and the provenance.")
+    p.add_argument("rig", choices=RIG_NAMES, help="the lab test to simulate")
+    p.add_argument("--set", dest="sets", action="append", default=[], metavar="NAME=VALUE",
+                   help="set a DEM parameter (repeatable), e.g. --set e_pp=0.32")
+    p.add_argument("--seed", type=int, default=0, help="run seed (default 0)")
+    p.add_argument("--json", dest="json_out", metavar="OUT", help="write the result to this JSON file")
+    p.add_argument("--full-record", action="store_true",
+                   help="put the whole record (all sphere positions, time series) in the JSON")
+    p.add_argument("--vtk", metavar="DIR", help=f"write about {VTK_FRAMES} particle frames and the "
+                                                "last one to DIR (.vtp, for ParaView)")
+    g = p.add_argument_group("repose rig")
+    g.add_argument("--profile", choices=("paper", "quick"), default="quick",
+                   help="paper: the source paper's case (10 s, 500 segments); quick: the smaller, "
+                        "faster case of calibration campaigns (default)")
+    g.add_argument("--workbook", metavar="PATH",
+                   help="take the carton, lift speed and fill count from this workbook's meta sheet")
+    g.add_argument("--annotate", metavar="PNG", help="write the annotated side view of the heap")
+    g = p.add_argument_group("drop and incline rigs")
+    g.add_argument("--height", type=float, default=400.0, metavar="MM",
+                   help="drop: gap between the plate and the segment's lowest point at release [mm] "
+                        "(default 400, the paper's)")
+    g.add_argument("--orientation", default="random", metavar="DEG|random",
+                   help="drop: angle of the long axis to the horizontal at release [deg], or "
+                        "'random' (uniform on the sphere, from --seed; default)")
+    g.add_argument("--pair", default="particle-steel",
+                   help="drop: material pair, particle-steel (default), particle-particle or "
+                        "particle-<material> (needs --surface-material)")
+    g.add_argument("--surface", default="steel",
+                   help="incline: plate surface, steel (default), particle or another material "
+                        "(needs --surface-material)")
+    g.add_argument("--mode", choices=("slide", "roll"), default="slide",
+                   help="incline: slide (segment along the slope) or roll (across it)")
+    g.add_argument("--tilt-rate", type=float, default=1.0, metavar="DEG_S",
+                   help="incline: tilt rate [deg/s] (default 1)")
+    g.add_argument("--surface-material", dest="surface_values", action="append", default=[],
+                   metavar="KEY=VALUE",
+                   help="another plate material: density [kg/m3], poisson_ratio, shear_modulus [Pa], "
+                        "and its contact with the particle: restitution, static_friction, "
+                        "rolling_friction (repeatable)")
+    p.set_defaults(handler=run)
+
+
+def parse_sets(items) -> dict:
+    """``["NAME=VALUE", ...]`` -> dict; a malformed item names itself and the valid names."""
+    from simulate.params import DEMParameters
+    out = {}
+    for item in items:
+        name, sep, value = str(item).partition("=")
+        name = name.strip()
+        if not sep or not name:
+            raise InputError(f"--set {item!r}: expected NAME=VALUE; valid names: "
+                             f"{', '.join(DEMParameters.names())}")
+        out[name] = value.strip()
+    return out
+
+
+def parameters(items):
+    """``DEMParameters`` with the ``--set`` items applied."""
+    from simulate.params import DEMParameters
+    values = parse_sets(items)
+    try:
+        return DEMParameters.from_names(values)
+    except InputError as exc:
+        raise InputError(f"--set: {exc}") from None
+
+
+def _surface_options(items, label) -> dict:
+    from simulate.rigs.surfaces import CONTACT_KEYS, MATERIAL_KEYS
+    if not items:
+        return {}
+    values = {}
+    for item in items:
+        key, sep, value = str(item).partition("=")
+        key = key.strip()
+        if not sep or key not in MATERIAL_KEYS + CONTACT_KEYS:
+            raise InputError(f"--surface-material {item!r}: expected KEY=VALUE with KEY one of "
+                             f"{', '.join(MATERIAL_KEYS + CONTACT_KEYS)}")
+        try:
+            values[key] = float(value)
+        except ValueError:
+            raise InputError(f"--surface-material {key}: needs a number, got {value!r}") from None
+    return {"surface_material": {k: v for k, v in values.items() if k in MATERIAL_KEYS},
+            "surface_contact": {k: v for k, v in values.items() if k in CONTACT_KEYS}}
+
+
+def rig_options(args) -> tuple[dict, dict]:
+    """Keyword options of the rig and the input files they came from (path -> SHA-256)."""
+    inputs = {}
+    if args.rig == "repose":
+        opts = {"profile": args.profile, "annotate_to": args.annotate}
+        if args.workbook:
+            from measure.workbook import read_workbook
+            from simulate.rigs.repose import ReposeGeometry
+            wb = read_workbook(args.workbook)
+            opts["geometry"] = ReposeGeometry.from_meta(wb.meta, file=str(wb.source))
+            inputs.update(wb.files)
+        return opts, inputs
+    if args.rig == "drop":
+        if not (math.isfinite(args.height) and args.height > 0):
+            raise InputError(f"--height must be a positive drop height [mm], got {args.height!r}")
+        text = str(args.orientation).strip().lower()
+        if text == "random":
+            orientation = None
+        else:
+            try:
+                orientation = float(text)
+            except ValueError:
+                raise InputError(f"--orientation must be an angle in [0, 90] deg or 'random', "
+                                 f"got {args.orientation!r}") from None
+        opts = {"height": args.height * 1e-3, "orientation_deg": orientation, "pair": args.pair}
+        opts.update(_surface_options(args.surface_values, "pair"))
+        return opts, inputs
+    opts = {"mode": args.mode, "surface": args.surface, "tilt_rate_deg_s": args.tilt_rate}
+    opts.update(_surface_options(args.surface_values, "surface"))
+    return opts, inputs
+
+
+class _Monitor:
+    """The rigs' callback: a progress bar on stderr (shown after a few seconds) and VTK frames."""
+
+    def __init__(self, vtk_dir=None):
+        self.bar = None
+        self.vtk_dir = Path(vtk_dir) if vtk_dir else None
+        self.next_frame = 0.0
+        self.frames = 0
+        self.write_vtp = None
+        if self.vtk_dir is not None:
+            try:
+                from simulate.vtk import write_vtp
+            except ImportError:
+                raise InputError("--vtk: simulate.vtk (write_vtp) is not available in this "
+                                 "installation") from None
+            self.write_vtp = write_vtp
+            self.vtk_dir.mkdir(parents=True, exist_ok=True)
+
+    def __call__(self, sim, t_end, final):
+        if self.bar is None:
+            from tqdm.auto import tqdm
+            self.bar = tqdm(total=round(t_end, 3), unit="s", desc="simulated", file=sys.stderr,
+                            delay=3.0, leave=False, bar_format="{desc}: {n:.2f}/{total} s "
+                            "|{bar}| {elapsed}<{remaining}")
+        done = round(min(sim.time, t_end), 3)
+        if done > self.bar.n:
+            self.bar.update(done - self.bar.n)
+        if self.write_vtp is not None and (final or sim.time >= self.next_frame):
+            name = "last.vtp" if final else f"frame_{self.frames:04d}.vtp"
+            self.write_vtp(self.vtk_dir / name, sim)
+            self.frames += 0 if final else 1
+            self.next_frame = sim.time + t_end / VTK_FRAMES
+        if final:
+            self.bar.close()
+
+
+def summarise_record(record: dict, full: bool = False) -> dict:
+    """The record for the JSON: small arrays whole, large ones as shape, min and max."""
+    out = {}
+    for key, value in record.items():
+        a = value if isinstance(value, np.ndarray) else None
+        if a is not None and a.size > RECORD_INLINE_MAX and not full:
+            num = a.astype(float) if a.dtype != bool else a.astype(int)
+            out[key] = {"shape": list(a.shape), "min": float(np.nanmin(num)) if a.size else None,
+                        "max": float(np.nanmax(num)) if a.size else None}
+        else:
+            out[key] = value
+    return out
+
+
+def result_json(result, full_record: bool = False) -> dict:
+    """The JSON document of one rig run."""
+    meta = result.meta
+    return {"rig": result.rig, "observable": result.observable, "wall_s": meta["wall_s"],
+            "steps": meta["steps"], "spheres": meta["spheres"],
+            "sphere_steps_per_s": meta["sphere_steps_per_s"], "seed": meta["seed"],
+            "profile": meta.get("profile"), "dt": meta["dt"], "simulated_s": meta["simulated_s"],
+            "notes": meta.get("notes", []), "params": result.params,
+            "record": summarise_record(result.record, full_record),
+            "meta": {k: v for k, v in meta.items() if k not in ("notes",)},
+            "provenance": result.provenance.to_dict()}
+
+
+def run(args) -> int:
+    from simulate.rigs import run_rig
+
+    params = parameters(args.sets)
+    if args.seed < 0:
+        raise InputError(f"--seed must be >= 0, got {args.seed}")
+    opts, inputs = rig_options(args)
+    monitor = _Monitor(args.vtk)
+    result = run_rig(args.rig, params, args.seed, callback=monitor, **opts)
+    if inputs:
+        result = dataclasses.replace(result, provenance=dataclasses.replace(
+            result.provenance, inputs=dict(result.provenance.inputs, **inputs)))
+    doc = result_json(result, args.full_record)
+    if args.json_out:
+        write_json(args.json_out, doc)
+    shown = ", ".join(f"{k} = {_fmt(v)}" for k, v in result.observable.items())
+    print(f"{args.rig}: {shown}")
+    print(f"  {doc['steps']} steps, {doc['spheres']} spheres, {doc['wall_s']:.1f} s wall, "
+          f"{doc['sphere_steps_per_s']:.3g} sphere-steps/s, seed {args.seed}")
+    for note in doc["notes"]:
+        print(f"note: {note}", file=sys.stderr)
+    if args.json_out:
+        print(f"written: {args.json_out}")
+    return 0
+
+
+def _fmt(value) -> str:
+    if isinstance(value, float):
+        return "nan" if math.isnan(value) else f"{value:.4g}"
+    return str(value)

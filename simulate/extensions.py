@@ -1,0 +1,517 @@
+"""Model extensions: switchable changes of the DEM model that the critique loop proposes.
+
+Each extension answers a mechanism of the critique catalogue (``analyse.critique.mechanisms``)
+and is recorded, by name and settings, in the provenance of every run that uses it
+(:func:`describe`). ``EXTENSIONS`` lists them:
+
+``velocity_dependent_restitution``
+    e falls with impact speed. :func:`fit_velocity_restitution` fits the power law
+    e(v) = e_ref (v / v_ref)^(-n) to drops from several heights (Johnson 1985, sec. 11.5:
+    n = 1/4 for fully plastic impacts). :func:`parameters_for_impact` gives the parameters of
+    a single-impact twin (the drop rig) at its impact speed, which is exact for one impact
+    of known speed; a law evaluated per contact inside the contact model (needed for heaps)
+    is an engine hook (see :class:`VelocityRestitution`).
+``inverted_restitution``
+    The contact restitution that makes the drop twin reproduce the measured apparent
+    restitution: an elongated body turns part of its energy into rotation, so sqrt(h2/h1) is
+    not the contact restitution. :func:`invert_drop_twin` solves twin(e) = measured.
+``size_distribution``
+    Segments drawn from the calliper size distribution (:class:`SizeDistribution`): a twin of
+    one trial uses its own specimen's length and diameter; a heap draws each segment from the
+    measured (length, diameter) pairs.
+``more_spheres``
+    More spheres per clump (:func:`with_more_spheres`): a smoother surface, closer to the
+    cylinder's volume and inertia (:func:`surface_ripple`).
+``rolling_spring_dashpot``
+    Elastic-plastic spring-dashpot rolling resistance (Ai et al. 2011, model type C):
+    :func:`epsd_stiffness`, :func:`epsd_damping`, and the per-contact update
+    :func:`epsd_rolling_torque`, an evaluator for the contact kernel.
+
+References
+----------
+Ai, J., Chen, J.-F., Rotter, J. M., Ooi, J. Y. (2011). Assessment of rolling resistance models
+in discrete element simulations. Powder Technol. 206, 269-282.
+Iwashita, K., Oda, M. (1998). Rolling resistance at contacts in simulation of shear band
+development by DEM. J. Eng. Mech. 124(3), 285-292.
+Johnson, K. L. (1985). Contact Mechanics. Cambridge University Press, sec. 11.5.
+Thornton, C., Ning, Z. (1998). A theoretical model for the stick/bounce behaviour of adhesive,
+elastic-plastic spheres. Powder Technol. 99, 154-162.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from demcal.errors import InputError
+from simulate._jit import evaluator
+from simulate.clump import ClumpTemplate, segment_template
+from simulate.params import DEMParameters
+
+#: Extension names, in the order of the critique's catalogue.
+EXTENSIONS = ("velocity_dependent_restitution", "inverted_restitution", "size_distribution",
+              "more_spheres", "rolling_spring_dashpot")
+
+#: Standard gravity [m/s^2], as the drop rig uses it.
+G = 9.81
+
+#: Parameter of ``DEMParameters`` holding the restitution of each pair the rigs know.
+RESTITUTION_PARAMETER = {"particle-steel": "e_pw", "particle-particle": "e_pp"}
+
+
+def describe(name: str, **settings) -> dict:
+    """Provenance record of an extension: ``{"extension": name, **settings}``; an unknown name
+    lists the valid ones."""
+    if name not in EXTENSIONS:
+        raise InputError(f"unknown model extension {name!r}; valid: {', '.join(EXTENSIONS)}")
+    return {"extension": name, **settings}
+
+
+def restitution_parameter(pair: str) -> str:
+    """The ``DEMParameters`` field of a pair's restitution (``e_pw`` or ``e_pp``)."""
+    try:
+        return RESTITUTION_PARAMETER[pair]
+    except KeyError:
+        raise InputError(f"no DEM restitution parameter for pair {pair!r}; "
+                         f"valid: {', '.join(RESTITUTION_PARAMETER)}") from None
+
+
+def impact_speed(drop_height: float, g: float = G) -> float:
+    """Free-fall impact speed sqrt(2 g h) [m/s] from a drop height [m]."""
+    if not drop_height > 0:
+        raise InputError(f"drop height must be positive, got {drop_height!r}")
+    return math.sqrt(2.0 * g * drop_height)
+
+
+# ----------------------------------------------------------------------------------------------
+# velocity-dependent restitution
+
+
+@dataclass(frozen=True)
+class VelocityRestitution:
+    """Power law e(v) = e_ref (v / v_ref)^(-n) of the restitution against impact speed.
+
+    Attributes
+    ----------
+    pair : str
+        Material pair it was fitted for.
+    e_ref : float
+        Restitution at ``v_ref`` [-].
+    v_ref : float
+        Reference speed, the geometric mean of the fitted speeds [m/s].
+    exponent : float
+        n [-]; positive when e falls with speed (Johnson 1985: 1/4 for plastic impacts).
+    exponent_ci95 : tuple of float
+        Student-t 95 % interval of n [-].
+    e_ref_ci95 : tuple of float
+        95 % interval of e_ref [-].
+    n : int
+        Drops fitted.
+    speeds : tuple of float
+        Distinct impact speeds fitted [m/s].
+
+    Notes
+    -----
+    Inside the contact model the law needs the normal approach speed at first touch of each
+    contact (a per-contact history slot) to set that contact's damping from e(v); until the
+    engine has it, :func:`parameters_for_impact` applies the law to single-impact twins.
+    """
+
+    pair: str
+    e_ref: float
+    v_ref: float
+    exponent: float
+    exponent_ci95: tuple
+    e_ref_ci95: tuple
+    n: int
+    speeds: tuple
+
+    def __call__(self, speed):
+        """e at impact speed(s) ``speed`` [m/s], capped to (0, 1]."""
+        v = np.asarray(speed, dtype=float)
+        if np.any(v <= 0):
+            raise InputError("impact speed must be positive")
+        e = self.e_ref * (v / self.v_ref) ** (-self.exponent)
+        e = np.clip(e, 1e-6, 1.0)
+        return float(e) if e.ndim == 0 else e
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def fit_velocity_restitution(drop_height, restitution, *, pair: str = "particle-steel",
+                             g: float = G) -> VelocityRestitution:
+    """Fit e(v) = e_ref (v / v_ref)^(-n) to drops from several heights.
+
+    Least squares of ln e on ln(v / v_ref), v = sqrt(2 g h) the impact speed of each drop and
+    v_ref the geometric mean of the speeds (which makes the two estimates uncorrelated). The
+    power law is the form of Johnson's plastic-impact theory (1985, sec. 11.5) and of Thornton
+    & Ning (1998) at speeds above yield.
+
+    Parameters
+    ----------
+    drop_height : array_like
+        Drop height of each drop [m]; at least two distinct values.
+    restitution : array_like
+        Restitution of each drop [-], > 0.
+    pair : str
+        Material pair (recorded).
+    g : float
+        Gravitational acceleration [m/s^2].
+
+    Returns
+    -------
+    VelocityRestitution
+    """
+    h = np.asarray(drop_height, dtype=float)
+    e = np.asarray(restitution, dtype=float)
+    if h.shape != e.shape or h.ndim != 1:
+        raise InputError("drop_height and restitution must be 1-D arrays of equal length")
+    if np.any(h <= 0) or np.any(e <= 0):
+        raise InputError("drop heights and restitutions must be positive")
+    if np.unique(h).size < 2 or h.size < 3:
+        raise InputError("e(v) needs at least 3 drops from at least 2 drop heights")
+    v = np.sqrt(2.0 * g * h)
+    v_ref = float(np.exp(np.mean(np.log(v))))
+    x = np.log(v / v_ref)
+    y = np.log(e)
+    X = np.column_stack([np.ones_like(x), x])
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    resid = y - X @ coef
+    dof = x.size - 2
+    s2 = float(resid @ resid) / dof if dof > 0 else math.nan
+    cov = s2 * np.linalg.inv(X.T @ X)
+    t = float(stats.t.ppf(0.975, dof)) if dof > 0 else math.nan
+    a, b = float(coef[0]), float(coef[1])
+    sa, sb = math.sqrt(cov[0, 0]), math.sqrt(cov[1, 1])
+    return VelocityRestitution(pair=pair, e_ref=math.exp(a), v_ref=v_ref, exponent=-b,
+                               exponent_ci95=(-b - t * sb, -b + t * sb),
+                               e_ref_ci95=(math.exp(a - t * sa), math.exp(a + t * sa)),
+                               n=int(h.size), speeds=tuple(float(s) for s in np.unique(v)))
+
+
+def parameters_for_impact(params: DEMParameters, pair: str, law: VelocityRestitution,
+                          speed: float) -> DEMParameters:
+    """Parameters of a single-impact twin with the pair's restitution e(speed) of ``law``."""
+    return params.with_(**{restitution_parameter(pair): law(speed)})
+
+
+# ----------------------------------------------------------------------------------------------
+# restitution by inverting the drop twin
+
+
+@dataclass(frozen=True)
+class InvertedRestitution:
+    """Contact restitution that makes the drop twin reproduce the measured drops.
+
+    Attributes
+    ----------
+    pair : str
+    target : float
+        Measured mean apparent restitution of the trials fitted [-].
+    contact : float
+        Contact restitution found [-] (NaN when the twin cannot reach the target).
+    contact_ci95 : tuple of float
+        95 % interval of ``contact``: the interval of the mean paired residual (measured minus
+        twin) at the solution, divided by the local slope d(twin mean)/de [-].
+    twin_mean : float
+        Twin's mean apparent restitution at ``contact`` [-].
+    residual_ci95 : tuple of float
+        95 % interval of the mean paired residual at ``contact`` [-].
+    slope : float
+        d(twin mean)/de near the solution [-].
+    evaluations : tuple of (float, float)
+        (e, twin mean) of every evaluation, in order.
+    converged : bool
+    note : str
+    """
+
+    pair: str
+    target: float
+    contact: float
+    contact_ci95: tuple
+    twin_mean: float
+    residual_ci95: tuple
+    slope: float
+    evaluations: tuple
+    converged: bool
+    note: str = ""
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def invert_drop_twin(twin, measured, *, pair: str = "particle-steel", start: float | None = None,
+                     lo: float = 0.02, hi: float = 1.0, tol: float = 0.005,
+                     max_evaluations: int = 8) -> InvertedRestitution:
+    """Solve mean(twin(e)) = mean(measured) for the contact restitution e.
+
+    ``twin(e)`` returns the twin's apparent restitution of every trial (same order as
+    ``measured``). The mean is close to monotone in e but not smooth (a pivoting segment's
+    rebound changes abruptly with e), so the root is found by the Illinois variant of false
+    position once bracketed, by secant steps (clipped to [lo, hi]) before.
+
+    Parameters
+    ----------
+    twin : callable
+        ``twin(e) -> array`` of per-trial apparent restitutions [-].
+    measured : array_like
+        Measured apparent restitution of the same trials [-].
+    pair : str
+        Recorded.
+    start : float, optional
+        First e tried; default the measured mean (what the paper would use).
+    lo, hi : float
+        Search range of e [-].
+    tol : float
+        Stop when |twin mean - target| < tol [-] or the bracket is narrower than tol.
+    max_evaluations : int
+
+    Returns
+    -------
+    InvertedRestitution
+    """
+    y = np.asarray(measured, dtype=float)
+    if y.ndim != 1 or y.size < 2:
+        raise InputError("invert_drop_twin needs at least 2 measured trials")
+    target = float(y.mean())
+    e = float(np.clip(start if start is not None else target, lo, hi))
+    evals: list[tuple[float, float]] = []
+    cache: dict[float, np.ndarray] = {}
+
+    def f(x):
+        sim = np.asarray(twin(x), dtype=float)
+        if sim.shape != y.shape:
+            raise InputError(f"twin(e) returned {sim.shape} values for {y.size} trials")
+        cache[x] = sim
+        evals.append((x, float(sim.mean())))
+        return float(sim.mean()) - target
+
+    a, fa = e, f(e)
+    b = fb = None
+    if abs(fa) >= tol:
+        # second point: proportional guess (the twin's rebound scales roughly with e)
+        mean_a = fa + target
+        guess = a * target / mean_a if mean_a > 1e-3 else 2.0 * a
+        b = float(np.clip(guess, lo, hi))
+        if b == a:
+            b = float(np.clip(a + (0.1 if fa < 0 else -0.1), lo, hi))
+        fb = f(b)
+    side = 0
+    while b is not None and len(evals) < max_evaluations and abs(fb) >= tol and abs(b - a) >= tol:
+        if fa * fb < 0:
+            c = b - fb * (b - a) / (fb - fa)            # false position inside the bracket
+        else:
+            c = b - fb * (b - a) / (fb - fa) if fb != fa else b + (0.1 if fb < 0 else -0.1)
+            c = float(np.clip(c, lo, hi))
+            if c == b:                                   # pinned at the edge of the range
+                break
+        fc = f(c)
+        if fa * fb < 0:
+            if fc * fb < 0:
+                a, fa = b, fb
+                side = 0
+            else:
+                side += 1
+                if side >= 2:                            # Illinois: halve the stale end
+                    fa *= 0.5
+            b, fb = c, fc
+        else:
+            a, fa, b, fb = b, fb, c, fc
+    best_e, best_m = min(evals, key=lambda em: abs(em[1] - target))
+    resid = y - cache[best_e]
+    n = resid.size
+    half = float(stats.t.ppf(0.975, n - 1)) * float(resid.std(ddof=1)) / math.sqrt(n)
+    r_mean = float(resid.mean())
+    pts = sorted(evals, key=lambda em: abs(em[0] - best_e))
+    slope = math.nan
+    for other_e, other_m in pts[1:]:
+        if other_e != best_e:
+            slope = (best_m - other_m) / (best_e - other_e)
+            break
+    converged = abs(best_m - target) < max(tol, half)
+    note = ""
+    if not converged:
+        top = max(evals)[1] if evals else math.nan
+        note = (f"the twin's mean apparent restitution does not reach the measured {target:.3g} "
+                f"(closest {best_m:.3g} at e = {best_e:.3g}; at the largest e tried, {top:.3g})")
+    if converged and math.isfinite(slope) and slope > 0:
+        ci = (best_e + (r_mean - half) / slope, best_e + (r_mean + half) / slope)
+    else:
+        ci = (math.nan, math.nan)
+    return InvertedRestitution(pair=pair, target=target,
+                               contact=best_e if converged else math.nan, contact_ci95=ci,
+                               twin_mean=best_m, residual_ci95=(r_mean - half, r_mean + half),
+                               slope=slope, evaluations=tuple(evals), converged=converged,
+                               note=note)
+
+
+# ----------------------------------------------------------------------------------------------
+# size distribution from the callipers
+
+
+@dataclass(frozen=True)
+class SizeDistribution:
+    """Segment sizes measured with callipers: (length, diameter) pairs, drawn jointly.
+
+    Attributes
+    ----------
+    lengths, diameters : tuple of float
+        Measured segment lengths and diameters [m], one pair per specimen.
+    specimen_ids : tuple of str
+        Specimen of each pair.
+    """
+
+    lengths: tuple
+    diameters: tuple
+    specimen_ids: tuple = ()
+
+    def __post_init__(self):
+        if len(self.lengths) != len(self.diameters) or not self.lengths:
+            raise InputError("a size distribution needs equal, non-empty lists of lengths and diameters")
+        for length, dia in zip(self.lengths, self.diameters):
+            if not (length > 0 and dia > 0 and dia <= length):
+                raise InputError(f"segment size must have 0 < diameter <= length, got "
+                                 f"length {length!r} m, diameter {dia!r} m")
+
+    @classmethod
+    def from_specimens(cls, frame) -> "SizeDistribution":
+        """From a ``specimens`` sheet frame (columns ``specimen_id``, ``length_mm``, ``diameter_mm``)."""
+        return cls(tuple(float(v) * 1e-3 for v in frame["length_mm"]),
+                   tuple(float(v) * 1e-3 for v in frame["diameter_mm"]),
+                   tuple(str(v) for v in frame["specimen_id"]))
+
+    def size_of(self, specimen_id: str) -> tuple[float, float]:
+        """(length, diameter) [m] of one specimen."""
+        try:
+            i = self.specimen_ids.index(str(specimen_id))
+        except ValueError:
+            raise InputError(f"specimen {specimen_id!r} is not in the size distribution") from None
+        return self.lengths[i], self.diameters[i]
+
+    def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """``n`` (length, diameter) pairs [m] resampled from the measured pairs, shape (n, 2)."""
+        idx = rng.integers(0, len(self.lengths), int(n))
+        return np.column_stack([np.asarray(self.lengths)[idx], np.asarray(self.diameters)[idx]])
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def segment_of_size(params: DEMParameters, length: float, diameter: float) -> ClumpTemplate:
+    """The segment template of ``params`` with another length and diameter [m] (same number of
+    spheres, density and mass model; a ``scaled`` mass model keeps its mass per volume)."""
+    mean_mass = params.mean_mass_kg
+    if params.mass_model == "scaled" and mean_mass:
+        mean_mass = mean_mass * (length * diameter ** 2) / (params.segment_length_m * params.segment_diameter_m ** 2)
+    return segment_template(length, diameter, int(params.spheres_per_clump), params.particle_density_kg_m3,
+                            mass_model=params.mass_model, mean_mass=mean_mass,
+                            name=f"segment {length * 1e3:.2f} x {diameter * 1e3:.2f} mm")
+
+
+# ----------------------------------------------------------------------------------------------
+# more spheres per clump
+
+
+def surface_ripple(length: float, diameter: float, n_spheres: int) -> float:
+    """Depth of the grooves between neighbouring spheres of a segment clump [m].
+
+    Equal spheres of radius r = D/2 at spacing s = (L - D) / (n - 1) meet at a waist of radius
+    sqrt(r^2 - s^2/4); the ripple is r minus that (0 for touching-in-line spheres at s -> 0).
+    """
+    if n_spheres < 2:
+        return 0.0
+    r = 0.5 * diameter
+    s = (length - diameter) / (n_spheres - 1)
+    if s >= 2.0 * r:
+        return r
+    return r - math.sqrt(r * r - 0.25 * s * s)
+
+
+def with_more_spheres(params: DEMParameters, n_spheres: int | None = None, *,
+                      max_ripple: float | None = None) -> DEMParameters:
+    """``params`` with more spheres per clump: ``n_spheres`` given, or the fewest whose
+    :func:`surface_ripple` is at most ``max_ripple`` [m]."""
+    if (n_spheres is None) == (max_ripple is None):
+        raise InputError("give exactly one of n_spheres, max_ripple")
+    if n_spheres is None:
+        if not max_ripple > 0:
+            raise InputError(f"max_ripple must be positive, got {max_ripple!r}")
+        n_spheres = 2
+        while surface_ripple(params.segment_length_m, params.segment_diameter_m, n_spheres) > max_ripple:
+            n_spheres += 1
+            if n_spheres > 200:
+                raise InputError(f"max_ripple {max_ripple!r} m needs more than 200 spheres")
+    if int(n_spheres) != n_spheres or n_spheres < 1:
+        raise InputError(f"n_spheres must be a positive integer, got {n_spheres!r}")
+    return params.with_(spheres_per_clump=int(n_spheres))
+
+
+# ----------------------------------------------------------------------------------------------
+# spring-dashpot rolling resistance (Ai et al. 2011, type C)
+
+
+def epsd_stiffness(normal_stiffness: float, mu_r: float, rolling_radius: float) -> float:
+    """Rolling stiffness k_r = 2.25 k_n mu_r^2 R_r^2 [N m/rad] (Ai et al. 2011, eq. 15, after
+    Iwashita & Oda 1998), from the normal stiffness k_n [N/m], the rolling friction mu_r [-]
+    and the rolling radius R_r [m]."""
+    return 2.25 * normal_stiffness * mu_r ** 2 * rolling_radius ** 2
+
+
+def epsd_damping(rolling_stiffness: float, inertia: float, damping_ratio: float = 0.3) -> float:
+    """Rolling viscous damping C_r = eta_r 2 sqrt(I_r k_r) [N m s/rad] (Ai et al. 2011, eq. 16;
+    eta_r = 0.3 recommended), I_r the moment of inertia about the contact point [kg m^2]."""
+    return damping_ratio * 2.0 * math.sqrt(inertia * rolling_stiffness)
+
+
+@evaluator
+def epsd_rolling_torque(mx, my, mz, wrx, wry, wrz, nx, ny, nz, k_r, c_r, m_max, dt):
+    """One step of the type C (elastic-plastic spring-dashpot) rolling torque of a contact.
+
+    Ai et al. (2011), eqs. (12)-(17): the spring torque M^k is advanced by -k_r dtheta_r with
+    dtheta_r = w_r dt the relative rolling rotation (w_r with its component along the contact
+    normal n removed), kept in the tangent plane, and capped at |M^k| <= M_m = mu_r R_r F_n
+    (full mobilisation: the contact then rolls at constant resistance); the damping torque
+    -c_r w_r acts only while the spring is below its cap (their f = 0 option).
+
+    Parameters
+    ----------
+    mx, my, mz : float
+        Spring torque of the contact at the previous step [N m] (the contact's history).
+    wrx, wry, wrz : float
+        Relative angular velocity w_i - w_j [rad/s].
+    nx, ny, nz : float
+        Unit contact normal.
+    k_r, c_r, m_max : float
+        Rolling stiffness [N m/rad], damping [N m s/rad] and limit torque M_m [N m].
+    dt : float
+        Time step [s].
+
+    Returns
+    -------
+    (mx, my, mz, tx, ty, tz)
+        New spring torque (to store) and the total rolling torque on body i [N m].
+    """
+    wn = wrx * nx + wry * ny + wrz * nz
+    rx = wrx - wn * nx
+    ry = wry - wn * ny
+    rz = wrz - wn * nz
+    # keep the stored torque in the current tangent plane
+    mn = mx * nx + my * ny + mz * nz
+    mx -= mn * nx
+    my -= mn * ny
+    mz -= mn * nz
+    mx -= k_r * rx * dt
+    my -= k_r * ry * dt
+    mz -= k_r * rz * dt
+    mag = math.sqrt(mx * mx + my * my + mz * mz)
+    if mag >= m_max:
+        scale = m_max / mag if mag > 0.0 else 0.0
+        mx *= scale
+        my *= scale
+        mz *= scale
+        return mx, my, mz, mx, my, mz
+    return mx, my, mz, mx - c_r * rx, my - c_r * ry, mz - c_r * rz

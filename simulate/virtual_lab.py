@@ -1,0 +1,789 @@
+"""The virtual lab: complete lab workbooks made from a known truth, with optional planted effects.
+
+A :class:`Truth` holds what the real material and the real rigs would be (contact parameters,
+segment sizes, moisture, the spread from trial to trial, the reading noise of each instrument,
+the operators and days of the campaign). :func:`write_virtual_workbook` runs a virtual
+campaign of the lab tests of lab-workbook.md and writes every sheet, with realistic
+covariates (operator, date, trial order, specimen, moisture, orientation, several drop
+heights), plus the files the sheets point to: heap photos, camera tracks and compression
+curves. It is how demcal's tests hide an effect in data and require the critique loop to find
+it, and how a user can plan an experiment (how many drops, which heights) before making it.
+
+The physics of each test, without planted effects:
+
+drop
+    Each drop's apparent restitution sqrt(h2/h1) is the drop twin's (``simulate.rigs.drop``)
+    at the drop's orientation: the contact restitution e of the pair times the twin's ratio
+    R(orientation) = apparent / contact, precomputed with the drop rig on a 10-degree grid of
+    orientations covering the design and interpolated (:func:`drop_twin_ratio`, cached), plus
+    a drop-to-drop scatter ``e_sd``. Rebound heights are read to ``height_noise_mm``. By
+    default the segments are released end on (orientation 80-90 degrees, a release jig),
+    where the twin's apparent restitution is the contact restitution within 1 %.
+incline
+    tan(angle at onset) is the static friction (slide) or the rolling friction (roll), with a
+    specimen-to-specimen scatter ``mu_sd``; the inclinometer is read to ``angle_noise_deg``
+    and 0.1 degree.
+repose
+    Two-flank heaps of angle ``repose_angle_deg`` (heap-to-heap scatter ``repose_sd_deg``),
+    rendered by ``simulate.render.heap_photo`` from an analytic heap profile
+    (``photos="analytic"``, fast) or from the heap of a repose-rig run (``photos="dem"``),
+    with a random, small camera roll that the photo estimator corrects.
+specimens, density, compression
+    Calliper sizes, masses from the envelope density, displaced volumes read to 0.1 ml,
+    Poisson's ratio and force curves of modulus E = 2 G (1 + nu).
+
+Planted effects (:class:`PlantedEffect`, kinds = the critique catalogue):
+
+========================================  =====================================================
+kind (default size)                       what changes
+========================================  =====================================================
+``velocity_dependent_restitution``        contact e of the drop pair(s) changes by ``size``
+(-2e-4 per mm)                            per mm of drop height (0.38 at 200 mm to 0.30 at
+                                          600 mm around 0.34)
+``orientation_rotation`` (0 deg)          segments dropped by hand at random orientations
+                                          from ``size`` to 90 deg, so part of the energy goes
+                                          into rotation as in the drop twin
+``size_dependence`` (0.02 per mm)         contact e tracks the specimen's length
+``block_effect`` (2 deg)                  one operator reads incline angles ``size`` higher
+                                          (levels of the covariate offset evenly over ``size``)
+``trial_order_drift`` (0.004 per trial)   static friction rises with trial order
+``moisture_dependence`` (0.01 per %)      static friction rises with moisture content
+``camera_tilt`` (2 deg)                   an uncorrected camera roll: the left flank reads
+                                          ``size`` steeper and the right one ``size``
+                                          shallower (``quantity="floor"``: the camera is
+                                          rolled by ``size`` and the floor shows it)
+========================================  =====================================================
+
+The workbook's folder also gets ``truth.json``: the truth, the effects and, for each planted
+effect, the true size of what the diagnosis estimates (``VirtualWorkbook.expected``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from demcal.errors import InputError
+from demcal.jsonio import read_json, write_json
+from demcal.provenance import Provenance
+from simulate.params import DEMParameters
+
+#: Effect kinds, the identifiers of the critique catalogue that a workbook can carry.
+EFFECT_KINDS = ("velocity_dependent_restitution", "orientation_rotation", "size_dependence",
+                "block_effect", "trial_order_drift", "moisture_dependence", "camera_tilt")
+
+#: Per kind: default size, sheet, quantity (prefix), covariate and the unit of ``size``.
+EFFECT_DEFAULTS = {
+    "velocity_dependent_restitution": dict(size=-2.0e-4, sheet="drop", quantity="restitution",
+                                           covariate="drop_height_mm", unit="1/mm"),
+    "orientation_rotation": dict(size=0.0, sheet="drop", quantity="restitution.particle-steel",
+                                 covariate="orientation_deg", unit="deg (lowest release angle)"),
+    "size_dependence": dict(size=0.02, sheet="drop", quantity="restitution", covariate="length_mm",
+                            unit="1/mm"),
+    "block_effect": dict(size=2.0, sheet="incline", quantity="", covariate="operator",
+                         unit="deg (incline), 1 (drop e) or deg (repose) between extreme levels"),
+    "trial_order_drift": dict(size=0.004, sheet="incline", quantity="static_friction",
+                              covariate="trial_order", unit="quantity per trial"),
+    "moisture_dependence": dict(size=0.01, sheet="incline", quantity="static_friction",
+                                covariate="moisture_pct", unit="quantity per %"),
+    "camera_tilt": dict(size=2.0, sheet="repose", quantity="flanks", covariate="side",
+                        unit="deg"),
+}
+
+#: Sheets each kind may be planted in.
+EFFECT_SHEETS = {"velocity_dependent_restitution": ("drop",), "orientation_rotation": ("drop",),
+                 "size_dependence": ("drop", "incline"), "block_effect": ("drop", "incline", "repose"),
+                 "trial_order_drift": ("drop", "incline"), "moisture_dependence": ("drop", "incline"),
+                 "camera_tilt": ("repose",)}
+
+#: Orientation grid spacing of the drop-twin table [deg].
+ORIENTATION_STEP_DEG = 10.0
+
+PHOTO_MODES = ("analytic", "dem", "none")
+
+
+@dataclass(frozen=True)
+class Truth:
+    """What the virtual material and rigs really are.
+
+    Attributes
+    ----------
+    params : DEMParameters
+        Contact parameters (the truth of e, mu_s, mu_r per pair), particle density, Poisson's
+        ratio, shear modulus and the mean segment size.
+    e_sd : float
+        Drop-to-drop scatter of the apparent restitution [-].
+    mu_sd : float
+        Specimen-to-specimen scatter of static and rolling friction [-].
+    length_sd_m, diameter_sd_m : float
+        Spread of segment length and diameter [m].
+    envelope_ratio : float
+        Envelope density / particle density of the segments [-].
+    density_sd : float
+        Scatter of the displacement density of a sample [kg/m^3].
+    moisture_pct, moisture_sd_pct : float
+        Mean and spread of the moisture content [%].
+    repose_angle_deg, repose_sd_deg : float
+        Flank angle of the heaps and its heap-to-heap spread [deg].
+    poisson_sd : float
+        Specimen scatter of Poisson's ratio [-].
+    modulus_sd_rel : float
+        Relative specimen scatter of the elastic modulus [-].
+    height_noise_mm : float
+        Reading noise of a rebound height [mm].
+    angle_noise_deg : float
+        Reading noise of the inclinometer [deg].
+    camera_roll_sd_deg : float
+        Spread of the camera roll from photo to photo [deg] (corrected by the estimator).
+    operators, batches, days : tuple of str
+        Who measures, the segment batches, and the days of the campaign.
+    """
+
+    params: DEMParameters = field(default_factory=DEMParameters)
+    e_sd: float = 0.03
+    mu_sd: float = 0.02
+    length_sd_m: float = 1.6e-3
+    diameter_sd_m: float = 0.9e-3
+    envelope_ratio: float = 0.965
+    density_sd: float = 15.0
+    moisture_pct: float = 48.0
+    moisture_sd_pct: float = 3.0
+    repose_angle_deg: float = 35.8
+    repose_sd_deg: float = 0.8
+    poisson_sd: float = 0.02
+    modulus_sd_rel: float = 0.05
+    height_noise_mm: float = 1.0
+    angle_noise_deg: float = 0.3
+    camera_roll_sd_deg: float = 0.5
+    operators: tuple = ("op1", "op2")
+    batches: tuple = ("B1", "B2", "B3")
+    days: tuple = ("2024-03-04", "2024-03-05", "2024-03-06")
+
+    def __post_init__(self):
+        if not isinstance(self.params, DEMParameters):
+            raise InputError(f"Truth.params must be a DEMParameters, got {type(self.params).__name__}")
+        for name in ("e_sd", "mu_sd", "length_sd_m", "diameter_sd_m", "density_sd", "moisture_sd_pct",
+                     "repose_sd_deg", "poisson_sd", "modulus_sd_rel", "height_noise_mm",
+                     "angle_noise_deg", "camera_roll_sd_deg"):
+            if not getattr(self, name) >= 0:
+                raise InputError(f"Truth.{name} must be >= 0, got {getattr(self, name)!r}")
+        if not 0 < self.repose_angle_deg < 80:
+            raise InputError(f"Truth.repose_angle_deg must be in (0, 80), got {self.repose_angle_deg!r}")
+        for name in ("operators", "batches", "days"):
+            if not getattr(self, name):
+                raise InputError(f"Truth.{name} must name at least one level")
+
+    def restitution(self, pair: str) -> float:
+        """Contact restitution of a drop pair [-] (``particle-steel`` or ``particle-particle``)."""
+        if pair == "particle-steel":
+            return self.params.e_pw
+        if pair == "particle-particle":
+            return self.params.e_pp
+        raise InputError(f"the virtual lab drops on particle-steel or particle-particle, got {pair!r}")
+
+    def friction(self, surface: str, mode: str) -> float:
+        """Static (``slide``) or rolling (``roll``) friction on ``steel`` or ``particle`` [-]."""
+        p = self.params
+        table = {("steel", "slide"): p.mu_s_pw, ("steel", "roll"): p.mu_r_pw,
+                 ("particle", "slide"): p.mu_s_pp, ("particle", "roll"): p.mu_r_pp}
+        try:
+            return table[(surface, mode)]
+        except KeyError:
+            raise InputError(f"the virtual lab tilts on steel or particle plates, slide or roll; "
+                             f"got {surface!r}, {mode!r}") from None
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["params"] = self.params.to_dict()
+        return d
+
+
+@dataclass(frozen=True)
+class PlantedEffect:
+    """An effect hidden in a virtual workbook (see the module docstring for the kinds).
+
+    Attributes
+    ----------
+    kind : str
+        One of ``EFFECT_KINDS``.
+    size : float, optional
+        Size in the unit of the kind (``EFFECT_DEFAULTS``); default the kind's.
+    sheet : str, optional
+        Sheet it is planted in; default the kind's.
+    quantity : str, optional
+        Quantity name or family prefix it acts on (e.g. ``restitution``,
+        ``restitution.particle-steel``, ``static_friction``; ``""`` = every quantity of the
+        sheet); for ``camera_tilt``, ``flanks`` or ``floor``.
+    covariate : str, optional
+        For ``block_effect``: ``operator``, ``date`` or ``batch``.
+    """
+
+    kind: str
+    size: float | None = None
+    sheet: str | None = None
+    quantity: str | None = None
+    covariate: str | None = None
+
+    def __post_init__(self):
+        if self.kind not in EFFECT_KINDS:
+            extra = (" (ill_conditioned_parameter is a property of a calibration campaign, not "
+                     "of a workbook)") if self.kind == "ill_conditioned_parameter" else ""
+            raise InputError(f"unknown planted effect {self.kind!r}{extra}; valid: {', '.join(EFFECT_KINDS)}")
+        d = EFFECT_DEFAULTS[self.kind]
+        for name in ("size", "sheet", "quantity", "covariate"):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, d[name])
+        if not math.isfinite(float(self.size)):
+            raise InputError(f"planted effect {self.kind}: size must be a finite number, got {self.size!r}")
+        if self.sheet not in EFFECT_SHEETS[self.kind]:
+            raise InputError(f"planted effect {self.kind}: sheet must be one of "
+                             f"{', '.join(EFFECT_SHEETS[self.kind])}, got {self.sheet!r}")
+        if self.kind == "block_effect" and self.covariate not in ("operator", "date", "batch"):
+            raise InputError(f"block_effect: covariate must be operator, date or batch, got {self.covariate!r}")
+        if self.kind == "camera_tilt" and self.quantity not in ("flanks", "floor"):
+            raise InputError(f"camera_tilt: quantity must be 'flanks' or 'floor', got {self.quantity!r}")
+        if self.kind == "orientation_rotation" and not 0 <= self.size < 90:
+            raise InputError(f"orientation_rotation: size (lowest release angle) must be in [0, 90) deg, "
+                             f"got {self.size!r}")
+
+    def acts_on(self, quantity: str) -> bool:
+        """Whether the effect changes quantity ``quantity`` of its sheet."""
+        q = self.quantity
+        return not q or quantity == q or quantity.startswith(q + ".")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class VirtualWorkbook:
+    """A workbook written by :func:`write_virtual_workbook`.
+
+    Attributes
+    ----------
+    path : Path
+        What ``measure.workbook.read_workbook`` takes (the ``.xlsx`` or the CSV folder).
+    truth : Truth
+    effects : tuple of PlantedEffect
+    expected : tuple of dict
+        For each planted effect and quantity it acts on: ``kind``, ``sheet``, ``quantity``,
+        ``covariate``, ``true_effect`` (the size of what the diagnosis estimates, computed on
+        the noise-free rows: the least-squares slope on the covariate, the range of the level
+        means for a block, the mean for a flank difference or floor tilt) and ``unit``.
+    seed : int or None
+        Seed of the generator when an int was given.
+    provenance : Provenance
+    """
+
+    path: Path
+    truth: Truth
+    effects: tuple
+    expected: tuple
+    seed: int | None
+    provenance: Provenance
+
+    def to_dict(self) -> dict:
+        return {"path": str(self.path), "truth": self.truth.to_dict(),
+                "effects": [e.to_dict() for e in self.effects], "expected": [dict(x) for x in self.expected],
+                "seed": self.seed, "provenance": self.provenance.to_dict()}
+
+
+# ----------------------------------------------------------------------------------------------
+# the drop twin table
+
+
+_DROP_CACHE: dict = {}
+
+
+def _drop_point(params: DEMParameters, pair: str, height_m: float, orientation_deg: float,
+                cache_dir) -> float:
+    """Apparent restitution of the drop twin at one orientation (cached in memory and on disk)."""
+    inputs = {"params": params.to_dict(), "pair": pair, "height": round(float(height_m), 6),
+              "orientation_deg": round(float(orientation_deg), 6)}
+    key = hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()
+    if key in _DROP_CACHE:
+        return _DROP_CACHE[key]
+    path = Path(cache_dir) / f"drop-{key}.json" if cache_dir else None
+    if path is not None and path.is_file():
+        value = float(read_json(path)["apparent_restitution"])
+    else:
+        from simulate.rigs import run_rig
+        result = run_rig("drop", params, 0, height=float(height_m), orientation_deg=float(orientation_deg),
+                         pair=pair)
+        value = float(result.observable["apparent_restitution"])
+        if path is not None:
+            write_json(path, {"inputs": inputs, "apparent_restitution": value})
+    _DROP_CACHE[key] = value
+    return value
+
+
+def drop_twin_ratio(params: DEMParameters, pair: str, height_m: float, orientation_deg, *,
+                    cache_dir=None) -> np.ndarray:
+    """Ratio apparent / contact restitution of the drop twin at the given orientations.
+
+    The drop rig is run at the points of a ``ORIENTATION_STEP_DEG`` grid that cover the
+    orientations asked for (each point once per parameter set, pair and height; cached in
+    memory and, with ``cache_dir`` or the environment variable ``DEMCAL_CACHE``, on disk) and
+    the ratio is interpolated linearly between them.
+
+    Parameters
+    ----------
+    params : DEMParameters
+        Contact parameters of the twin (its restitution of ``pair`` is the contact one).
+    pair : str
+        ``particle-steel`` or ``particle-particle``.
+    height_m : float
+        Drop height [m].
+    orientation_deg : array_like
+        Angles of the long axis to the horizontal at release [deg], in [0, 90].
+
+    Returns
+    -------
+    numpy.ndarray
+        R [-], one per orientation.
+    """
+    from simulate.extensions import restitution_parameter
+
+    o = np.atleast_1d(np.asarray(orientation_deg, dtype=float))
+    if np.any((o < 0) | (o > 90)):
+        raise InputError("orientation_deg must lie in [0, 90] deg")
+    cache_dir = cache_dir or os.environ.get("DEMCAL_CACHE") or None
+    step = ORIENTATION_STEP_DEG
+    lo = step * math.floor(o.min() / step)
+    hi = step * math.ceil(o.max() / step)
+    grid = np.arange(lo, hi + 0.5 * step, step) if hi > lo else np.array([lo])
+    e = getattr(params, restitution_parameter(pair))
+    ratio = np.array([_drop_point(params, pair, height_m, g, cache_dir) for g in grid]) / e
+    return np.interp(o, grid, ratio) if grid.size > 1 else np.full(o.shape, ratio[0])
+
+
+# ----------------------------------------------------------------------------------------------
+# helpers
+
+
+def _slope(x, y) -> float:
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    xc = x - x.mean()
+    sxx = float(xc @ xc)
+    return float(xc @ (y - y.mean()) / sxx) if sxx > 0 else math.nan
+
+
+def _block_range(levels, y) -> float:
+    frame = pd.DataFrame({"g": list(levels), "y": np.asarray(y, dtype=float)})
+    means = frame.groupby("g")["y"].mean()
+    return float(means.max() - means.min())
+
+
+def _level_offset(levels: tuple, value, size: float) -> float:
+    """Offset of one level: levels spread evenly from 0 to ``size`` in their given order."""
+    if len(levels) < 2:
+        return 0.0
+    return size * levels.index(value) / (len(levels) - 1)
+
+
+def camera_track(rng: np.random.Generator, drop_height_m: float, e: float, *, fps: float = 1000.0,
+                 g: float = 9.81, pixel_mm: float = 0.4, noise_mm: float = 0.15) -> pd.DataFrame:
+    """High-speed-camera track of a drop: free fall from rest at ``drop_height_m``, impact,
+    rebound at ``e`` times the impact speed; positions with Gaussian noise [mm], quantised to
+    the pixel size. Columns ``t_s``, ``y_mm``."""
+    v_in = math.sqrt(2.0 * g * drop_height_m)
+    t_impact = v_in / g
+    t = np.arange(0.2 * t_impact, t_impact + 1.8 * e * v_in / g, 1.0 / fps)
+    y = np.where(t < t_impact, drop_height_m - 0.5 * g * t ** 2,
+                 e * v_in * (t - t_impact) - 0.5 * g * (t - t_impact) ** 2)
+    y_mm = 1000.0 * y + rng.normal(0.0, noise_mm, t.size)
+    y_mm = np.round(y_mm / pixel_mm) * pixel_mm
+    return pd.DataFrame({"t_s": t.round(5), "y_mm": y_mm.round(3)})
+
+
+def force_curve(rng: np.random.Generator, stiffness_n_per_m: float, max_disp_mm: float, *,
+                rate_mm_s: float = 5.0, hz: float = 500.0, noise_n: float = 0.3) -> pd.DataFrame:
+    """Texture-analyser loading curve: linear (``stiffness``) over the first 20 % of the travel,
+    then softening as the tissue yields; load-cell noise ``noise_n``. Columns
+    ``displacement_mm``, ``force_N``."""
+    d = np.arange(0.0, max_disp_mm, rate_mm_s / hz)
+    d_lin = 0.2 * max_disp_mm
+    k = stiffness_n_per_m * 1e-3
+    f = np.where(d <= d_lin, k * d, k * d_lin + 0.45 * k * (d - d_lin) - 0.02 * k * (d - d_lin) ** 2 / d_lin)
+    f = f + rng.normal(0.0, noise_n, d.size)
+    return pd.DataFrame({"displacement_mm": d.round(4), "force_N": f.round(3)})
+
+
+# ----------------------------------------------------------------------------------------------
+# sheets
+
+
+def _specimens(truth: Truth, rng, n: int) -> pd.DataFrame:
+    p = truth.params
+    length = np.clip(rng.normal(p.segment_length_m, truth.length_sd_m, n), 0.6 * p.segment_length_m,
+                     1.4 * p.segment_length_m)
+    dia = np.clip(rng.normal(p.segment_diameter_m, truth.diameter_sd_m, n), 0.6 * p.segment_diameter_m,
+                  np.minimum(1.4 * p.segment_diameter_m, length))
+    env = truth.envelope_ratio * p.particle_density_kg_m3 * (1.0 + 0.02 * rng.standard_normal(n))
+    mass = env * math.pi / 4.0 * dia ** 2 * length          # kg
+    return pd.DataFrame({
+        "specimen_id": [f"S{i + 1:02d}" for i in range(n)],
+        "length_mm": (length * 1e3).round(2), "diameter_mm": (dia * 1e3).round(2),
+        "mass_g": (mass * 1e3).round(3),
+        "moisture_pct": rng.normal(truth.moisture_pct, truth.moisture_sd_pct, n).round(1),
+        "batch": rng.choice(list(truth.batches), n)})
+
+
+def _density(truth: Truth, rng, n: int) -> pd.DataFrame:
+    rho = rng.normal(truth.params.particle_density_kg_m3, truth.density_sd, n)
+    mass = rng.uniform(18.0, 26.0, n)
+    displaced = np.round(mass / (rho / 1000.0), 1)           # read to 0.1 ml
+    return pd.DataFrame({"sample_id": [f"D{i + 1}" for i in range(n)], "mass_g": mass.round(3),
+                         "volume_before_ml": np.full(n, 100.0), "volume_after_ml": 100.0 + displaced})
+
+
+def _session(rng, n: int, truth: Truth, day: str, specimens: pd.DataFrame) -> dict:
+    """Covariates of ``n`` trials in random order: trial order, alternating operators, a day,
+    a specimen each."""
+    ops = list(truth.operators)
+    return {"trial_order": np.arange(1, n + 1),
+            "operator": [ops[k % len(ops)] for k in range(n)],
+            "date": [day] * n,
+            "specimen_id": rng.choice(specimens["specimen_id"].to_numpy(), n)}
+
+
+def _join_specimens(frame: pd.DataFrame, specimens: pd.DataFrame) -> pd.DataFrame:
+    return frame.merge(specimens[["specimen_id", "length_mm", "moisture_pct", "batch"]],
+                       on="specimen_id", how="left", suffixes=("", "_spec"))
+
+
+def _contributions(effects, sheet: str, quantity: str, rows: pd.DataFrame, truth: Truth,
+                   specimens_mean: dict, height_ref_mm: float = 0.0) -> dict:
+    """Per-row additive contribution of each effect (index in ``effects``) to a quantity, in its
+    own unit (e for drops, mu for inclines; block offsets of inclines are in degrees and are
+    returned separately by the caller)."""
+    out = {}
+    n = len(rows)
+    for k, eff in enumerate(effects):
+        if eff.sheet != sheet or not eff.acts_on(quantity):
+            continue
+        if eff.kind == "velocity_dependent_restitution":
+            h = rows["drop_height_mm"].to_numpy(float)
+            out[k] = eff.size * (h - height_ref_mm)
+        elif eff.kind == "size_dependence":
+            out[k] = eff.size * (rows["length_mm"].to_numpy(float) - specimens_mean["length_mm"])
+        elif eff.kind == "trial_order_drift":
+            t = rows["trial_order"].to_numpy(float)
+            out[k] = eff.size * (t - 0.5 * (n + 1))
+        elif eff.kind == "moisture_dependence":
+            out[k] = eff.size * (rows["moisture_pct"].to_numpy(float) - truth.moisture_pct)
+        elif eff.kind == "block_effect":
+            levels = {"operator": truth.operators, "date": truth.days, "batch": truth.batches}[eff.covariate]
+            out[k] = np.array([_level_offset(tuple(levels), v, eff.size) for v in rows[eff.covariate]])
+    return out
+
+
+def _expected(effects, k: int, sheet: str, quantity: str, rows: pd.DataFrame, delta) -> dict:
+    eff = effects[k]
+    cov = EFFECT_DEFAULTS[eff.kind]["covariate"] if eff.kind != "block_effect" else eff.covariate
+    if eff.kind == "block_effect":
+        size = _block_range(rows[cov], delta)
+        unit = "quantity (range of level means)"
+    else:
+        size = _slope(rows[cov].to_numpy(float), delta)
+        unit = f"quantity per {cov}"
+    return {"kind": eff.kind, "sheet": sheet, "quantity": quantity, "covariate": cov,
+            "true_effect": size, "unit": unit}
+
+
+def _drops(truth: Truth, rng, effects, specimens, *, pairs, heights_mm, n_drop, orientation_range,
+           n_tracks, root: Path, cache_dir):
+    """The drop sheet, its tracks, and the expected sizes of the effects planted in it."""
+    frames, expected = [], []
+    orient = [e for e in effects if e.kind == "orientation_rotation"]
+    spec_mean = {"length_mm": float(specimens["length_mm"].mean())}
+    trial = 0
+    for pair in pairs:
+        e_pair = truth.restitution(pair)
+        n = n_drop * len(heights_mm)
+        rows = pd.DataFrame(_session(rng, n, truth, truth.days[0], specimens))
+        rows["pair"] = pair
+        rows["drop_height_mm"] = rng.permutation(np.repeat(np.asarray(heights_mm, float), n_drop))
+        hand = [e for e in orient if e.acts_on(f"restitution.{pair}")]
+        lo = min([e.size for e in hand]) if hand else orientation_range[0]
+        hi = 90.0 if hand else orientation_range[1]
+        rows["orientation_deg"] = rng.uniform(lo, hi, n).round(1)
+        rows = _join_specimens(rows, specimens)
+        contrib = _contributions(effects, "drop", f"restitution.{pair}", rows, truth, spec_mean,
+                                 height_ref_mm=float(np.mean(heights_mm)))
+        contact = e_pair + sum(contrib.values(), np.zeros(n))
+        ratio = np.ones(n)
+        for h in np.unique(rows["drop_height_mm"]):
+            sel = rows["drop_height_mm"].to_numpy() == h
+            ratio[sel] = drop_twin_ratio(truth.params, pair, h * 1e-3, rows.loc[sel, "orientation_deg"],
+                                         cache_dir=cache_dir)
+        apparent = contact * ratio
+        # expected sizes, on the noise-free apparent restitution
+        for k, c in contrib.items():
+            expected.append(_expected(effects, k, "drop", f"restitution.{pair}", rows, c * ratio))
+        for eff in hand:
+            expected.append({"kind": eff.kind, "sheet": "drop", "quantity": f"restitution.{pair}",
+                             "covariate": "orientation_deg",
+                             "true_effect": _slope(rows["orientation_deg"], apparent - contact),
+                             "unit": "quantity per orientation_deg"})
+        e_obs = np.clip(apparent + rng.normal(0.0, truth.e_sd, n), 0.01, 0.99)
+        h1 = rows["drop_height_mm"].to_numpy(float)
+        h2 = np.clip(e_obs ** 2 * h1 + rng.normal(0.0, truth.height_noise_mm, n), 0.0, h1).round(1)
+        rows["rebound_height_mm"] = h2
+        rows["trial_id"] = [f"T{trial + i + 1:03d}" for i in range(n)]
+        trial += n
+        rows["track_file"] = ""
+        if pair == "particle-steel" and n_tracks:
+            (root / "tracks").mkdir(parents=True, exist_ok=True)
+            # film the first drops that rebound clearly (a track needs a rebound to fit)
+            for i in [i for i in range(n) if e_obs[i] >= 0.15][:n_tracks]:
+                name = f"tracks/{rows.at[i, 'trial_id']}.csv"
+                camera_track(rng, h1[i] * 1e-3, float(e_obs[i])).to_csv(root / name, index=False)
+                rows.at[i, "track_file"] = name
+        frames.append(rows)
+    drop = pd.concat(frames, ignore_index=True)
+    cols = ["trial_id", "pair", "drop_height_mm", "rebound_height_mm", "specimen_id", "operator",
+            "date", "orientation_deg", "trial_order", "track_file"]
+    return drop[cols], expected
+
+
+def _inclines(truth: Truth, rng, effects, specimens, *, surfaces, n_incline):
+    frames, expected = [], []
+    spec_mean = {"length_mm": float(specimens["length_mm"].mean())}
+    trial = 0
+    day = truth.days[min(1, len(truth.days) - 1)]
+    for surface in surfaces:
+        for mode in ("slide", "roll"):
+            quantity = f"{'static' if mode == 'slide' else 'rolling'}_friction.{surface}"
+            rows = pd.DataFrame(_session(rng, n_incline, truth, day, specimens))
+            rows["surface"], rows["mode"] = surface, mode
+            rows = _join_specimens(rows, specimens)
+            contrib = _contributions(effects, "incline", quantity, rows, truth, spec_mean)
+            block = {k: c for k, c in contrib.items() if effects[k].kind == "block_effect"}
+            shifts = {k: c for k, c in contrib.items() if k not in block}
+            mu = truth.friction(surface, mode) + rng.normal(0.0, truth.mu_sd, n_incline)
+
+            def reading(keep):
+                m = mu + sum((c for k, c in shifts.items() if k in keep), np.zeros(n_incline))
+                off = sum((c for k, c in block.items() if k in keep), np.zeros(n_incline))
+                return np.degrees(np.arctan(np.clip(m, 1e-3, None))) + off
+
+            everything = set(contrib)
+            for k in contrib:
+                delta = np.tan(np.radians(reading(everything))) - np.tan(np.radians(reading(everything - {k})))
+                expected.append(_expected(effects, k, "incline", quantity, rows, delta))
+            angle = reading(everything) + rng.normal(0.0, truth.angle_noise_deg, n_incline)
+            rows["angle_deg"] = np.clip(angle, 0.1, 89.0).round(1)
+            rows["trial_id"] = [f"I{trial + i + 1:03d}" for i in range(n_incline)]
+            trial += n_incline
+            frames.append(rows)
+    inc = pd.concat(frames, ignore_index=True)
+    return inc[["trial_id", "surface", "mode", "angle_deg", "specimen_id", "operator", "date",
+                "trial_order"]], expected
+
+
+def _compression(truth: Truth, rng, specimens, n: int, root: Path) -> pd.DataFrame:
+    p = truth.params
+    (root / "curves").mkdir(parents=True, exist_ok=True)
+    rows = []
+    for i in range(min(n, len(specimens))):
+        spec = specimens.iloc[i]
+        nu = float(np.clip(rng.normal(p.poisson_ratio, truth.poisson_sd), 0.05, 0.45))
+        E = 2.0 * p.shear_modulus_pa * (1.0 + p.poisson_ratio) * (1.0 + truth.modulus_sd_rel * rng.standard_normal())
+        t0 = float(spec["diameter_mm"]) * (1.0 + 0.01 * rng.standard_normal())
+        w0 = float(spec["diameter_mm"]) * (1.0 + 0.01 * rng.standard_normal())
+        eps_t = 0.30 * (0.55 + 0.1 * rng.random())
+        k = E * (w0 * 1e-3) * (float(spec["length_mm"]) * 1e-3) / (t0 * 1e-3)
+        name = f"curves/C{i + 1:02d}.csv"
+        force_curve(rng, k, 0.30 * t0).to_csv(root / name, index=False)
+        rows.append({"specimen_id": spec["specimen_id"], "axis": "radial",
+                     "width_before_mm": round(w0, 3), "width_after_mm": round(w0 * (1.0 + nu * eps_t), 3),
+                     "thickness_before_mm": round(t0, 3), "thickness_after_mm": round(t0 * (1.0 - eps_t), 3),
+                     "curve_file": name})
+    return pd.DataFrame(rows)
+
+
+def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base: int):
+    import cv2
+
+    from simulate.render import Lighting, heap_photo, heap_profile
+
+    tilt = [e for e in effects if e.kind == "camera_tilt"]
+    block = [e for e in effects if e.kind == "block_effect" and e.sheet == "repose"]
+    flank = sum(e.size for e in tilt if e.quantity == "flanks")
+    floor = sum(e.size for e in tilt if e.quantity == "floor")
+    if mode == "dem" and flank:
+        raise InputError("camera_tilt on the flanks needs photos='analytic' (a repose-rig heap has one flank)")
+    (root / "photos").mkdir(parents=True, exist_ok=True)
+    rows, expected = [], []
+    ops = list(truth.operators)
+    day = truth.days[-1]
+    for i in range(n):
+        row = {"photo_id": f"P{i + 1}", "operator": ops[i % len(ops)], "date": day}
+        offset = sum(_level_offset(tuple({"operator": truth.operators, "date": truth.days,
+                                          "batch": truth.batches}[e.covariate]),
+                                   row.get(e.covariate, truth.batches[0]), e.size) for e in block)
+        angle = truth.repose_angle_deg + truth.repose_sd_deg * rng.standard_normal() + offset
+        roll = truth.camera_roll_sd_deg * rng.standard_normal() + floor
+        light = Lighting(gradient=float(rng.uniform(0.1, 0.35)), direction_deg=float(rng.uniform(0, 360)))
+        if mode == "analytic":
+            x, z = heap_profile(angle + flank, angle - flank, height_m=0.10, floor_m=0.04,
+                                roughness_m=0.002, rng=rng)
+            side = "both"
+        else:
+            from simulate.rigs import run_rig
+            res = run_rig("repose", truth.params, seed_base + i, profile="quick")
+            x = np.asarray(res.record["profile_x"], float)
+            z = np.asarray(res.record["profile_z"], float)
+            side = "right"
+        img = heap_photo(x, z, rng=rng, camera_roll_deg=float(np.clip(roll, -15, 15)), light=light,
+                         noise_sd=4.0, blur_px=1.0, jpeg_quality=int(rng.integers(75, 93)))
+        name = f"photos/heap_{i + 1}.jpg"
+        cv2.imwrite(str(root / name), img, [cv2.IMWRITE_JPEG_QUALITY, 95])
+        rows.append({"photo_id": row["photo_id"], "file": name, "side": side, "operator": row["operator"],
+                     "date": day})
+    frame = pd.DataFrame(rows)
+    for e in tilt:
+        q = "flank_difference_deg" if e.quantity == "flanks" else "base_tilt_deg"
+        expected.append({"kind": e.kind, "sheet": "repose", "quantity": q,
+                         "covariate": "side" if e.quantity == "flanks" else "floor",
+                         "true_effect": 2.0 * e.size if e.quantity == "flanks" else e.size,
+                         "unit": "deg"})
+    for e in block:
+        levels = {"operator": truth.operators, "date": truth.days, "batch": truth.batches}[e.covariate]
+        offs = [_level_offset(tuple(levels), v, e.size) for v in frame[e.covariate]]
+        expected.append({"kind": e.kind, "sheet": "repose", "quantity": "repose_angle_deg",
+                         "covariate": e.covariate, "true_effect": _block_range(frame[e.covariate], offs),
+                         "unit": "deg (range of level means)"})
+    return frame, expected
+
+
+def _meta(truth: Truth, effects) -> pd.DataFrame:
+    p = truth.params
+    rows = [("material", "Virtual root segments (demcal virtual lab)"), ("contact_material", "steel"),
+            ("contact_density_kg_m3", p.wall_density_kg_m3), ("contact_poisson", p.wall_poisson_ratio),
+            ("contact_shear_modulus_pa", p.wall_shear_modulus_pa),
+            ("particle_shear_modulus_pa", p.shear_modulus_pa),
+            ("box_length_mm", 200), ("box_width_mm", 100), ("box_height_mm", 250),
+            ("plate_lift_speed_mm_s", 100), ("fill_count", 500),
+            ("virtual_lab", "made by simulate.virtual_lab from a known truth (truth.json); planted: "
+             + (", ".join(e.kind for e in effects) or "none"))]
+    return pd.DataFrame(rows, columns=["key", "value"])
+
+
+def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: str = "analytic",
+                           n_specimens: int = 30, n_density: int = 5,
+                           pairs=("particle-particle", "particle-steel"),
+                           drop_heights_mm=(200.0, 400.0, 600.0), n_drop: int = 10,
+                           orientation_range_deg=(80.0, 90.0), n_tracks: int = 2,
+                           surfaces=("particle", "steel"), n_incline: int = 30,
+                           n_compression: int = 10, n_photos: int = 4,
+                           cache_dir=None) -> VirtualWorkbook:
+    """Write a complete lab workbook from ``truth``, with ``effects`` planted.
+
+    Parameters
+    ----------
+    truth : Truth
+    path : str or Path
+        ``*.xlsx`` for a workbook file (photos, tracks and curves beside it), else a folder
+        that receives one CSV per sheet and the files.
+    effects : sequence of PlantedEffect or str
+        Effects to plant (a kind name plants the kind's default).
+    rng : numpy.random.Generator or int
+        Random source; an int is a seed. Required.
+    photos : {"analytic", "dem", "none"}
+        Heap photos from analytic heap profiles (fast), from repose-rig heaps (slow), or none
+        (no repose sheet).
+    n_specimens, n_density : int
+        Specimens measured with callipers; density samples.
+    pairs : sequence of str
+        Drop pairs (``particle-steel``, ``particle-particle``).
+    drop_heights_mm : sequence of float
+        Drop heights [mm]; ``n_drop`` drops of each pair from each height, in random order.
+    orientation_range_deg : (float, float)
+        Release orientations without a planted ``orientation_rotation`` [deg].
+    n_tracks : int
+        Particle-steel drops filmed (a camera track each).
+    surfaces : sequence of str
+        Incline surfaces (``particle``, ``steel``); ``n_incline`` slide and ``n_incline`` roll
+        trials on each.
+    n_compression, n_photos : int
+        Compression tests (with curves); heap photos.
+    cache_dir : path, optional
+        Disk cache of the drop-twin table (default ``$DEMCAL_CACHE``, else memory only).
+
+    Returns
+    -------
+    VirtualWorkbook
+    """
+    from measure.workbook import write_workbook
+
+    if not isinstance(truth, Truth):
+        raise InputError(f"truth must be a Truth, got {type(truth).__name__}")
+    if rng is None:
+        raise InputError("write_virtual_workbook needs rng (a seed or numpy.random.Generator)")
+    seed = int(rng) if isinstance(rng, (int, np.integer)) else None
+    rng = np.random.default_rng(rng)
+    effects = tuple(e if isinstance(e, PlantedEffect) else PlantedEffect(str(e)) for e in effects)
+    if photos not in PHOTO_MODES:
+        raise InputError(f"photos must be one of {', '.join(PHOTO_MODES)}, got {photos!r}")
+    for name, value, least in (("n_specimens", n_specimens, 3), ("n_density", n_density, 2),
+                               ("n_drop", n_drop, 1), ("n_incline", n_incline, 2),
+                               ("n_compression", n_compression, 0), ("n_photos", n_photos, 0),
+                               ("n_tracks", n_tracks, 0)):
+        if int(value) != value or value < least:
+            raise InputError(f"{name} must be an integer >= {least}, got {value!r}")
+    lo, hi = (float(v) for v in orientation_range_deg)
+    if not 0 <= lo <= hi <= 90:
+        raise InputError(f"orientation_range_deg must satisfy 0 <= low <= high <= 90, got {orientation_range_deg!r}")
+    if not drop_heights_mm or any(not h > 0 for h in drop_heights_mm):
+        raise InputError(f"drop_heights_mm must be positive heights, got {drop_heights_mm!r}")
+    for e in effects:
+        if e.sheet == "repose" and (photos == "none" or n_photos < 2):
+            raise InputError(f"planted effect {e.kind} is in the repose sheet: needs photos and n_photos >= 2")
+
+    path = Path(path)
+    xlsx = path.suffix.lower() == ".xlsx"
+    root = path.parent if xlsx else path
+    root.mkdir(parents=True, exist_ok=True)
+    specimens = _specimens(truth, rng, n_specimens)
+    sheets = {"meta": _meta(truth, effects), "specimens": specimens,
+              "density": _density(truth, rng, n_density)}
+    expected = []
+    if pairs:
+        sheets["drop"], exp = _drops(truth, rng, effects, specimens, pairs=tuple(pairs),
+                                     heights_mm=tuple(float(h) for h in drop_heights_mm), n_drop=n_drop,
+                                     orientation_range=(lo, hi), n_tracks=n_tracks, root=root,
+                                     cache_dir=cache_dir)
+        expected += exp
+    if surfaces:
+        sheets["incline"], exp = _inclines(truth, rng, effects, specimens, surfaces=tuple(surfaces),
+                                           n_incline=n_incline)
+        expected += exp
+    if n_compression:
+        sheets["compression"] = _compression(truth, rng, specimens, n_compression, root)
+    if photos != "none" and n_photos:
+        sheets["repose"], exp = _photos(truth, rng, effects, n_photos, root, photos,
+                                        seed_base=int(rng.integers(0, 2**31)))
+        expected += exp
+    for e in effects:
+        if e.sheet not in sheets or not any(x["kind"] == e.kind for x in expected):
+            raise InputError(f"planted effect {e.kind} acts on nothing in this design "
+                             f"(sheet {e.sheet!r}, quantity {e.quantity!r})")
+    write_workbook(sheets, path)
+    options = {"photos": photos, "n_specimens": n_specimens, "n_density": n_density, "pairs": list(pairs),
+               "drop_heights_mm": list(drop_heights_mm), "n_drop": n_drop,
+               "orientation_range_deg": [lo, hi], "n_tracks": n_tracks, "surfaces": list(surfaces),
+               "n_incline": n_incline, "n_compression": n_compression, "n_photos": n_photos}
+    result = VirtualWorkbook(path=path, truth=truth, effects=effects, expected=tuple(expected), seed=seed,
+                             provenance=Provenance(seed=seed, options=options))
+    write_json(root / "truth.json", result.to_dict())
+    return result

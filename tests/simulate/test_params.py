@@ -1,0 +1,41 @@
+"""DEMParameters: the paper's defaults and the ``--set NAME=VALUE`` interface."""
+
+from __future__ import annotations
+
+import pytest
+
+from demcal.errors import InputError
+from simulate import DEMParameters
+
+
+def test_defaults_are_the_paper_values():
+    p = DEMParameters()
+    assert (p.poisson_ratio, p.shear_modulus_pa, p.particle_density_kg_m3) == (0.25, 1e7, 912.0)
+    assert (p.e_pp, p.e_pw, p.mu_s_pp, p.mu_s_pw, p.mu_r_pp, p.mu_r_pw) == (0.3, 0.35, 0.65, 0.2, 0.53, 0.15)
+    assert (p.wall_density_kg_m3, p.wall_poisson_ratio, p.wall_shear_modulus_pa) == (7850.0, 0.3, 8e10)
+    assert (p.segment_length_m, p.segment_diameter_m, p.spheres_per_clump) == (0.025, 0.011, 5)
+    assert (p.mass_model, p.rolling_lever) == ("union", "edem_com")
+
+
+def test_from_names_converts_strings():
+    p = DEMParameters.from_names({"e_pp": "0.32", "spheres_per_clump": "7", "rolling_lever": "liggghts_reff"})
+    assert p.e_pp == 0.32 and p.spheres_per_clump == 7 and p.rolling_lever == "liggghts_reff"
+    assert DEMParameters().with_(mu_s_pw=0.22).mu_s_pw == 0.22
+
+
+def test_unknown_name_lists_the_valid_ones():
+    with pytest.raises(InputError) as info:
+        DEMParameters().with_(e_ppp=0.3)
+    assert "'e_ppp'" in str(info.value) and "e_pp" in str(info.value) and "rolling_lever" in str(info.value)
+
+
+@pytest.mark.parametrize("changes,match", [
+    ({"e_pp": 0.0}, "e_pp"), ({"e_pw": 1.2}, "e_pw"), ({"mu_s_pp": -0.1}, "mu_s_pp"),
+    ({"poisson_ratio": 0.5}, "poisson_ratio"), ({"mass_model": "voxel"}, "mass_model"),
+    ({"rolling_lever": "edem"}, "edem_com, edem_sphere, liggghts_reff"),
+    ({"mass_model": "scaled"}, "mean_mass_kg"), ({"spheres_per_clump": "2.5"}, "integer"),
+    ({"shear_modulus_pa": "soft"}, "needs a number"),
+])
+def test_invalid_values_name_the_parameter(changes, match):
+    with pytest.raises(InputError, match=match):
+        DEMParameters().with_(**changes)

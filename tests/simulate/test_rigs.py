@@ -1,0 +1,305 @@
+"""The lab-rig twins: drop, incline and repose (simulate.rigs).
+
+References used below:
+- Drop: for one Hertz contact with the EDEM/Tsuji dashpot the coefficient of restitution is
+  ``e`` at every impact speed; a second implementation (scipy ODE of the same normal law,
+  ``_restitution_ode``) confirms it and gives the rebound of n equal contacts in parallel,
+  each with the whole body mass in m* (a segment landing flat; Kodam et al. 2010).
+- Incline: a block slides at tan(theta) = mu_s; a body rolls when the driving torque
+  m g sin(theta) a exceeds the rolling resistance mu_r m g cos(theta) times the mean lever of
+  its contacts (simulate.contact.rolling): tan(theta) = mu_r * mean(lever) / a.
+- Repose: a synthetic pile of spheres whose surface follows a line of known slope.
+"""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+from scipy.integrate import solve_ivp
+
+from demcal.errors import InputError, WorkbookError
+from demcal.jsonio import read_json, write_json
+from simulate.clump import make_template
+from simulate.params import DEMParameters
+from simulate.rigs import RIGS, RigResult, run_rig
+from simulate.rigs.drop import release_orientation
+from simulate.rigs.repose import PROFILES, ReposeGeometry, heap_angles, top_profile
+from simulate.rigs.surfaces import make_surface, surface_from_pair
+
+PARAMS = DEMParameters()
+R = 0.0055
+SPHERE = make_template([[0.0, 0.0, 0.0]], R, 912.0, name="sphere")
+
+
+def _restitution_ode(e, n_contacts=1):
+    """Restitution of a body on n equal parallel Hertz contacts with the EDEM dashpot, each
+    with the whole body mass in m*, by direct integration (scipy, tight tolerances).
+
+    m x'' = -n [4/3 E* sqrt(R) x^1.5 + 2 sqrt(5/6) |beta| sqrt(2 E* sqrt(R x) m) x'], from
+    x = 0 at speed v until the overlap is back to 0. The result does not depend on m, R, E*, v.
+    """
+    m, r, es, v = 1e-3, R, 2.7e7, 2.8
+    log_e = math.log(e)
+    damp = 2.0 * math.sqrt(5.0 / 6.0) * abs(log_e / math.sqrt(log_e ** 2 + math.pi ** 2))
+
+    def rhs(t, y):
+        x, u = y
+        if x <= 0.0:
+            return [u, 0.0]
+        s_n = 2.0 * es * math.sqrt(r * x)
+        return [u, -n_contacts * (4.0 / 3.0 * es * math.sqrt(r) * x ** 1.5 + damp * math.sqrt(s_n * m) * u) / m]
+
+    def separated(t, y):
+        return y[0]
+    separated.terminal, separated.direction = True, -1
+    sol = solve_ivp(rhs, (0.0, 1.0), [1e-15, v], events=separated, rtol=1e-10, atol=1e-16, max_step=1e-6)
+    return -sol.y_events[0][0][1] / v
+
+
+# ---------------------------------------------------------------------------------- drop
+
+@pytest.mark.parametrize("e", [0.3, 0.8])
+def test_drop_single_sphere_reproduces_contact_restitution(e):
+    """A sphere's apparent restitution is the contact's e (Hertz + EDEM dashpot: exact e at every
+    speed; the ODE agrees to 1e-6); the rig's time step (t_c/100) costs at most 1.5 %."""
+    assert _restitution_ode(e) == pytest.approx(e, rel=1e-6)
+    res = run_rig("drop", PARAMS.with_(e_pw=e), seed=0, template=SPHERE, height=0.4, orientation_deg=0.0)
+    obs = res.observable
+    assert obs["apparent_restitution"] == pytest.approx(e, rel=0.015)
+    assert obs["velocity_ratio"] == pytest.approx(e, rel=0.015)
+    # free fall: the centre falls by the release gap; the rebound is e^2 h
+    assert obs["drop_height_m"] == pytest.approx(0.4, abs=1e-4)
+    assert obs["rebound_height_m"] == pytest.approx(e * e * 0.4, rel=0.03)
+    assert obs["rotational_energy_share"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_drop_end_on_segment_rebounds_with_contact_restitution():
+    """End on (axis vertical), one contact acts through the centre of mass: no rotation and the
+    apparent restitution is the contact's e_pw."""
+    obs = run_rig("drop", PARAMS, seed=0, orientation_deg=90.0).observable
+    assert obs["apparent_restitution"] == pytest.approx(PARAMS.e_pw, rel=0.015)
+    assert obs["rotational_energy_share"] < 1e-6
+
+
+def test_drop_flat_segment_matches_parallel_contacts_kodam2010():
+    """Flat, all 5 spheres strike at once: n springs and dashpots in parallel with the body
+    mass in each m* give a damping ratio sqrt(5) times the contact's, so the rebound is the
+    ODE's 0.043 for e = 0.35, far below e. (The leapfrog's error on this strongly damped
+    contact shrinks slowly with dt: -3 % at dt = 5e-7 s.)"""
+    expected = _restitution_ode(PARAMS.e_pw, n_contacts=5)
+    assert 0.03 < expected < 0.06
+    obs = run_rig("drop", PARAMS, seed=0, orientation_deg=0.0, dt=5e-7).observable
+    assert obs["apparent_restitution"] == pytest.approx(expected, rel=0.05)
+    assert obs["velocity_ratio"] == pytest.approx(expected, rel=0.05)
+
+
+def test_drop_random_orientations_lower_mean_rebound():
+    """Landing at random orientations, energy goes into rotation or into several contacts at
+    once: every drop rebounds at most as high as end on (the contact's e) and the mean is
+    clearly lower."""
+    obs = [run_rig("drop", PARAMS, seed=s).observable for s in range(8)]
+    e_app = np.array([o["apparent_restitution"] for o in obs])
+    assert np.all(e_app <= PARAMS.e_pw * 1.02)
+    assert e_app.mean() < 0.8 * PARAMS.e_pw
+    assert max(o["rotational_energy_share"] for o in obs) > 0.1
+    assert len({round(o["orientation_deg"], 6) for o in obs}) == 8
+
+
+def test_drop_random_orientation_is_uniform_on_the_sphere():
+    """Axis uniform on the sphere of directions: sin(angle to the horizontal) = |u_z| is
+    uniform on [0, 1] (Archimedes); the same seed gives the same orientation."""
+    rng = np.random.default_rng(7)
+    angles = np.array([release_orientation(None, rng)[1] for _ in range(2000)])
+    assert stats.kstest(np.sin(np.radians(angles)), "uniform").pvalue > 0.01
+    q1, a1 = release_orientation(None, np.random.default_rng(3))
+    q2, a2 = release_orientation(None, np.random.default_rng(3))
+    assert np.array_equal(q1, q2) and a1 == a2
+    with pytest.raises(InputError, match="orientation_deg"):
+        release_orientation(120.0, rng)
+
+
+def test_drop_on_another_material_uses_its_pair_parameters():
+    """particle-rubber needs the rubber's properties and the pair's contact; end on, the
+    rebound is the pair's restitution (the paper's 0.3142)."""
+    rubber = {"density": 1200.0, "poisson_ratio": 0.49, "shear_modulus": 1e6}
+    contact = {"restitution": 0.3142, "static_friction": 0.8, "rolling_friction": 0.1}
+    obs = run_rig("drop", PARAMS, seed=0, orientation_deg=90.0, pair="particle-rubber",
+                  surface_material=rubber, surface_contact=contact).observable
+    assert obs["apparent_restitution"] == pytest.approx(0.3142, rel=0.015)
+    with pytest.raises(InputError, match="surface_material"):
+        run_rig("drop", PARAMS, seed=0, pair="particle-rubber")
+    with pytest.raises(InputError, match="pair must be"):
+        run_rig("drop", PARAMS, seed=0, pair="steel")
+
+
+def test_surfaces_built_in_and_named():
+    assert surface_from_pair("particle-particle") == "particle"
+    s = make_surface(PARAMS, "particle")
+    pair = s.materials.pair("particle", s.plate_material)
+    assert (pair.restitution, pair.static_friction, pair.rolling_friction) == (
+        PARAMS.e_pp, PARAMS.mu_s_pp, PARAMS.mu_r_pp)
+    assert s.materials.material(s.plate_material).shear_modulus == PARAMS.shear_modulus_pa
+    with pytest.raises(InputError, match="takes its properties"):
+        make_surface(PARAMS, "steel", surface_contact={"restitution": 0.5})
+    with pytest.raises(InputError, match="missing static_friction"):
+        make_surface(PARAMS, "wood", surface_material={"density": 600, "poisson_ratio": 0.3, "shear_modulus": 1e9},
+                     surface_contact={"restitution": 0.5, "rolling_friction": 0.1})
+
+
+# ---------------------------------------------------------------------------------- incline
+
+@pytest.mark.parametrize("surface, mu_s", [("steel", PARAMS.mu_s_pw), ("particle", 0.4)])
+def test_incline_slide_onset_is_atan_mu_s(surface, mu_s):
+    """Segment along the slope: it slides when tan(theta) = mu_s (Coulomb)."""
+    params = PARAMS.with_(mu_s_pp=0.4)
+    res = run_rig("incline", params, mode="slide", surface=surface)
+    obs = res.observable
+    assert obs["slide_angle_deg"] == pytest.approx(math.degrees(math.atan(mu_s)), abs=0.5)
+    assert obs["static_friction_apparent"] == pytest.approx(mu_s, abs=0.01)
+    assert math.isnan(obs["roll_angle_deg"])          # along the slope it cannot roll
+    rec = res.record
+    assert rec["tilt_deg"].shape == rec["t"].shape == rec["slip"].shape
+    assert np.all(np.diff(rec["tilt_deg"]) > 0)
+
+
+def test_incline_slide_onset_does_not_depend_on_tilt_rate():
+    a1 = run_rig("incline", PARAMS, mode="slide", tilt_rate_deg_s=1.0).observable["slide_angle_deg"]
+    a2 = run_rig("incline", PARAMS, mode="slide", tilt_rate_deg_s=2.0).observable["slide_angle_deg"]
+    assert abs(a1 - a2) < 0.15
+
+
+def test_incline_sphere_rolls_at_atan_mu_r():
+    """A sphere across the slope rolls when m g sin(theta) a = mu_r m g cos(theta) a."""
+    params = PARAMS.with_(mu_s_pw=0.5)
+    obs = run_rig("incline", params, mode="roll", template=SPHERE).observable
+    assert obs["roll_angle_deg"] == pytest.approx(math.degrees(math.atan(params.mu_r_pw)), abs=0.5)
+    assert math.isnan(obs["slide_angle_deg"])
+
+
+@pytest.mark.parametrize("lever", ["edem_com", "edem_sphere"])
+def test_incline_segment_rolls_at_lever_weighted_mu_r(lever):
+    """A segment across the slope touches with its 5 spheres (equal loads, offsets y_i along
+    the axis). Lever of each contact: sqrt(a^2 + y_i^2) (edem_com) or a (edem_sphere), so
+    tan(theta) = mu_r mean(lever) / a: 1.32 mu_r and mu_r."""
+    params = PARAMS.with_(mu_s_pw=0.5, rolling_lever=lever)
+    y = np.linspace(-1, 1, 5) * (params.segment_length_m - params.segment_diameter_m) / 2
+    factor = np.mean(np.hypot(R, y)) / R if lever == "edem_com" else 1.0
+    obs = run_rig("incline", params, mode="roll").observable
+    assert obs["roll_angle_deg"] == pytest.approx(math.degrees(math.atan(params.mu_r_pw * factor)), abs=0.5)
+
+
+def test_incline_rejects_bad_options():
+    with pytest.raises(InputError, match="unknown incline mode 'tumble'; valid: slide, roll"):
+        run_rig("incline", PARAMS, mode="tumble")
+    with pytest.raises(InputError, match="tilt_rate_deg_s"):
+        run_rig("incline", PARAMS, tilt_rate_deg_s=-1.0)
+
+
+# ---------------------------------------------------------------------------------- repose
+
+def _synthetic_pile(angle_deg, box_length=0.2, height=0.09, rng=None):
+    """Spheres (r = 5.5 mm) filling a plate-withdrawal heap: flat at ``height`` from the back
+    wall to x = 0.6 L, then a straight slope at ``angle_deg`` that crosses the carton's end
+    (x = L) and reaches the floor outside. Surface spheres have their centres r below the
+    surface every 2 mm (on the slope their envelope is the line shifted up by the constant
+    r (1/cos - 1): same slope) with 0.5 mm of random height jitter; the inside is filled on a
+    coarse lattice."""
+    rng = np.random.default_rng(rng)
+    t = math.tan(math.radians(angle_deg))
+    x_crest = 0.6 * box_length
+    x_toe = x_crest + height / t
+
+    def surface(x):
+        return np.clip(height - t * (x - x_crest), 0.0, height)
+
+    xs = np.arange(R, x_toe + R, 0.002)
+    zs = surface(xs) - R + rng.normal(0.0, 0.0005, xs.size)
+    keep = zs >= R
+    top = np.c_[xs[keep], rng.uniform(0.01, 0.09, keep.sum()), zs[keep]]
+    gx, gy, gz = np.meshgrid(np.arange(R, x_toe, 2 * R), [0.03, 0.07], np.arange(R, height, 2 * R), indexing="ij")
+    inside = np.c_[gx.ravel(), gy.ravel(), gz.ravel()]
+    inside = inside[inside[:, 2] < surface(inside[:, 0]) - 2 * R]
+    centres = np.vstack([top, inside])
+    return centres, np.full(centres.shape[0], R)
+
+
+@pytest.mark.parametrize("angle", [30.0, 40.0])
+def test_heap_angle_methods_agree_on_synthetic_pile(angle):
+    """Photo method (rendered side view) and profile fit both find the known slope."""
+    centres, radii = _synthetic_pile(angle, rng=int(angle))
+    h = heap_angles(centres, radii, box_length=0.2)
+    assert h.angle_profile_deg == pytest.approx(angle, abs=1.0)
+    assert h.angle_deg == pytest.approx(angle, abs=1.0)
+    assert abs(h.angle_deg - h.angle_profile_deg) < 1.0
+    # the slope continues beyond the carton end, so the outside fit sees the same line
+    assert h.angle_outside_deg == pytest.approx(angle, abs=2.0)
+    assert h.notes == ()
+
+
+def test_top_profile_is_the_upper_envelope_of_the_discs():
+    centres = np.array([[0.0, 0.0, 0.01], [0.004, 0.05, 0.02]])
+    x, z = top_profile(centres, [0.005, 0.003], -0.01, 0.01, step=0.001)
+    for xi, zi in zip(x, z):
+        expect = 0.0
+        for (cx, _, cz), r in zip(centres, (0.005, 0.003)):
+            if abs(xi - cx) <= r:
+                expect = max(expect, cz + math.sqrt(r * r - (xi - cx) ** 2))
+        assert zi == pytest.approx(expect, abs=1e-12)
+
+
+def test_tiny_repose_run_makes_a_heap_measured_both_ways():
+    """A few segments in a small carton, short times: the plate is lifted, segments flow out,
+    and both angle methods give a finite slope."""
+    tiny = PROFILES["quick"].__class__(name="tiny", scale=1.0, dt=PROFILES["quick"].dt, fill_time=0.2,
+                                       fill_bottom=0.1, fill_top=0.9, lift_time=None, duration=1.5,
+                                       early_end=True)
+    geo = ReposeGeometry(box_length=0.08, box_width=0.06, box_height=0.08, fill_count=40)
+    params = PARAMS.with_(rolling_lever="liggghts_reff")
+    res = run_rig("repose", params, seed=2, profile=tiny, geometry=geo)
+    assert isinstance(res, RigResult) and res.rig == "repose"
+    obs = res.observable
+    assert set(obs) == {"angle_deg", "angle_profile_deg", "angle_outside_deg", "escaped", "outside_fraction"}
+    assert 5.0 < obs["angle_deg"] < 85.0
+    assert 5.0 < obs["angle_profile_deg"] < 85.0
+    assert obs["outside_fraction"] > 0.0
+    assert res.meta["inserted"] == 40 and res.meta["spheres"] == 200
+    assert res.record["t_lift"] < res.record["t_clear"] <= res.record["t_end"] + 1e-9
+    assert res.record["sphere_positions"].shape == (200, 3)
+    assert res.meta["profile"] == "tiny" and res.meta["steps"] > 0 and res.meta["sphere_steps_per_s"] > 0
+
+
+def test_repose_geometry_from_workbook_meta():
+    geo = ReposeGeometry.from_meta({"box_length_mm": 150, "box_width_mm": 80, "plate_lift_speed_mm_s": 50,
+                                    "fill_count": 300, "material": "x"})
+    assert (geo.box_length, geo.box_width, geo.box_height, geo.lift_speed, geo.fill_count) == (
+        pytest.approx(0.15), pytest.approx(0.08), 0.25, pytest.approx(0.05), 300)
+    assert ReposeGeometry.from_meta({}) == ReposeGeometry()
+    with pytest.raises(WorkbookError, match=r"sheet 'meta'.*box_width_mm.*needs a number.*'wide'"):
+        ReposeGeometry.from_meta({"box_width_mm": "wide"}, file="wb.xlsx")
+    with pytest.raises(WorkbookError, match="fill_count: needs a whole number"):
+        ReposeGeometry.from_meta({"fill_count": 10.5})
+    q = ReposeGeometry().scaled(0.6)
+    assert (q.box_length, q.fill_count) == (pytest.approx(0.12), 108)
+
+
+# ---------------------------------------------------------------------------------- run_rig
+
+def test_run_rig_rejects_unknown_rig_listing_valid_ones():
+    with pytest.raises(InputError, match="unknown rig 'shear'; valid rigs: repose, drop, incline"):
+        run_rig("shear", PARAMS)
+    assert set(RIGS) == {"repose", "drop", "incline"}
+
+
+def test_rig_result_round_trips_through_json(tmp_path):
+    res = run_rig("drop", PARAMS, seed=5, template=SPHERE, orientation_deg=0.0, height=0.05)
+    doc = res.to_dict()
+    assert set(doc) == {"rig", "observable", "record", "meta", "params", "provenance"}
+    assert doc["params"] == PARAMS.to_dict()
+    assert doc["provenance"]["seed"] == 5
+    for key in ("seed", "dt", "steps", "wall_s", "spheres", "sphere_steps_per_s", "profile"):
+        assert key in doc["meta"]
+    back = read_json(write_json(tmp_path / "r.json", doc))
+    assert back["observable"]["apparent_restitution"] == pytest.approx(res.observable["apparent_restitution"])
+    with pytest.raises(InputError, match="seed"):
+        run_rig("drop", PARAMS, seed=-1)

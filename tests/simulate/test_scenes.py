@@ -1,0 +1,50 @@
+"""The paper's repose case (plate withdrawal): a quick, scaled-down run by default and the
+full 10 s paper case as an opt-in validation run."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from simulate import DEMParameters
+from simulate.scenes import PAPER_DURATION, build_paper_repose_case
+
+#: The LIGGGHTS benchmark's parameters (the paper's calibrated values, cylinder mass model).
+BENCHMARK = dict(e_pp=0.32, e_pw=0.36, mu_s_pw=0.22, mass_model="cylinder")
+
+
+def _check_heap(sim, n_clumps, ke_trace, length=0.2, width=0.1):
+    x = sim.positions()
+    assert sim.n_bodies == n_clumps
+    assert not sim.escaped
+    outside = x[:, 0] > length
+    assert outside.sum() >= 1                              # segments flowed under the plate
+    inside = x[~outside]
+    assert np.all(inside[:, 0] > 0) and np.all((inside[:, 1] > 0) & (inside[:, 1] < width))
+    assert np.all(x[:, 2] > 0) and np.all(x[:, 2] < 0.1)   # resting on the floor or the pile
+    times, ke = np.array(ke_trace).T
+    assert ke[-1] < 1e-3 * ke.max()                       # the heap has come to rest
+
+
+def test_scaled_down_repose_case_forms_a_heap():
+    params = DEMParameters().with_(**BENCHMARK)
+    # a small, narrow carton so that 60 segments pile up high enough to flow out
+    sim = build_paper_repose_case(params, seed=3, n_clumps=60, box_length=0.08, box_width=0.05,
+                                  fill_time=0.3, lift_time=0.6, lift_speed=0.5, fill_bottom=0.02,
+                                  fill_top=0.2)
+    assert [w.name for w in sim.walls] == ["floor", "carton x-", "carton y-", "carton y+", "end plate"]
+    trace = []
+    sim.run(duration=2.0, progress=lambda s: trace.append((s.time, s.kinetic_energy())))
+    _check_heap(sim, 60, trace, length=0.08, width=0.05)
+    plate = sim.wall_origins()[sim.wall_index("end plate")]
+    assert plate[2] == pytest.approx(0.125 + 0.5 * (sim.time - 0.6), abs=0.5 * 0.5 * sim.dt)
+
+
+@pytest.mark.validation
+def test_paper_repose_case_full_run():
+    params = DEMParameters().with_(**BENCHMARK)
+    sim = build_paper_repose_case(params, seed=1)
+    trace = []
+    sim.run(duration=PAPER_DURATION, progress=lambda s: trace.append((s.time, s.kinetic_energy())))
+    _check_heap(sim, 500, trace)
+    assert (sim.positions()[:, 0] > 0.2).sum() >= 10
