@@ -18,7 +18,8 @@ does the whole chain on the photo, step by step:
 4. *Morphological clean-up* [Soille2003]_: an opening removes thin grid lines and speckle, a
    closing bridges the gaps between surface segments, holes are filled, and the largest
    connected object (heap and floor) is kept.
-5. *Top boundary*: in every column, the top-most object pixel.
+5. *Top boundary*: in every column, the top edge of the top-most object pixel, placed to
+   a fraction of a pixel where the grey levels across it straddle the threshold.
 6. *Floor line*: a Hough-type search [DudaHart1972]_ over near-horizontal lines for the one
    supported by most boundary points with (almost) none below it (the floor is the lower
    envelope of the boundary; a flat heap top is not), refined by the robust line of step 8
@@ -71,6 +72,7 @@ from demcal.errors import InputError
 
 SIDES = ("left", "right", "both", "auto")
 FLANKS = ("left", "right")
+PIXEL_SCALE = 0.25     # smallest robust sd of an image boundary about a line [px]
 
 
 @dataclass(frozen=True)
@@ -270,17 +272,22 @@ def angle_from_photo(image, side="both", annotate_to=None, scale_mm_per_px=None,
     bgr, name = _read_image(image)
     h, w = bgr.shape[:2]
     gray = _grayscale(bgr)
-    mask = _segment(gray, name)
-    x, y = _top_boundary(mask)
+    mask, flat, t, bright = _segment(gray, name)
+    x, y = _top_boundary(mask, flat, t, bright)
     if x.size < 0.2 * w:
         raise InputError(f"{name}: no heap found (the object covers only {x.size} of {w} columns)")
+    if np.mean(y < 0) > 0.5:
+        raise InputError(f"{name}: no heap found (no background above the object: the image has "
+                         f"no contrast, or the heap fills the frame)")
     tol = max(2.0, 0.003 * max(h, w))
     a, b, tilt = _floor_line(x, y, max_tilt_deg, tol, name)
     # Floor frame: u along the floor, h perpendicular to it, up (image y is down).
     norm = math.hypot(1.0, b)
     u = (x + b * (y - a)) / norm
     hgt = (b * x - (y - a)) / norm
-    fits, crest, reasons = _flank_fits(u, hgt, band, smooth, min_points)
+    if not np.max(hgt) > 3.0:
+        raise InputError(f"{name}: no heap found above the floor line")
+    fits, crest, reasons = _flank_fits(u, hgt, band, smooth, min_points, min_scale=PIXEL_SCALE)
     fits = _select(fits, reasons, side, name)
     flanks = {s: (fits[s].angle_deg if s in fits else None) for s in FLANKS}
     angle = float(np.mean([f.angle_deg for f in fits.values()]))
@@ -403,7 +410,7 @@ def angle_from_drum(image, *, chord=0.5, rim_margin=0.04, annotate_to=None):
         raise InputError(f"{name}: no free surface found in the drum")
     mid, span = 0.5 * (bx.min() + bx.max()), bx.max() - bx.min()
     sel = np.abs(bx - mid) <= 0.5 * chord * span
-    slope, intercept, lo, hi, kept = _robust_line(bx[sel], -by[sel])
+    slope, intercept, lo, hi, kept = _robust_line(bx[sel], -by[sel], min_scale=PIXEL_SCALE)
     res = (-by[sel] - (intercept + slope * bx[sel]))[kept]
     angle = abs(math.degrees(math.atan(slope)))
     fit = FlankFit(side="left" if slope > 0 else "right", angle_deg=angle, slope=slope,
@@ -516,6 +523,7 @@ def _disk(radius):
 
 def _object_class(img):
     """Step 3: threshold; the object is on the side of the bottom centre of the frame.
+    Returns the object mask, the threshold and whether the object is the bright side.
 
     Three-class Otsu thresholds [Otsu1979]_ [Liao2001]_ split background, heap and floor when
     the floor is much lighter or darker than the heap; the threshold next to the class of the
@@ -531,11 +539,11 @@ def _object_class(img):
     except ValueError:                  # too few grey levels for three classes
         t1 = t2 = None
     if t1 is not None and top < t1 < bottom:
-        return img > t1
+        return img > t1, float(t1), True
     if t1 is not None and bottom < t2 < top:
-        return img < t2
+        return img < t2, float(t2), False
     t = _otsu(img)
-    return img > t if bottom > t else img <= t
+    return (img > t, t, True) if bottom > t else (img <= t, t, False)
 
 
 def _illumination(img, background):
@@ -592,7 +600,8 @@ def _largest(mask):
 
 
 def _segment(gray, name):
-    """Steps 2-4: flattened, thresholded, cleaned mask of the heap and floor."""
+    """Steps 2-4: cleaned mask of the heap and floor, with the flattened image, its threshold
+    and the object's side of it (for the sub-pixel boundary)."""
     h, w = gray.shape
     diag = math.hypot(h, w)
     r_open = max(1, int(round(0.003 * diag)))
@@ -604,24 +613,44 @@ def _segment(gray, name):
         return _largest(_fill_holes(m > 0))
 
     img = cv2.GaussianBlur(gray, (0, 0), max(1.0, diag / 1000.0))
-    mask = clean(_object_class(img))
+    flat = img
+    obj, t, bright = _object_class(flat)
+    mask = clean(obj)
     for _ in range(2):
         # Background well away from the object (its light level is what is fitted).
         background = cv2.erode((~mask).astype(np.uint8), _disk(r_close)) > 0
         field = _illumination(img, background)
         if field is None:
             break
-        mask = clean(_object_class(img / field))
+        flat = img / field
+        obj, t, bright = _object_class(flat)
+        mask = clean(obj)
     if mask.sum() < 0.01 * h * w:
         raise InputError(f"{name}: no heap found (no object large enough after thresholding)")
-    return mask
+    return mask, flat, t, bright
 
 
-def _top_boundary(mask):
-    """Step 5: column index and row of the top-most object pixel of each column."""
-    has = mask.any(axis=0)
-    cols = np.nonzero(has)[0]
-    return cols.astype(float), mask[:, cols].argmax(axis=0).astype(float)
+def _top_boundary(mask, flat=None, t=None, bright=True):
+    """Step 5: the top edge of the object in each column [px, pixel centres at integers].
+
+    The edge lies between the top-most object pixel (row y0) and the pixel above it. Where
+    their grey levels in ``flat`` straddle the threshold ``t``, it is placed where the linear
+    interpolation between the two crosses ``t`` (sub-pixel); elsewhere (e.g. a notch filled by
+    the closing) half-way, at y0 - 0.5.
+    """
+    cols = np.nonzero(mask.any(axis=0))[0]
+    y0 = mask[:, cols].argmax(axis=0)
+    y = y0 - 0.5
+    if flat is not None:
+        ok = y0 >= 1
+        c, r = cols[ok], y0[ok]
+        v_in, v_out = flat[r, c].astype(float), flat[r - 1, c].astype(float)
+        if not bright:
+            v_in, v_out, t = -v_in, -v_out, -t
+        straddle = (v_out <= t) & (v_in > t)
+        frac = np.where(straddle, (t - v_out) / np.where(straddle, v_in - v_out, 1.0), 0.5)
+        y[ok] = r - 1 + frac
+    return cols.astype(float), y.astype(float)
 
 
 # ----------------------------------------------------------------------------------------
@@ -668,14 +697,14 @@ def _floor_line(x, y, max_tilt_deg, tol, name):
         near = flat & (np.abs(y - (a + b * x)) <= 2 * tol)
         if near.sum() < need // 2:
             break
-        b, a = _robust_line(x[near], y[near])[:2]
+        b, a = _robust_line(x[near], y[near], min_scale=PIXEL_SCALE)[:2]
     return float(a), float(b), float(-math.degrees(math.atan(b)))
 
 
 # ----------------------------------------------------------------------------------------
 # Steps 7-8: crest, toes, band, robust line
 
-def _robust_line(u, h, clip=3.5, max_width=0.05, max_iter=10):
+def _robust_line(u, h, clip=3.5, max_width=0.05, min_scale=0.0, max_iter=10):
     """Straight line h = intercept + slope u: least squares without the spikes.
 
     Started from the Theil-Sen line [Theil1950]_ [Sen1968]_, which no outlier can pull far.
@@ -686,6 +715,10 @@ def _robust_line(u, h, clip=3.5, max_width=0.05, max_iter=10):
     background. Spikes are set aside and the line refitted by least squares until the set is
     stable. Wider excursions are the roughness of the surface and are kept, so the result is
     the mean (least-squares) slope of a rough flank.
+
+    ``min_scale`` is a floor for the robust standard deviation (a quarter pixel for image
+    boundaries: below it, the median absolute deviation of a nearly exact edge only measures
+    the pixel grid).
 
     Returns slope, intercept, the 95 % interval of the slope (t distribution) and the mask
     of the points kept (in the order given).
@@ -701,7 +734,8 @@ def _robust_line(u, h, clip=3.5, max_width=0.05, max_iter=10):
     keep = np.ones(us.size, bool)
     for it in range(max_iter):
         res = hs - (intercept + slope * us)
-        scale = max(1.4826 * float(np.median(np.abs(res[keep] - np.median(res[keep])))), tiny)
+        scale = max(1.4826 * float(np.median(np.abs(res[keep] - np.median(res[keep])))), tiny,
+                    min_scale)
         spike = np.zeros(us.size, bool)
         for sign in (1.0, -1.0):
             runs, _ = ndimage.label(sign * res > scale)
@@ -728,7 +762,7 @@ def _robust_line(u, h, clip=3.5, max_width=0.05, max_iter=10):
     return float(slope), float(intercept), float(slope - half), float(slope + half), kept
 
 
-def _flank_fits(u, h, band, smooth, min_points):
+def _flank_fits(u, h, band, smooth, min_points, min_scale=0.0):
     """Fit each flank of the profile h(u) (u sorted or not). Returns (fits, crest height,
     reasons a flank could not be measured)."""
     order = np.argsort(u, kind="stable")
@@ -769,7 +803,7 @@ def _flank_fits(u, h, band, smooth, min_points):
         if sel.sum() < min_points:
             reasons[side] = f"too few boundary points in the fitting band ({int(sel.sum())} < {min_points})"
             continue
-        slope, intercept, s_lo, s_hi, kept = _robust_line(u[sel], h[sel])
+        slope, intercept, s_lo, s_hi, kept = _robust_line(u[sel], h[sel], min_scale=min_scale)
         # The band's ends where the fitted line, not the rough boundary, crosses the band
         # heights: a bump or dip at an end would otherwise choose the range and bias the slope.
         for _ in range(3):
@@ -780,7 +814,7 @@ def _flank_fits(u, h, band, smooth, min_points):
             if new_sel.sum() < min_points or np.array_equal(new_sel, sel):
                 break
             sel, (ua, ub) = new_sel, ends
-            slope, intercept, s_lo, s_hi, kept = _robust_line(u[sel], h[sel])
+            slope, intercept, s_lo, s_hi, kept = _robust_line(u[sel], h[sel], min_scale=min_scale)
         angle = math.degrees(math.atan(slope if side == "left" else -slope))
         if angle <= 0:
             reasons[side] = f"is not a slope down to the floor (fitted angle {angle:.1f} deg)"

@@ -23,14 +23,14 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from demcal.errors import DemcalError, InputError
 from demcal.jsonio import read_json
 from demcal.provenance import sha256_file
-from report.tables import (PAPER_FILE, RESULT_TABLE_IDS, Campaign, build_tables, load_critique, load_paper,
-                           normalised, run_keys)
+from report.tables import (PAPER_FILE, RESULT_TABLE_IDS, Campaign, build_tables, load_critique,
+                           load_paper, normalised, run_keys)
 
 #: Relative and absolute tolerance of a float cell.
 REL_TOL = 1e-9

@@ -22,8 +22,7 @@ from demcal.errors import InputError
 from demcal.jsonio import read_json, write_json
 from demcal.provenance import sha256_file
 from report.figures import make_figures
-from report.tables import (PAPER_FILE, Campaign, Table, build_tables, load_campaign, parameter_label,
-                           tables_document)
+from report.tables import Campaign, build_tables, load_campaign, parameter_label, tables_document
 
 HERE = Path(__file__).resolve().parent
 
@@ -128,7 +127,8 @@ def describe_sources(sources) -> list[str]:
             lines.append(f"{Path(s['file']).name}: {s.get('path', '')} (SHA-256 {s.get('sha256')})")
     out = [f"{Path(f).name if f else '?'} (SHA-256 {sha}): {'; '.join(w)}" for (f, sha), w in workbook.items()]
     if files:
-        out.append("files read by those rows (SHA-256, first 16 hex digits; all in Table A1): " + ", ".join(files))
+        out.append("files read by those rows (SHA-256, first 16 hex digits; all in Table A1): "
+                   + ", ".join(files))
     if runs:
         out.append(f"{len(runs)} DEM run record(s), runs/<key>.json (Table A2): "
                    + ", ".join(k[:10] for k in runs))
@@ -162,7 +162,8 @@ def equations(c: Campaign) -> dict:
     fit = r["box_behnken"]["fit"]
     wall = str(c.measurement.get("meta", {}).get("contact_material", "steel")).lower()
     codes = fit["factors"]
-    symbol = {code: parameter_label(r["factors"][letter]["parameter"], wall)[1] for code, letter in codes.items()}
+    symbol = {code: parameter_label(r["factors"][letter]["parameter"], wall)[1]
+              for code, letter in codes.items()}
 
     def coded_name(term):
         return term.replace("^2", "²")
@@ -172,10 +173,11 @@ def equations(c: Campaign) -> dict:
             return f"{symbol[term[0]]}²"
         return "·".join(symbol[ch] for ch in term)
 
-    out = {"coded": "θ = " + _signed_terms(fit["coefficients"], {t: coded_name(t) for t in fit["coefficients"]}),
-           "actual": "θ = " + _signed_terms(fit["coefficients_actual"],
-                                            {t: actual_name(t) for t in fit["coefficients_actual"] if t != "Intercept"}),
-           "codes": ", ".join(f"{code} = {symbol[code]} (screening factor {letter})" for code, letter in codes.items())}
+    coded, actual = fit["coefficients"], fit["coefficients_actual"]
+    out = {"coded": "θ = " + _signed_terms(coded, {t: coded_name(t) for t in coded}),
+           "actual": "θ = " + _signed_terms(actual, {t: actual_name(t) for t in actual if t != "Intercept"}),
+           "codes": ", ".join(f"{code} = {symbol[code]} (screening factor {letter})"
+                              for code, letter in codes.items())}
     pc = (c.paper.get("regression") or {}).get("coefficients")
     if pc:
         out["paper"] = "θ = " + _signed_terms(pc, {t: coded_name(t) for t in pc})
@@ -233,7 +235,8 @@ def differences(c: Campaign) -> list[str]:
         if name.startswith("restitution.") and n_track:
             out.append(f"{name}: {n_track} drop(s) take restitution from the camera track velocities "
                        "(free-flight fits), the others from heights (paper eq. 4).")
-    out.append("Screening levels: " + ("the measured minimum and maximum, as the paper." if cfg.get("levels") == "minmax"
+    out.append("Screening levels: " + ("the measured minimum and maximum, as the paper."
+                                       if cfg.get("levels") == "minmax"
                                        else "measured mean -+ one SD (the paper used min/max)."))
     n = r.get("noise", {})
     out.append(f"Seed-to-seed noise, not measured by the paper: the screening centre run with "
@@ -242,7 +245,8 @@ def differences(c: Campaign) -> list[str]:
     flagged = r.get("significant", {}).get("flagged", [])
     paper_sig = p.get("screening", {}).get("significant", [])
     if paper_sig and sorted(flagged) != sorted(paper_sig):
-        out.append(f"Significant factors: {', '.join(flagged) or 'none'} here, {', '.join(paper_sig)} in the paper.")
+        out.append(f"Significant factors: {', '.join(flagged) or 'none'} here, "
+                   f"{', '.join(paper_sig)} in the paper.")
     if r.get("significant", {}).get("note"):
         out.append("Factors carried forward: " + r["significant"]["note"] + ".")
     sc = r.get("steepest_climb", {})
@@ -368,9 +372,11 @@ def render_html(c: Campaign, tables: list[dict], figures: list) -> str:
     context = {
         "material": c.measurement.get("material", ""), "css": css, "t": by_id, "fig": figs,
         "tables": tables, "abstract": abstract(c), "equations": equations(c),
-        "differences": differences(c), "rig": rig_text(c), "runner_text": runner_text, "runner_warn": runner_warn,
+        "differences": differences(c), "rig": rig_text(c), "runner_text": runner_text,
+        "runner_warn": runner_warn,
         "synthetic": c.measurement.get("meta", {}).get("synthetic"),
         "notes": c.measurement.get("notes", []), "critique": c.critique is not None,
+        "critique_summary": [str(x) for x in (c.critique or {}).get("summary", [])],
         "provenance": provenance(c), "references": REFERENCES, "results": r,
         "critique_ids": [t["id"] for t in tables if t["id"].startswith("C")],
     }
@@ -423,7 +429,3 @@ def write_pdf(text: str, path: Path, base_url) -> Path:
         raise InputError(f"the PDF needs weasyprint ({exc}); use --no-pdf for the HTML only") from exc
     weasyprint.HTML(string=text, base_url=str(base_url)).write_pdf(str(path))
     return path
-
-
-__all__ = ["build_report", "write_tables", "render_html", "format_cell", "describe_sources", "equations", "differences",
-           "abstract", "REFERENCES", "PAPER_FILE", "Table"]

@@ -19,7 +19,6 @@ text, or None for "not available"; the ``formats`` only say how to print them.
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -361,10 +360,12 @@ def table_dimensions(c: Campaign) -> Table:
                  formats=("", "", "d", ".4g", ".3g", ".4g", ".4g", ".4g", ".4g", ".4g"))
 
 
-_META_ROWS = (("contact_density_kg_m3", "Density of the {wall} plate", "ρw", "kg/m^3", ("steel", "density_kg_m3")),
-              ("contact_poisson", "Poisson's ratio of the {wall} plate", "νw", "", ("steel", "poisson_ratio")),
-              ("contact_shear_modulus_pa", "Shear modulus of the {wall} plate", "Gw", "Pa", ("steel", "shear_modulus_pa")),
-              ("particle_shear_modulus_pa", "Shear modulus of the segment used by the DEM", "G", "Pa", None))
+#: Meta keys shown in Table 2: label, symbol, unit, path of the paper's value.
+_META_ROWS = (
+    ("contact_density_kg_m3", "Density of the {wall} plate", "ρw", "kg/m^3", ("steel", "density_kg_m3")),
+    ("contact_poisson", "Poisson's ratio of the {wall} plate", "νw", "", ("steel", "poisson_ratio")),
+    ("contact_shear_modulus_pa", "Shear modulus of the {wall} plate", "Gw", "Pa", ("steel", "shear_modulus_pa")),
+    ("particle_shear_modulus_pa", "Shear modulus of the segment used by the DEM", "G", "Pa", None))
 
 
 def table_physical(c: Campaign) -> Table:
@@ -391,7 +392,7 @@ def table_physical(c: Campaign) -> Table:
         if name == "poisson_ratio" and isinstance(eq1, dict):
             rows.append(("Poisson's ratio, paper eq. (1) |Δw|/|Δt|", "ν1", "", eq1.get("n"),
                          eq1.get("value"), eq1.get("sd"), eq1["ci95"][0], eq1["ci95"][1], pv, None))
-            notes.append(f"Poisson's ratio: the DEM uses {_get(e, 'extra', 'used', default='the first row')}; "
+            notes.append(f"Poisson's ratio: the DEM uses {_get(e, 'extra', 'used', default='the normalised strains')}; "
                          "the paper's eq. (1), absolute changes not divided by the original size, "
                          "is shown below it.")
     meta = m.get("meta", {})
@@ -400,7 +401,7 @@ def table_physical(c: Campaign) -> Table:
         if meta.get(key) in (None, ""):
             continue
         used_keys.append(key)
-        pv = _get(c.paper, *paper_path) if paper_path else None
+        pv = _get(c.paper, *paper_path) if paper_path and wall == "steel" else None  # paper: steel
         if key == "particle_shear_modulus_pa":
             notes.append("The segment's shear modulus is not in the paper's text; the DEM uses "
                          "the workbook's meta value.")
@@ -612,7 +613,8 @@ def table_bbd_levels(c: Campaign) -> Table:
                  ("Code", "Screening factor", "Parameter", "Symbol", "Low (-1)", "Centre (0)", "High (+1)"),
                  ("",) * 7, tuple(rows),
                  notes=("Centre = the best level of the steepest climb, -1/+1 = its neighbours "
-                        f"(clipped to the admissible range). Other factors fixed at their measured means: {fixed}.",),
+                        "(clipped to the admissible range). Other factors fixed at their measured "
+                        f"means: {fixed}.",),
                  sources=(_results_source("box_behnken.low, box_behnken.centre, box_behnken.high"),
                           _runs_source(r, "steepest_climb")),
                  formats=("", "", "", "", ".4g", ".4g", ".4g"))
@@ -831,16 +833,37 @@ def table_validation(c: Campaign) -> Table:
 # ----------------------------------------------------------------------------------------------
 # Critique (generic: its stage renders into critique.json)
 
+#: Columns the critique tables show first (critique.json's documented keys).
+CRITIQUE_COLUMNS = {
+    "discrepancies": ("observable", "measured", "measured_ci95", "simulated", "simulated_ci95",
+                      "difference", "combined_u95", "exceeds"),
+    "findings": ("mechanism", "verdict", "sheet", "covariate", "effect", "ci95", "p_adjusted"),
+    "extensions": ("name", "mechanism", "before", "after", "gain", "ci95"),
+}
+
+#: Text longer than this goes under the table as a numbered note instead of into a cell.
+LONG_TEXT = 40
+
+
 def _generic(table_id: str, title: str, items: list, source: dict, path: str) -> Table:
-    cols = []
+    """A table of a list of flat records: the documented keys first, then every other key;
+    long text values become numbered notes under the table, so nothing is left out."""
+    keys = list(CRITIQUE_COLUMNS.get(path, ()))
+    keys = [k for k in keys if any(k in it for it in items)]
     for it in items:
-        for k in it:
-            if k not in cols:
-                cols.append(k)
+        keys += [k for k in it if k not in keys]
+    long = [k for k in keys if any(isinstance(it.get(k), str) and len(it[k]) > LONG_TEXT for it in items)
+            or any(isinstance(it.get(k), dict) for it in items)]
+    cols = [k for k in keys if k not in long]
     rows = tuple(tuple(it.get(k) for k in cols) for it in items)
-    return Table(table_id, title, tuple(cols) or ("(none)",), ("",) * (len(cols) or 1),
-                 rows, notes=() if items else ("None.",),
-                 sources=({"kind": "critique", **source, "path": path},))
+    notes = [] if items else ["None."]
+    for i, it in enumerate(items, 1):
+        for k in long:
+            if it.get(k) not in (None, "", {}):
+                value = it[k] if isinstance(it[k], str) else json.dumps(it[k], sort_keys=True)
+                notes.append(f"Row {i}, {k}: {value}")
+    return Table(table_id, title, tuple(cols) or ("(none)",), ("",) * (len(cols) or 1), rows,
+                 notes=tuple(notes), sources=({"kind": "critique", **source, "path": path},))
 
 
 def critique_tables(c: Campaign) -> list[Table]:
@@ -944,7 +967,3 @@ def tables_document(tables: list[Table], inputs: dict) -> dict:
 def normalised(tables: list[Table]) -> list[dict]:
     """Tables as they read back from JSON (tuples as lists, NaN as None), for comparison."""
     return json.loads(json.dumps([t.to_dict() for t in tables], allow_nan=False))
-
-
-def is_missing(x) -> bool:
-    return x is None or (isinstance(x, float) and math.isnan(x))

@@ -14,19 +14,25 @@ Building and running a simulation
 >>> summary = sim.run(duration=0.5)
 
 Walls are ``simulate.walls.Plane`` (infinite, one-sided) or ``Rectangle`` (finite, two-sided,
-edges included; ``box_rectangles`` gives the faces of a box). A wall translates at its
-``velocity`` during ``[move_start, move_stop)``; ``set_wall_motion(k, velocity, start, stop)``
-changes that between runs. Particle factories (``simulate.factory.ParticleFactory``) are added
-with ``add_factory`` and insert clumps between chunks of steps.
+edges included; ``box_rectangles`` gives the faces of a box); ``wall_index(name)`` finds one.
+A wall translates at its ``velocity`` during ``[move_start, move_stop)``;
+``set_wall_motion(k, velocity, start, stop)`` changes that between runs. Particle factories
+(``simulate.factory.ParticleFactory``) are added with ``add_factory`` and insert clumps between
+chunks of steps; ``reserve(n_bodies)`` pre-allocates for clumps added one by one. Gravity may
+be changed between runs (``sim.gravity = (gx, gy, gz)``, e.g. to tilt a plate slowly).
+``run(duration=...)`` or ``run(n_steps=...)`` returns a ``RunSummary``; ``progress(sim)`` is
+called after every chunk.
 
 Reading the state (copies, SI units, rows = bodies in the order they were added):
 ``positions()`` (centres of mass [m]), ``velocities()`` [m/s], ``orientations()`` (unit
 quaternions (w, x, y, z) rotating the *template* frame into the world), ``rotation_matrices()``,
 ``angular_velocities()`` [rad/s], ``active()`` (False once a body has left the domain),
 ``sphere_positions()`` [m], ``sphere_radii()`` [m], ``sphere_body()`` (clump id of each sphere),
-``kinetic_energy()`` [J], ``body_kinetic_energy()``, ``contact_forces()`` (contact force and
-torque on each body at the last step [N], [N m]), ``wall_origins()``, ``time`` [s],
-``escaped`` (bodies that left the domain: id, time, position). Frames go to ParaView with
+``kinetic_energy()`` [J], ``body_kinetic_energy()``, ``masses()``, ``angular_momenta()``,
+``contact_forces()`` (contact force and torque on each body at the last step [N], [N m]),
+``rolling_resistance()``, ``n_contacts()``, ``wall_origins()``, ``time`` [s], ``escaped``
+(bodies that left the domain: id, time, position). ``evaluate_forces()`` recomputes the
+contact forces of the current state without stepping. Frames go to ParaView with
 ``simulate.vtk.write_vtp(path, sim)``.
 
 The step (``run`` pseudocode; the whole loop runs in numba, returning to Python every

@@ -10,11 +10,15 @@ chunks so that each clump enters when it is due.
 
 Randomness comes only from ``seed`` (an int or a ``numpy.random.Generator``).
 
-Example
+Example (``sim`` and its segment template ``seg`` as in ``simulate.engine``)
 -------
 >>> factory = ParticleFactory(template=seg, n_total=500, region_lo=(0.01, 0.01, 0.10),
 ...                           region_hi=(0.19, 0.09, 0.24), start_time=0.0, end_time=1.0, seed=1)
 >>> sim.add_factory(factory)
+
+References
+----------
+Shoemake, K. (1992). Uniform random rotations. In Graphics Gems III, 124-132. Academic Press.
 """
 
 from __future__ import annotations

@@ -10,7 +10,9 @@ Example
 -------
 >>> table = MaterialTable()
 >>> table.add_material("particle", density=912.0, poisson_ratio=0.25, shear_modulus=1e7)
+0
 >>> table.add_material("steel", density=7850.0, poisson_ratio=0.3, shear_modulus=8e10)
+1
 >>> table.set_pair("particle", "particle", restitution=0.3, static_friction=0.65, rolling_friction=0.53)
 >>> table.set_pair("particle", "steel", restitution=0.35, static_friction=0.2, rolling_friction=0.15)
 """

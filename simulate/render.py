@@ -610,7 +610,7 @@ def _heap(img, px, pz, row0, seg_len, seg_dia, scene, texture, rng):
     on_heap = np.r_[pz < row0 - 0.3 * seg_dia]
     # Two passes: a deeper, disordered layer, then the outermost segments, which make the
     # silhouette and lie roughly along the slope (they came to rest sliding down it).
-    for depth_range, step, spread in (((0.9, 1.5), 0.6, 35.0), ((0.35, 0.65), 0.4, 12.0)):
+    for depth_range, step, spread in (((0.9, 1.5), 0.6, 35.0), ((0.35, 0.65), 0.35, 12.0)):
         for a in np.arange(rng.uniform(0, 0.5) * seg_len, arc[-1], step * seg_len):
             i = min(np.searchsorted(arc, a, side="right") - 1, px.size - 2)
             f = (a - arc[i]) / max(seg[i], 1e-9)

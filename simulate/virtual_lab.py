@@ -220,7 +220,8 @@ class PlantedEffect:
     quantity : str, optional
         Quantity name or family prefix it acts on (e.g. ``restitution``,
         ``restitution.particle-steel``, ``static_friction``; ``""`` = every quantity of the
-        sheet); for ``camera_tilt``, ``flanks`` or ``floor``.
+        sheet); for ``camera_tilt``, ``flanks`` or ``floor``. Default: the kind's in its
+        default sheet, every quantity in another sheet.
     covariate : str, optional
         For ``block_effect``: ``operator``, ``date`` or ``batch``.
     """
@@ -237,6 +238,8 @@ class PlantedEffect:
                      "of a workbook)") if self.kind == "ill_conditioned_parameter" else ""
             raise InputError(f"unknown planted effect {self.kind!r}{extra}; valid: {', '.join(EFFECT_KINDS)}")
         d = EFFECT_DEFAULTS[self.kind]
+        if self.quantity is None and self.sheet not in (None, d["sheet"]):
+            object.__setattr__(self, "quantity", "")   # another sheet: every quantity of it
         for name in ("size", "sheet", "quantity", "covariate"):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, d[name])

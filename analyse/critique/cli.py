@@ -1,7 +1,7 @@
 """``demcal critique``: critique a calibrated model against the lab's measurements.
 
     demcal critique WORKBOOK_OR_DIR [--json OUT] [--no-twins] [--rigs drop,incline,repose]
-                    [--extensions NAME,...] [--alpha 0.05] [--correction bh|holm]
+                    [--extensions NAME,...] [--alpha 0.01] [--correction bh|holm]
                     [--workers N] [--store DIR] [--repose-seeds N] [--seed S] [--progress]
 
 WORKBOOK_OR_DIR is a lab workbook (``.xlsx`` or CSV folder) or a calibration campaign folder
@@ -37,7 +37,7 @@ def register(subparsers) -> None:
     p.add_argument("--rigs", default="drop,incline,repose", help="twins to run (default: %(default)s)")
     p.add_argument("--extensions", default="inverted_restitution,velocity_dependent_restitution,size_distribution",
                    help="extensions to evaluate for found mechanisms ('' for none; default: %(default)s)")
-    p.add_argument("--alpha", type=float, default=0.05, help="significance after correction (%(default)s)")
+    p.add_argument("--alpha", type=float, default=0.01, help="significance after correction (%(default)s)")
     p.add_argument("--correction", default="bh", choices=("bh", "holm"),
                    help="multiple-testing correction: Benjamini-Hochberg or Holm (%(default)s)")
     p.add_argument("--workers", type=int, default=1, help="worker processes for the twins (%(default)s)")

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from analyse.critique.diagnosis import CORRECTIONS, Series, measured_series, test_all
+from analyse.critique.diagnosis import CORRECTIONS, DEFAULT_ALPHA, Series, measured_series, run_tests
 from analyse.critique.mechanisms import CATALOGUE, Finding, ill_conditioned, judge
 from analyse.critique.twins import (TwinRunner, constant_discrepancy, drop_trials, incline_groups,
                                     incline_twin_runner, independent_discrepancy, paired_discrepancy,
@@ -124,7 +124,7 @@ def _fmt(x, d=3):
 
 
 def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EXTENSIONS,
-                 alpha: float = 0.05, correction: str = "bh", store_dir=None, workers: int = 1,
+                 alpha: float = DEFAULT_ALPHA, correction: str = "bh", store_dir=None, workers: int = 1,
                  progress: bool = False, repose_seeds: int = 0, seed: int = 0) -> Critique:
     """Critique the model calibrated from a workbook (see the module docstring).
 
@@ -139,7 +139,7 @@ def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EX
     extensions : sequence of str
         Extensions to evaluate for found mechanisms (``DEFAULT_EXTENSIONS``); empty for none.
     alpha : float
-        Significance level after the correction.
+        Significance level after the correction (``diagnosis.DEFAULT_ALPHA``).
     correction : {"bh", "holm"}
     store_dir : path, optional
         Run store of the twins; default ``DIR/critique_runs`` for a campaign, else temporary.
@@ -179,8 +179,8 @@ def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EX
             _incline_twins(runner, measurement, workbook, params, wall, discrepancies)
         if twins and "repose" in rigs:
             _repose_twins(runner, measurement, results, campaign, params, repose_seeds, discrepancies)
-        tests, untestable = test_all(series, method=correction, alpha=alpha)
-        findings = judge(tests, untestable) + ill_conditioned(results, alpha=alpha)
+        tests, untestable = run_tests(series, method=correction, alpha=alpha)
+        findings = judge(tests, untestable) + ill_conditioned(results)
         gains = []
         if twins and extensions:
             gains = _extensions(runner, params, findings, drop_state, tuple(extensions), seed, summary)

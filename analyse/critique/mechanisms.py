@@ -208,7 +208,7 @@ def judge(tests, untestable=(), *, notes: dict | None = None) -> list:
     Parameters
     ----------
     tests : list of CovariateTest
-        Adjusted tests (``diagnosis.test_all``).
+        Adjusted tests (``diagnosis.run_tests``).
     untestable : list of Untestable
         Pairs that could not be tested (their reasons feed ``not_testable``).
     notes : dict, optional
@@ -271,7 +271,7 @@ def _missing_reason(mech: str) -> str:
 # ill-conditioned parameters (from a campaign)
 
 
-def ill_conditioned(results: dict | None, *, alpha: float = 0.05) -> list:
+def ill_conditioned(results: dict | None) -> list:
     """Verdict on ``ill_conditioned_parameter`` from a campaign's ``results.json``.
 
     A parameter carried into the Box-Behnken design is ill-conditioned when none of its terms

@@ -258,8 +258,7 @@ def top_profile(centres, radii, x_min: float, x_max: float, step: float = PROFIL
         return x, z
     lo = np.searchsorted(x, c[:, 0] - r)
     hi = np.searchsorted(x, c[:, 0] + r, side="right")
-    for i in np.argsort(c[:, 2] + r)[::-1]:
-        # highest spheres first; a column already above this sphere's top cannot change
+    for i in range(c.shape[0]):
         if hi[i] <= lo[i]:
             continue
         xs = x[lo[i]:hi[i]]
@@ -295,14 +294,15 @@ def heap_angles(centres, radii, box_length: float, *, px_per_m: float = PX_PER_M
 
     c = np.asarray(centres, dtype=float).reshape(-1, 3)
     r = np.broadcast_to(np.asarray(radii, dtype=float), (c.shape[0],))
-    on_floor = c[:, 2] > -r          # spheres that fell through nothing; all, in practice
-    c, r = c[on_floor], r[on_floor]
     if c.shape[0] < 3:
         raise InputError(f"heap_angles: too few spheres ({c.shape[0]}) to make a heap")
     notes = []
     r_max = float(r.max())
-    x_lo = min(0.0, float((c[:, 0] - r).min())) - 0.05 * box_length
-    x_hi = float((c[:, 0] + r).max()) + 0.15 * box_length
+    # floor visible on both sides (the photo method finds the floor line there)
+    x_lo = min(0.0, float((c[:, 0] - r).min()))
+    x_hi = float((c[:, 0] + r).max())
+    margin = max(0.15 * (x_hi - x_lo), 0.02)
+    x_lo, x_hi = x_lo - margin, x_hi + margin
     x, z = top_profile(c, r, x_lo, x_hi)
 
     def fit(xs, zs, label):
@@ -315,10 +315,7 @@ def heap_angles(centres, radii, box_length: float, *, px_per_m: float = PX_PER_M
 
     angle_profile, crest = fit(x, z, "profile")
     outside = x > box_length
-    angle_outside, _ = fit(x[outside], z[outside], "outside heap") if outside.sum() > 10 else (
-        math.nan, None)
-    if not outside.sum() > 10:
-        notes.append("outside heap: no profile beyond the carton")
+    angle_outside, _ = fit(x[outside], z[outside], "outside heap")
 
     # side view: the floor fills the bottom 15 % of the image, a margin above the crest
     top = float(z.max())
@@ -418,14 +415,14 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
         return math.sqrt(2.0 * sim.kinetic_energy() / m) if m > 0 else 0.0
 
     # fill, then (quick) wait for the fill to settle and lift the plate
-    advance_to(prof.fill_time)
+    advance_to(min(prof.fill_time, prof.duration))
     t_lift = prof.lift_time
     if t_lift is None:
         while sim.time < 0.5 * prof.duration and rms_speed() > SETTLED_SPEED:
             advance(chunk)
         t_lift = sim.time
     else:
-        advance_to(t_lift)
+        advance_to(min(t_lift, prof.duration))
     # the plate is clear once its lower edge is a segment diameter above the highest sphere
     z_top = float((sim.sphere_positions()[:, 2] + sim.sphere_radii()).max()) if sim.n_spheres else 0.0
     t_clear = t_lift + (z_top + params.segment_diameter_m) / geo.lift_speed

@@ -53,7 +53,7 @@ def heap_photo_params(k, n=N_PHOTOS, seed=20240):
     h, w = PHOTO_SIZE
     angle = 20.0 + 30.0 * (k + rng.uniform()) / n
     kind = ("cone", "right", "left")[k % 3]
-    p = {"kind": kind, "height_m": rng.uniform(0.14, 0.2), "roughness_m": rng.uniform(0.0, 0.001)}
+    p = {"kind": kind, "height_m": rng.uniform(0.15, 0.21), "roughness_m": rng.uniform(0.0, 0.001)}
     height = p["height_m"]
     if kind == "cone":
         other = float(np.clip(angle + rng.uniform(-5, 5), 20, 50))

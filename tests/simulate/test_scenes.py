@@ -13,15 +13,16 @@ from simulate.scenes import PAPER_DURATION, build_paper_repose_case
 BENCHMARK = dict(e_pp=0.32, e_pw=0.36, mu_s_pw=0.22, mass_model="cylinder")
 
 
-def _check_heap(sim, n_clumps, ke_trace, length=0.2, width=0.1):
+def _check_heap(sim, n_clumps, ke_trace, length=0.2, width=0.1, top=0.1):
     x = sim.positions()
     assert sim.n_bodies == n_clumps
     assert not sim.escaped
-    outside = x[:, 0] > length
-    assert outside.sum() >= 1                              # segments flowed under the plate
-    inside = x[~outside]
-    assert np.all(inside[:, 0] > 0) and np.all((inside[:, 1] > 0) & (inside[:, 1] < width))
-    assert np.all(x[:, 2] > 0) and np.all(x[:, 2] < 0.1)   # resting on the floor or the pile
+    in_carton = (x[:, 0] > 0) & (x[:, 0] < length) & (x[:, 1] > 0) & (x[:, 1] < width)
+    assert (~in_carton).sum() >= 1                         # segments flowed under the plate
+    # none went through a carton wall: every segment outside came out by the opening, so its
+    # centre is at most half a segment (12.5 mm) back from the plate's plane
+    assert np.all(x[~in_carton, 0] > length - 0.0125)
+    assert np.all(x[:, 2] > 0) and np.all(x[:, 2] < top)   # resting on the floor or the pile
     times, ke = np.array(ke_trace).T
     assert ke[-1] < 1e-3 * ke.max()                       # the heap has come to rest
 
@@ -41,10 +42,15 @@ def test_scaled_down_repose_case_forms_a_heap():
 
 
 @pytest.mark.validation
-def test_paper_repose_case_full_run():
-    params = DEMParameters().with_(**BENCHMARK)
+def test_paper_repose_case_full_run_liggghts_convention():
+    # DESIGN.md (LIGGGHTS, 5 seeds): with these frictions only about 10 % of the segments
+    # leave the 200 x 100 mm carton; the same rolling convention should give the same picture
+    params = DEMParameters().with_(rolling_lever="liggghts_reff", **BENCHMARK)
     sim = build_paper_repose_case(params, seed=1)
     trace = []
     sim.run(duration=PAPER_DURATION, progress=lambda s: trace.append((s.time, s.kinetic_energy())))
-    _check_heap(sim, 500, trace)
-    assert (sim.positions()[:, 0] > 0.2).sum() >= 10
+    _check_heap(sim, 500, trace, top=0.15)
+    x = sim.positions()
+    outside = ~((x[:, 0] < 0.2) & (x[:, 1] > 0) & (x[:, 1] < 0.1))
+    assert 0.03 <= outside.mean() <= 0.2
+    assert sim.wall_origins()[sim.wall_index("end plate")][2] > 0.6  # lifted 0.6 m from 4 s

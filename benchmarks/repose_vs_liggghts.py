@@ -1,0 +1,272 @@
+"""The paper's repose case run by demcal and by LIGGGHTS-PUBLIC 3.8, side by side on one machine.
+
+    python -m benchmarks.repose_vs_liggghts                      # 5 seeds each, 10 s (the paper's)
+    python -m benchmarks.repose_vs_liggghts --seeds 1 --duration 1.5   # a quick end-to-end check
+    python -m benchmarks.repose_vs_liggghts --skip-liggghts      # demcal only
+
+What it measures, on one core each and sequentially (never both codes at once):
+
+- Throughput: sphere-steps per second of the time-step loop (demcal: the rig's simulation
+  time; LIGGGHTS: its "Loop time"), per run and over all runs, and the ratio demcal/LIGGGHTS.
+- Start-up: the time from a fresh Python process to the first simulated step, twice in a row
+  (the second loads the compiled kernels from numba's on-disk cache).
+- Angle of repose from ``--seeds`` seeds per code, measured the same way on both codes' final
+  sphere positions (``simulate.rigs.repose.heap_angles``: rendered side view + photo
+  estimator, profile fit of the full slope, outside heap alone): mean and standard deviation.
+
+The case is the LIGGGHTS deck's (``benchmarks.liggghts.deck.ReposeCase``): 500 five-sphere
+segments, carton 200 x 100 x 250 mm, plate lifted at 0.1 m/s from 4 s, 10 s at
+7.43678e-5 s, the paper's calibrated contact parameters. demcal runs it with LIGGGHTS'
+conventions: rolling friction lever ``liggghts_reff`` and the cylinder mass model.
+
+Outputs: ``benchmarks/results/repose_vs_liggghts_<UTC time>.json`` (every run, the summary,
+machine, versions) and one row appended to ``benchmarks/RESULTS.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import datetime as dt
+import math
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+from demcal.errors import DemcalError  # noqa: E402
+from demcal.jsonio import write_json  # noqa: E402
+from demcal.provenance import code_version  # noqa: E402
+
+RESULTS_MD_HEADER = (
+    "| date (UTC) | machine | versions | duration [s] | seeds | demcal sphere-steps/s | "
+    "LIGGGHTS sphere-steps/s | ratio | start-up 1st / 2nd [s] | angle photo demcal | "
+    "angle photo LIGGGHTS | angle profile demcal | angle profile LIGGGHTS | outside heap demcal | "
+    "outside heap LIGGGHTS |\n|" + "---|" * 15 + "\n")
+
+#: Time from a fresh interpreter to the first step of a small repose case (run as a subprocess).
+STARTUP_SCRIPT = """
+import time
+t0 = time.perf_counter()
+import sys
+sys.path.insert(0, {root!r})
+from simulate.params import DEMParameters
+from simulate.scenes import build_paper_repose_case
+sim = build_paper_repose_case(DEMParameters(rolling_lever="liggghts_reff", mass_model="cylinder"),
+                              seed=1, n_clumps=5)
+sim.run(n_steps=2)
+print(time.perf_counter() - t0)
+"""
+
+
+def benchmark_parameters(case=None):
+    """``DEMParameters`` of the LIGGGHTS deck's case, with LIGGGHTS' lever and mass model."""
+    from benchmarks.liggghts.deck import ReposeCase
+    from simulate.params import DEMParameters
+
+    c = case or ReposeCase()
+    return DEMParameters(
+        poisson_ratio=c.particle_poisson, shear_modulus_pa=c.particle_shear_modulus,
+        particle_density_kg_m3=c.particle_density, e_pp=c.restitution_pp, e_pw=c.restitution_ps,
+        mu_s_pp=c.friction_pp, mu_s_pw=c.friction_ps, mu_r_pp=c.rolling_pp, mu_r_pw=c.rolling_ps,
+        wall_poisson_ratio=c.steel_poisson, wall_shear_modulus_pa=c.steel_shear_modulus,
+        segment_length_m=c.segment_length, segment_diameter_m=c.segment_diameter,
+        spheres_per_clump=len(c.sphere_offsets), mass_model="cylinder", rolling_lever="liggghts_reff")
+
+
+def machine() -> dict:
+    """CPU model (from /proc/cpuinfo), logical cores, OS."""
+    model = platform.processor() or "unknown"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.lower().startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {"cpu": model, "cores": os.cpu_count(), "os": platform.platform(),
+            "load_avg": list(os.getloadavg()) if hasattr(os, "getloadavg") else None}
+
+
+def versions() -> dict:
+    import numba
+    return {**code_version(), "numpy": np.__version__, "numba": numba.__version__}
+
+
+def startup_times(n: int = 2) -> list:
+    """Seconds from interpreter start to the first steps, for ``n`` fresh processes in a row."""
+    out = []
+    for _ in range(n):
+        proc = subprocess.run([sys.executable, "-c", STARTUP_SCRIPT.format(root=str(ROOT))],
+                              capture_output=True, text=True, cwd=str(ROOT),
+                              env=dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1"))
+        if proc.returncode != 0:
+            raise DemcalError(f"start-up probe failed: {proc.stderr.strip().splitlines()[-1:]}")
+        out.append(float(proc.stdout.strip().splitlines()[-1]))
+    return out
+
+
+def run_demcal(seed: int, duration: float, params) -> dict:
+    """The paper case by demcal's repose rig (``paper`` profile, ``duration`` simulated)."""
+    from simulate.rigs import run_rig
+    from simulate.rigs.repose import PROFILES
+
+    profile = dataclasses.replace(PROFILES["paper"], duration=float(duration))
+    t0 = time.perf_counter()
+    res = run_rig("repose", params, seed, profile=profile)
+    meta = res.meta
+    return {"code": "demcal", "seed": seed, "wall_s": meta["wall_s"], "elapsed_s": time.perf_counter() - t0,
+            "steps": meta["steps"], "spheres": meta["spheres"],
+            "sphere_steps_per_s": meta["sphere_steps_per_s"], "sphere_steps": meta["sphere_steps_per_s"] * meta["wall_s"],
+            **{k: res.observable[k] for k in ("angle_deg", "angle_profile_deg", "angle_outside_deg",
+                                              "outside_fraction")},
+            "escaped": res.observable["escaped"], "notes": meta["notes"]}
+
+
+def run_reference(seed: int, duration: float, workdir: Path) -> dict:
+    """The same case by LIGGGHTS on one core; its final spheres measured by ``heap_angles``."""
+    from benchmarks.liggghts.run import heap_summary, run_liggghts
+    from simulate.rigs.repose import heap_angles
+
+    res = run_liggghts(seed, workdir / f"seed{seed}", duration=duration, nice=0)
+    heap = heap_angles(res["positions"], res["radii"], res["deck"]["case"]["box_length"])
+    summary = heap_summary(res)
+    return {"code": "liggghts", "seed": seed, "wall_s": res["wall_s"], "cpu_s": res["cpu_s"],
+            "elapsed_s": res["elapsed_s"], "steps": res["steps"], "spheres": res["spheres"],
+            "sphere_steps_per_s": res["sphere_steps_per_s"], "sphere_steps": res["spheres"] * res["steps"],
+            "angle_deg": heap.angle_deg, "angle_profile_deg": heap.angle_profile_deg,
+            "angle_outside_deg": heap.angle_outside_deg, "outside_fraction": summary["outside_fraction"],
+            "lost_spheres": res["lost_spheres"], "notes": list(heap.notes),
+            "version": res["version"], "package_version": res["package_version"]}
+
+
+def summarise(runs: list) -> dict:
+    """Throughput over all runs and the angles' mean and sample standard deviation."""
+    if not runs:
+        return {}
+    wall = sum(r["wall_s"] for r in runs)
+    out = {"runs": len(runs), "wall_s": wall,
+           "sphere_steps_per_s": sum(r["sphere_steps"] for r in runs) / wall if wall > 0 else math.nan}
+    for key in ("angle_deg", "angle_profile_deg", "angle_outside_deg", "outside_fraction"):
+        v = np.array([r[key] for r in runs], dtype=float)
+        v = v[np.isfinite(v)]
+        out[key] = {"mean": float(v.mean()) if v.size else math.nan,
+                    "sd": float(v.std(ddof=1)) if v.size > 1 else math.nan, "n": int(v.size)}
+    return out
+
+
+def _pm(stat: dict) -> str:
+    if not stat or not np.isfinite(stat.get("mean", math.nan)):
+        return "-"
+    sd = stat["sd"]
+    return f"{stat['mean']:.1f} ± {sd:.1f}" if np.isfinite(sd) else f"{stat['mean']:.1f}"
+
+
+def results_row(doc: dict) -> str:
+    d, lg = doc["summary"]["demcal"], doc["summary"].get("liggghts", {})
+    ratio = doc["summary"].get("ratio_demcal_to_liggghts")
+    m, v = doc["machine"], doc["versions"]
+    lig_version = next((r.get("package_version") or r.get("version") for r in doc["runs"]
+                        if r["code"] == "liggghts"), None)
+    cells = [doc["date"], f"{m['cpu']}, {m['cores']} cores",
+             f"demcal {v['demcal']} ({(v['git_sha'] or '?')[:12]}), numba {v['numba']}"
+             + (f", LIGGGHTS {lig_version}" if lig_version else ""),
+             f"{doc['duration']:g}", str(doc["seeds"]), f"{d['sphere_steps_per_s']:.3g}",
+             f"{lg['sphere_steps_per_s']:.3g}" if lg else "skipped",
+             f"{ratio:.2f}" if ratio else "-",
+             " / ".join(f"{t:.1f}" for t in doc["startup_s"]),
+             _pm(d.get("angle_deg")), _pm(lg.get("angle_deg")), _pm(d.get("angle_profile_deg")),
+             _pm(lg.get("angle_profile_deg")), _pm(d.get("angle_outside_deg")), _pm(lg.get("angle_outside_deg"))]
+    return "| " + " | ".join(cells) + " |\n"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.repose_vs_liggghts",
+                                     description="The paper's repose case by demcal and by LIGGGHTS-PUBLIC 3.8, "
+                                                 "one core each, sequentially.")
+    parser.add_argument("--seeds", type=int, default=5, help="seeds per code (default 5)")
+    parser.add_argument("--duration", type=float, default=10.0, help="simulated time [s] (default 10)")
+    parser.add_argument("--skip-liggghts", action="store_true", help="run demcal only")
+    parser.add_argument("--results", type=Path, default=HERE / "results", help="folder of the JSON output")
+    parser.add_argument("--results-md", type=Path, default=HERE / "RESULTS.md", help="table the row is appended to")
+    args = parser.parse_args(argv)
+    if args.seeds < 1:
+        parser.error(f"--seeds must be >= 1, got {args.seeds}")
+    if not (args.duration > 0 and math.isfinite(args.duration)):
+        parser.error(f"--duration must be > 0, got {args.duration}")
+    os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+
+    now = dt.datetime.now(dt.timezone.utc)
+    stamp = now.strftime("%Y%m%dT%H%M%SZ")
+    doc = {"date": now.isoformat(timespec="seconds"), "duration": args.duration, "seeds": args.seeds,
+           "command": [sys.executable, "-m", "benchmarks.repose_vs_liggghts", *(argv or sys.argv[1:])],
+           "machine": machine(), "versions": versions(), "runs": []}
+    print(f"machine: {doc['machine']['cpu']}, {doc['machine']['cores']} cores", flush=True)
+
+    doc["startup_s"] = startup_times(2)
+    print(f"demcal start-up to the first step: {doc['startup_s'][0]:.1f} s, then "
+          f"{doc['startup_s'][1]:.1f} s (numba cache)", flush=True)
+
+    params = benchmark_parameters()
+    doc["params"] = params.to_dict()
+    seeds = list(range(1, args.seeds + 1))
+    for seed in seeds:
+        r = run_demcal(seed, args.duration, params)
+        doc["runs"].append(r)
+        print(f"demcal   seed {seed}: {r['wall_s']:.1f} s, {r['sphere_steps_per_s']:.3g} sphere-steps/s, "
+              f"angle {r['angle_deg']:.1f} deg (profile {r['angle_profile_deg']:.1f}, outside "
+              f"{r['angle_outside_deg']:.1f}), {r['outside_fraction']:.1%} outside", flush=True)
+
+    skipped = None
+    if not args.skip_liggghts:
+        from benchmarks.liggghts.run import LiggghtsUnavailable
+        workdir = args.results / "tmp" / "liggghts"
+        for seed in seeds:
+            try:
+                r = run_reference(seed, args.duration, workdir)
+            except LiggghtsUnavailable as exc:
+                skipped = str(exc)
+                print(f"LIGGGHTS skipped: {exc}", flush=True)
+                break
+            doc["runs"].append(r)
+            print(f"LIGGGHTS seed {seed}: {r['wall_s']:.1f} s, {r['sphere_steps_per_s']:.3g} sphere-steps/s, "
+                  f"angle {r['angle_deg']:.1f} deg (profile {r['angle_profile_deg']:.1f}, outside "
+                  f"{r['angle_outside_deg']:.1f}), {r['outside_fraction']:.1%} outside", flush=True)
+    doc["liggghts_skipped"] = skipped or (True if args.skip_liggghts else None)
+
+    summary = {"demcal": summarise([r for r in doc["runs"] if r["code"] == "demcal"])}
+    lig = [r for r in doc["runs"] if r["code"] == "liggghts"]
+    if lig:
+        summary["liggghts"] = summarise(lig)
+        summary["ratio_demcal_to_liggghts"] = (summary["demcal"]["sphere_steps_per_s"]
+                                               / summary["liggghts"]["sphere_steps_per_s"])
+    doc["summary"] = summary
+    json_path = write_json(args.results / f"repose_vs_liggghts_{stamp}.json", doc)
+    md = args.results_md
+    if not md.exists():
+        md.write_text("# Benchmark results\n\nOne row per run of `benchmarks/run` "
+                      "(`benchmarks/repose_vs_liggghts.py`); the JSON beside each run in "
+                      "`benchmarks/results/` has every number.\n\n" + RESULTS_MD_HEADER)
+    with md.open("a") as f:
+        f.write(results_row(doc))
+    d = summary["demcal"]
+    print(f"demcal:   {d['sphere_steps_per_s']:.3g} sphere-steps/s, angle {_pm(d['angle_deg'])} deg")
+    if lig:
+        print(f"LIGGGHTS: {summary['liggghts']['sphere_steps_per_s']:.3g} sphere-steps/s, "
+              f"angle {_pm(summary['liggghts']['angle_deg'])} deg; ratio demcal/LIGGGHTS "
+              f"{summary['ratio_demcal_to_liggghts']:.2f}")
+    print(f"written: {json_path} and a row in {md}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

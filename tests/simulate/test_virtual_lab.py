@@ -1,0 +1,101 @@
+"""The virtual lab writes complete workbooks that the measure stage reads back to the truth,
+and plants effects of known size."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from demcal.errors import InputError
+from measure.pipeline import measure_workbook
+from measure.workbook import read_workbook
+from simulate.params import DEMParameters
+from simulate.virtual_lab import (EFFECT_KINDS, PlantedEffect, Truth, VirtualWorkbook, drop_twin_ratio,
+                                  write_virtual_workbook)
+
+
+@pytest.fixture(scope="module")
+def clean(tmp_path_factory):
+    path = tmp_path_factory.mktemp("virtual") / "clean"
+    vw = write_virtual_workbook(Truth(), path, rng=11, n_photos=3)
+    return vw, measure_workbook(vw.path)
+
+
+def test_clean_workbook_has_every_sheet_and_file(clean):
+    vw, _ = clean
+    wb = read_workbook(vw.path)
+    assert set(wb.sheets) == {"meta", "specimens", "density", "drop", "incline", "compression", "repose"}
+    drop = wb.sheet("drop")
+    assert {"specimen_id", "operator", "date", "orientation_deg", "trial_order"} <= set(drop.covariates)
+    assert sorted(set(drop.frame["drop_height_mm"])) == [200.0, 400.0, 600.0]
+    assert sum(bool(v) for v in drop.frame["track_file"] if isinstance(v, str)) == 2
+    assert {"moisture_pct", "batch"} <= set(wb.sheet("specimens").covariates)
+    assert vw.expected == ()
+    truth = json.loads((vw.path / "truth.json").read_text())
+    assert truth["truth"]["params"]["e_pw"] == 0.35 and truth["effects"] == []
+
+
+def test_clean_workbook_measures_back_to_the_truth(clean):
+    _, m = clean
+    q = m.quantities
+    p = Truth().params
+    for name, truth in (("static_friction.particle", p.mu_s_pp), ("static_friction.steel", p.mu_s_pw),
+                        ("rolling_friction.particle", p.mu_r_pp), ("rolling_friction.steel", p.mu_r_pw),
+                        ("particle_density_kg_m3", p.particle_density_kg_m3),
+                        ("poisson_ratio", p.poisson_ratio), ("length_mm", 25.0), ("diameter_mm", 11.0)):
+        lo, hi = q[name].ci95
+        se = (hi - lo) / 4
+        assert lo - se < truth < hi + se, name            # within the CI widened by half
+    # released end on, the apparent restitution is the contact one within the twin's 1 %
+    assert q["restitution.particle-steel"].value == pytest.approx(p.e_pw, abs=0.02)
+    assert q["shear_modulus_pa"].value == pytest.approx(p.shear_modulus_pa, rel=0.1)
+
+
+def test_drop_twin_ratio_end_on_and_tilted():
+    params = DEMParameters()
+    end_on = drop_twin_ratio(params, "particle-steel", 0.4, [90.0])
+    assert end_on[0] == pytest.approx(1.0, abs=0.01)       # one contact through the centre of mass
+    tilted = drop_twin_ratio(params, "particle-steel", 0.4, [45.0])
+    assert tilted[0] < 0.7                                  # energy into rotation
+
+
+def test_planted_sizes_are_the_true_effects(tmp_path):
+    effects = (PlantedEffect("velocity_dependent_restitution", quantity="restitution.particle-steel"),
+               PlantedEffect("block_effect"), PlantedEffect("trial_order_drift"),
+               PlantedEffect("moisture_dependence", sheet="drop"))
+    vw = write_virtual_workbook(Truth(), tmp_path / "wb", effects=effects, rng=3, photos="none",
+                                pairs=("particle-steel",))
+    exp = {(x["kind"], x["quantity"]): x["true_effect"] for x in vw.expected}
+    # linear effects: the slope of the noise-free rows is the planted size (times the end-on
+    # twin ratio, 0.99-1, for the drops)
+    assert exp[("velocity_dependent_restitution", "restitution.particle-steel")] == pytest.approx(-2e-4, rel=0.015)
+    assert exp[("trial_order_drift", "static_friction.steel")] == pytest.approx(0.004, rel=0.02)
+    assert exp[("moisture_dependence", "restitution.particle-steel")] == pytest.approx(0.01, rel=0.015)
+    # an operator reading 2 deg higher raises tan(angle) by about sec^2(theta) x 2 deg
+    hand = (1 + 0.65 ** 2) * math.radians(2.0)
+    assert exp[("block_effect", "static_friction.particle")] == pytest.approx(hand, rel=0.05)
+    assert ("trial_order_drift", "rolling_friction.steel") not in exp     # drift acts on static friction
+
+
+def test_xlsx_output_reads_back(tmp_path):
+    vw = write_virtual_workbook(Truth(), tmp_path / "lab" / "book.xlsx", rng=np.random.default_rng(2),
+                                photos="none", n_drop=2, n_incline=3, n_compression=2, n_specimens=5)
+    assert isinstance(vw, VirtualWorkbook) and vw.path.suffix == ".xlsx"
+    wb = read_workbook(vw.path)
+    assert len(wb.sheet("incline").rows) == 12 and (tmp_path / "lab" / "truth.json").exists()
+
+
+def test_errors_name_the_problem(tmp_path):
+    with pytest.raises(InputError, match="valid: " + ", ".join(EFFECT_KINDS)):
+        PlantedEffect("wet_segments")
+    with pytest.raises(InputError, match="calibration campaign"):
+        PlantedEffect("ill_conditioned_parameter")
+    with pytest.raises(InputError, match="rng"):
+        write_virtual_workbook(Truth(), tmp_path / "a")
+    with pytest.raises(InputError, match="sheet must be one of"):
+        PlantedEffect("camera_tilt", sheet="drop")
+    with pytest.raises(InputError, match="needs photos"):
+        write_virtual_workbook(Truth(), tmp_path / "b", effects=("camera_tilt",), rng=1, photos="none")
+    with pytest.raises(InputError, match="e_sd"):
+        Truth(e_sd=-0.1)
