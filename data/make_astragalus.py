@@ -172,11 +172,11 @@ def repose(rng, photos_dir):
     photos_dir.mkdir(parents=True, exist_ok=True)
     rows, truth = [], []
     for i, angle in enumerate(PHOTO_ANGLES):
-        x, z = heap_profile(None, angle, height_m=0.10, plateau_m=0.20, floor_m=0.06,
+        x, z = heap_profile(None, angle, height_m=0.15, plateau_m=0.20, floor_m=0.06,
                             roughness_m=0.002, rng=rng)
         roll = float(rng.uniform(-1.5, 1.5))
         light = Lighting(gradient=float(rng.uniform(0.1, 0.35)), direction_deg=float(rng.uniform(0, 360)))
-        img = heap_photo(x, z, rng=rng, camera_roll_deg=roll, light=light, noise_sd=4.0,
+        img = heap_photo(x, z, rng=rng, px_per_m=1800.0, camera_roll_deg=roll, light=light, noise_sd=4.0,
                          blur_px=1.0, jpeg_quality=int(rng.integers(70, 92)))
         name = f"photos/heap_{i + 1}.jpg"
         cv2.imwrite(str(OUT / name), img, [cv2.IMWRITE_JPEG_QUALITY, 95])

@@ -90,7 +90,9 @@ class FlankFit:
     intercept : float
         Fitted h at u = 0 [px for photos, m for profiles].
     slope_ci : tuple of float
-        95 % confidence interval of the slope [-].
+        95 % confidence interval of the slope from the fit [-]. It treats the boundary points
+        as independent; the boundary of a granular heap is correlated over about a particle,
+        so this understates the uncertainty (repeat photos measure it).
     u_range : tuple of float
         Along-floor range of the points used [px or m].
     h_range : tuple of float

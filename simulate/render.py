@@ -607,7 +607,7 @@ def _heap(img, px, pz, row0, seg_len, seg_dia, scene, texture, rng):
     # Segments lying on the surface, roughly along the local slope.
     seg = np.hypot(np.diff(px), np.diff(pz))
     arc = np.r_[0.0, np.cumsum(seg)]
-    on_heap = np.r_[pz < row0 - 0.3 * seg_dia]
+    on_heap = pz < row0 - 0.3 * seg_dia
     # Two passes: a deeper, disordered layer, then the outermost segments, which make the
     # silhouette and lie roughly along the slope (they came to rest sliding down it).
     for depth_range, step, spread in (((0.9, 1.5), 0.6, 35.0), ((0.35, 0.65), 0.35, 12.0)):

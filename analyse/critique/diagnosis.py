@@ -36,6 +36,12 @@ full workbook and 20-30 trials per group, significant noise is mostly also above
 thresholds, so alpha is the false-alarm rate: at 0.05, 4 of 100 clean virtual-lab workbooks
 named a cause (``simulate.virtual_lab``, photos omitted); at 0.01, 2 of the same 100.
 
+Intervals after selection. A cause is named because its test came out significant, so its
+ordinary 95 % interval covers the true size less often than 95 % (the selected estimates are
+the large ones). A named effect therefore carries the false-coverage-rate interval of
+Benjamini & Yekutieli (2005): the marginal interval at level 1 - R q / m for R effects selected
+among m tests, q = ``FCR_LEVEL``, so that on average at most 5 % of the named intervals miss.
+
 Identifiers (``*_id``), file columns, and labels that are unique to almost every row are not
 covariates; a covariate with no variation, or too few rows (``MIN_ROWS``), is listed as
 untestable with the reason.
@@ -44,6 +50,8 @@ References
 ----------
 Benjamini, Y., Hochberg, Y. (1995). Controlling the false discovery rate: a practical and
 powerful approach to multiple testing. J. R. Stat. Soc. B 57(1), 289-300.
+Benjamini, Y., Yekutieli, D. (2005). False discovery rate-adjusted multiple confidence
+intervals for selected parameters. J. Am. Stat. Assoc. 100(469), 71-81.
 Holm, S. (1979). A simple sequentially rejective multiple test procedure. Scand. J. Stat. 6,
 65-70.
 Fisher, R. A. (1925). Statistical Methods for Research Workers. Oliver & Boyd (analysis of
@@ -83,6 +91,9 @@ MIN_ROWS = 6
 
 #: Significance level after the correction (see the module docstring).
 DEFAULT_ALPHA = 0.01
+
+#: False coverage-statement rate of the intervals of selected effects (Benjamini & Yekutieli 2005).
+FCR_LEVEL = 0.05
 
 CORRECTIONS = ("bh", "holm")
 
@@ -159,6 +170,10 @@ class CovariateTest:
     effect_unit : str
     span : float or None
         Range of the covariate over the rows (numeric covariates).
+    se : float
+        Standard error of ``effect``; ``ci95`` is effect +- t(0.975, dof) se.
+    dof : int
+        Degrees of freedom of the t quantile.
     practical : float
         Size of the effect over the covariate's range [unit].
     threshold : float
@@ -173,6 +188,11 @@ class CovariateTest:
         ``p_adjusted < alpha``.
     relevant : bool
         ``practical >= threshold``.
+    ci_selected : tuple of float or None
+        For a test selected as a cause (significant and relevant): its false-coverage-rate
+        interval (Benjamini & Yekutieli 2005), effect +- t(1 - R q / (2 m), dof) se with R
+        tests selected out of m and q = ``FCR_LEVEL``: the interval keeps its 95 % meaning
+        after the effect was chosen for being large.
     levels : dict
         Level -> (mean, n) for ``anova``.
     """
@@ -190,10 +210,13 @@ class CovariateTest:
     practical: float
     threshold: float
     p_value: float
+    se: float = math.nan
+    dof: int = 0
     p_curvature: float | None = None
     p_adjusted: float = math.nan
     significant: bool = False
     relevant: bool = False
+    ci_selected: tuple | None = None
     levels: dict = field(default_factory=dict)
 
     @property
@@ -204,6 +227,7 @@ class CovariateTest:
     def to_dict(self) -> dict:
         d = asdict(self)
         d["ci95"] = list(self.ci95)
+        d["ci_selected"] = None if self.ci_selected is None else list(self.ci_selected)
         return d
 
 
@@ -262,9 +286,20 @@ def adjust(tests, *, method: str = "bh", alpha: float = DEFAULT_ALPHA) -> list:
         raise InputError(f"alpha must be in (0, 1), got {alpha!r}")
     tests = list(tests)
     adj = adjust_pvalues([t.p_value for t in tests], method)
-    return [replace(t, p_adjusted=float(a), significant=bool(np.isfinite(a) and a < alpha),
-                    relevant=bool(np.isfinite(t.practical) and t.practical >= t.threshold))
-            for t, a in zip(tests, adj)]
+    out = [replace(t, p_adjusted=float(a), significant=bool(np.isfinite(a) and a < alpha),
+                   relevant=bool(np.isfinite(t.practical) and t.practical >= t.threshold))
+           for t, a in zip(tests, adj)]
+    m = int(np.isfinite(adj).sum())
+    selected = sum(t.significant and t.relevant for t in out)
+    if selected:
+        tail = selected * FCR_LEVEL / m / 2.0
+        out = [replace(t, ci_selected=_interval(t, tail)) if t.significant and t.relevant else t for t in out]
+    return out
+
+
+def _interval(t, tail: float) -> tuple:
+    half = float(stats.t.ppf(1.0 - tail, t.dof)) * t.se if t.dof > 0 else math.nan
+    return (t.effect - half, t.effect + half)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -309,14 +344,14 @@ def trend_test(x, y) -> dict:
             p_curv = float(2.0 * stats.t.sf(abs(tc), dof2))
         else:
             p, p_curv = (0.0, 0.0) if rss0 > 0 else (1.0, 1.0)
-        return {"method": "trend", "n": n, "effect": b, "ci95": ci, "p_value": p,
+        return {"method": "trend", "n": n, "effect": b, "ci95": ci, "se": se_b, "dof": dof1, "p_value": p,
                 "p_curvature": p_curv, "span": span}
     if se_b > 0:
         p = float(2.0 * stats.t.sf(abs(b / se_b), dof1))
     else:
         p = 0.0 if b != 0 else 1.0
-    return {"method": "line", "n": n, "effect": b, "ci95": ci, "p_value": p, "p_curvature": None,
-            "span": span}
+    return {"method": "line", "n": n, "effect": b, "ci95": ci, "se": se_b, "dof": dof1, "p_value": p,
+            "p_curvature": None, "span": span}
 
 
 def block_test(levels, y) -> dict:
@@ -348,8 +383,10 @@ def block_test(levels, y) -> dict:
     hi = max(means, key=means.get)
     lo = min(means, key=means.get)
     effect = means[hi] - means[lo]
-    half = _t95(dof) * math.sqrt(mse * (1.0 / groups[hi].size + 1.0 / groups[lo].size))
+    se = math.sqrt(mse * (1.0 / groups[hi].size + 1.0 / groups[lo].size))
+    half = _t95(dof) * se
     return {"method": "anova", "n": n, "effect": effect, "ci95": (effect - half, effect + half),
+            "se": se, "dof": dof,
             "p_value": p, "levels": {lev: [means[lev], int(groups[lev].size)] for lev in groups}}
 
 
@@ -365,7 +402,8 @@ def mean_test(y) -> dict:
         p = float(2.0 * stats.t.sf(abs(m / (sd / math.sqrt(n))), n - 1))
     else:
         p = 0.0 if m != 0 else 1.0
-    return {"method": "mean", "n": n, "effect": m, "ci95": (m - half, m + half), "p_value": p}
+    return {"method": "mean", "n": n, "effect": m, "ci95": (m - half, m + half),
+            "se": sd / math.sqrt(n), "dof": n - 1, "p_value": p}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -410,7 +448,8 @@ def series_tests(series: Series) -> tuple[list, list]:
         tests.append(CovariateTest(
             series=series.name, sheet=series.sheet, source=series.source, covariate=cov,
             method=res["method"], n=int(res["n"]), effect=float(res["effect"]),
-            ci95=tuple(float(c) for c in res["ci95"]), effect_unit=unit, span=span,
+            ci95=tuple(float(c) for c in res["ci95"]), se=float(res["se"]), dof=int(res["dof"]),
+            effect_unit=unit, span=span,
             practical=float(practical), threshold=float(series.threshold),
             p_value=float(res["p_value"]), p_curvature=res.get("p_curvature"),
             levels=res.get("levels", {})))

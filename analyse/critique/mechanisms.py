@@ -154,6 +154,9 @@ class Finding:
     effect : float or None
         Effect size in natural units (slope per covariate unit, range of level means, mean).
     ci95 : list of float or None
+        95 % interval of ``effect``: for a found effect the false-coverage-rate interval of
+        the selected effects (``diagnosis``, Benjamini & Yekutieli 2005), else the marginal
+        Student-t interval (also in ``evidence``).
     effect_unit : str or None
     p_adjusted : float or None
     evidence : str
@@ -186,7 +189,7 @@ def _fmt(x, digits=3) -> str:
 
 
 def _evidence(t, verdict: str) -> str:
-    size = (f"{_fmt(t.effect)} {t.effect_unit} [{_fmt(t.ci95[0])}, {_fmt(t.ci95[1])}]")
+    size = (f"{_fmt(t.effect)} {t.effect_unit} [{_fmt(t.ci95[0])}, {_fmt(t.ci95[1])}] (marginal 95 %)")
     over = (f", {_fmt(t.practical)} over the observed range of {t.covariate}" if t.span is not None
             else "")
     bar = f"practical threshold {_fmt(t.threshold)}"
@@ -195,9 +198,10 @@ def _evidence(t, verdict: str) -> str:
 
 
 def _finding(mech: str, verdict: str, t, note: str = "") -> Finding:
+    ci = t.ci_selected if verdict == "found" and t.ci_selected is not None else t.ci95
     return Finding(mechanism=mech, verdict=verdict, sheet=t.sheet, covariate=t.covariate,
                    quantity=t.series, source=t.source, effect=float(t.effect),
-                   ci95=[float(t.ci95[0]), float(t.ci95[1])], effect_unit=t.effect_unit,
+                   ci95=[float(ci[0]), float(ci[1])], effect_unit=t.effect_unit,
                    p_adjusted=float(t.p_adjusted), evidence=(note + _evidence(t, verdict)))
 
 
@@ -293,12 +297,16 @@ def ill_conditioned(results: dict | None) -> list:
     pb = (results.get("plackett_burman") or {}).get("effects_vs_noise") or {}
     if not carried or not (terms or pb):
         return [Finding(mech, "not_testable", evidence="the campaign has no noise comparison of its terms")]
+    # the response surface names its factors A, B, C... in the order carried (fit "factors")
+    coded = {v: k for k, v in ((bbd.get("fit") or {}).get("factors") or {}).items()}
     rows = []
     for f in carried:
         param = factors.get(f, {}).get("parameter", f)
-        own = {name: v for name, v in terms.items() if name != "Intercept" and f in name}
+        letter = coded.get(f, f)
+        own = {name: v for name, v in terms.items()
+               if name != "Intercept" and letter in re.findall(r"[A-Z]", name)}
         if own:
-            lin = own.get(f, next(iter(own.values())))
+            lin = own.get(letter, next(iter(own.values())))
             coef, se = float(lin["coefficient"]), float(lin["se_noise"])
             exceeds = any(bool(v["exceeds_noise"]) for v in own.values())
             what = (f"{sum(bool(v['exceeds_noise']) for v in own.values())} of {len(own)} response-surface "

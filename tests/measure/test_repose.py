@@ -47,7 +47,10 @@ def heap_photo_params(k, n=N_PHOTOS, seed=20240):
     Angles are stratified over 20-50 deg; the geometry cycles cone / right flank / left flank
     (the single-flank heap of the plate-withdrawal rig, its plateau running out of the frame);
     the roll alternates in sign, 0.3-3 deg; the heap tone alternates dark / light in pairs; the
-    framing leaves floor visible beside the heap, as a photographer would.
+    framing leaves floor visible beside the heap, as a photographer would. Heaps are 0.15-0.21 m
+    high, 6-8 segment lengths: the segments lining a flank make its outline bumpy, and over a
+    shorter flank they move the fitted angle by more (about 0.5 deg sd per flank for a 0.10 m
+    heap, against 0.2 deg here).
     """
     rng = np.random.default_rng([seed, k, 0])
     h, w = PHOTO_SIZE
@@ -170,12 +173,13 @@ def _drawn_cone(angle_left, angle_right, roll_deg, polarity="dark", size=(600, 9
 
 @pytest.mark.parametrize("roll, polarity", [(0.0, "dark"), (2.0, "light"), (-3.0, "dark")])
 def test_drawn_cone_exact_angles_and_tilt(roll, polarity):
-    """A drawn cone of 30/40 deg: angles to 0.05 deg, tilt (the rotation) to 0.05 deg."""
+    """A drawn cone of 30/40 deg: angles and tilt (the rotation) to 0.02 deg (sub-pixel edges,
+    no texture: only anti-aliasing and the rotation's interpolation remain)."""
     result = angle_from_photo(_drawn_cone(30.0, 40.0, roll, polarity))
-    assert result.flanks["left"] == pytest.approx(30.0, abs=0.05)
-    assert result.flanks["right"] == pytest.approx(40.0, abs=0.05)
-    assert result.angle_deg == pytest.approx(35.0, abs=0.05)
-    assert result.base_tilt_deg == pytest.approx(roll, abs=0.05)
+    assert result.flanks["left"] == pytest.approx(30.0, abs=0.02)
+    assert result.flanks["right"] == pytest.approx(40.0, abs=0.02)
+    assert result.angle_deg == pytest.approx(35.0, abs=0.02)
+    assert result.base_tilt_deg == pytest.approx(roll, abs=0.02)
 
 
 def test_profile_exact_trapezoid():

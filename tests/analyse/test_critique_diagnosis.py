@@ -1,0 +1,155 @@
+"""The critique's statistics against second implementations (statsmodels, scipy) and hand
+calculations."""
+
+import math
+
+import numpy as np
+import pytest
+import statsmodels.api as sm
+from scipy import stats
+from statsmodels.stats.multitest import multipletests
+
+from analyse.critique import diagnosis
+from analyse.critique.diagnosis import (Series, adjust_pvalues, block_test, mean_test, series_tests,
+                                        trend_test)
+from analyse.critique.mechanisms import classify, ill_conditioned, judge
+from demcal.errors import InputError
+
+
+@pytest.mark.parametrize("method,sm_name", [("bh", "fdr_bh"), ("holm", "holm")])
+def test_adjusted_pvalues_match_statsmodels(method, sm_name):
+    rng = np.random.default_rng(4)
+    p = np.concatenate([rng.uniform(0, 1, 40), rng.uniform(0, 1e-3, 5)])
+    p[[3, 17]] = p[[5, 5]]                          # ties
+    ours = adjust_pvalues(p, method)
+    theirs = multipletests(p, method=sm_name)[1]
+    assert ours == pytest.approx(theirs, rel=1e-12)
+
+
+def test_adjusted_pvalues_hand_example_benjamini_hochberg1995():
+    # m = 4, sorted p 0.01, 0.02, 0.03, 0.5: BH gives 0.04, 0.04, 0.04, 0.5; Holm 0.04, 0.06, 0.06, 0.5
+    p = [0.03, 0.5, 0.01, 0.02]
+    assert adjust_pvalues(p, "bh") == pytest.approx([0.04, 0.5, 0.04, 0.04])
+    assert adjust_pvalues(p, "holm") == pytest.approx([0.06, 0.5, 0.04, 0.06])
+    assert np.isnan(adjust_pvalues([np.nan, 0.01], "bh")[0])
+    with pytest.raises(InputError, match="valid: bh, holm"):
+        adjust_pvalues(p, "bonferroni")
+
+
+def test_trend_test_matches_statsmodels_ols():
+    rng = np.random.default_rng(7)
+    x = rng.uniform(10, 60, 25)
+    y = 0.3 - 0.002 * x + 1e-5 * x ** 2 + rng.normal(0, 0.01, 25)
+    res = trend_test(x, y)
+    line = sm.OLS(y, sm.add_constant(x)).fit()
+    assert res["effect"] == pytest.approx(line.params[1], rel=1e-10)
+    assert res["ci95"] == pytest.approx(tuple(line.conf_int(0.05)[1]), rel=1e-10)
+    quad = sm.OLS(y, sm.add_constant(np.column_stack([x, x ** 2]))).fit()
+    assert res["p_value"] == pytest.approx(quad.f_pvalue, rel=1e-8)            # trend or curvature
+    assert res["p_curvature"] == pytest.approx(quad.pvalues[2], rel=1e-6)
+    assert res["span"] == pytest.approx(x.max() - x.min())
+
+
+def test_trend_with_two_levels_is_the_line_t_test():
+    x = np.repeat([200.0, 600.0], 6)
+    y = np.array([0.38, 0.37, 0.39, 0.36, 0.38, 0.40, 0.30, 0.31, 0.29, 0.32, 0.30, 0.28])
+    res = trend_test(x, y)
+    t = stats.ttest_ind(y[:6], y[6:])
+    assert res["method"] == "line"
+    assert res["p_value"] == pytest.approx(t.pvalue, rel=1e-10)
+    assert res["effect"] == pytest.approx((y[6:].mean() - y[:6].mean()) / 400.0)
+
+
+def test_block_test_matches_scipy_anova_and_hand_interval():
+    y = np.array([1.0, 1.2, 0.9, 1.1, 2.0, 2.1, 1.9, 2.2, 1.5, 1.4])
+    g = ["a"] * 4 + ["b"] * 4 + ["c"] * 2
+    res = block_test(g, y)
+    assert res["p_value"] == pytest.approx(stats.f_oneway(y[:4], y[4:8], y[8:]).pvalue, rel=1e-10)
+    assert res["effect"] == pytest.approx(2.05 - 1.05)
+    mse = (np.sum((y[:4] - 1.05) ** 2) + np.sum((y[4:8] - 2.05) ** 2) + np.sum((y[8:] - 1.45) ** 2)) / 7
+    half = stats.t.ppf(0.975, 7) * math.sqrt(mse * (1 / 4 + 1 / 4))
+    assert res["ci95"] == pytest.approx((1.0 - half, 1.0 + half))
+    assert res["levels"]["c"] == [pytest.approx(1.45), 2]
+
+
+def test_mean_test_is_the_one_sample_t_test():
+    y = np.array([3.1, 4.5, 4.0, 3.8, 4.4])
+    res = mean_test(y)
+    assert res["p_value"] == pytest.approx(stats.ttest_1samp(y, 0.0).pvalue, rel=1e-12)
+    assert res["effect"] == pytest.approx(y.mean())
+
+
+def test_series_tests_skip_identifiers_and_constants():
+    n = 12
+    s = Series("static_friction.steel", "incline", "measured", "static_friction", "1", tuple(range(1, n + 1)),
+               tuple(np.linspace(0.2, 0.25, n)),
+               {"specimen_id": tuple(f"S{i}" for i in range(n)), "date": ("2024-01-01",) * n,
+                "note": tuple(f"n{i}" for i in range(n)), "trial_order": tuple(range(1, n + 1)),
+                "operator": ("a", "b") * (n // 2)})
+    tests, skipped = series_tests(s)
+    assert sorted(t.covariate for t in tests) == ["operator", "trial_order"]
+    reasons = {u.covariate: u.reason for u in skipped}
+    assert "no variation" in reasons["date"] and "identifier" in reasons["note"]
+    assert "specimen_id" not in reasons
+
+
+def test_catalogue_classification():
+    assert classify("restitution.particle-steel", "drop", "drop_height_mm", False) == "velocity_dependent_restitution"
+    assert classify("residual:restitution.particle-steel", "drop", "orientation_deg", False) == "orientation_rotation"
+    assert classify("twin_minus_contact:restitution.particle-steel", "drop", "orientation_deg", False) == \
+        "orientation_rotation"
+    assert classify("static_friction.steel", "incline", "length_mm", False) == "size_dependence"
+    assert classify("length_mm", "specimens", "length_mm", False) == "other_covariate"
+    assert classify("static_friction.steel", "incline", "operator", True) == "block_effect"
+    assert classify("static_friction.steel", "incline", "trial_order", False) == "trial_order_drift"
+    assert classify("static_friction.steel", "incline", "moisture_pct", False) == "moisture_dependence"
+    assert classify("flank_difference_deg", "repose", "side", False) == "camera_tilt"
+    assert classify("static_friction.steel", "incline", "room_temp_c", False) == "other_covariate"
+
+
+def test_judge_needs_significance_relevance_and_sign():
+    base = dict(sheet="drop", source="measured", covariate="drop_height_mm", method="trend", n=30,
+                effect_unit="1/mm", span=400.0, threshold=0.03, p_value=1e-6, p_adjusted=1e-5,
+                significant=True, relevant=True)
+    falls = diagnosis.CovariateTest(series="restitution.particle-steel", effect=-2e-4, ci95=(-3e-4, -1e-4),
+                                    practical=0.08, **base)
+    rises = diagnosis.CovariateTest(series="restitution.particle-particle", effect=2e-4, ci95=(1e-4, 3e-4),
+                                    practical=0.08, **base)
+    tiny = diagnosis.CovariateTest(series="static_friction.steel", effect=1e-5, ci95=(5e-6, 2e-5),
+                                   practical=0.001, **dict(base, sheet="incline", covariate="trial_order",
+                                                           relevant=False))
+    found = {(f.mechanism, f.quantity): f.verdict for f in judge([falls, rises, tiny])}
+    assert found[("velocity_dependent_restitution", "restitution.particle-steel")] == "found"
+    assert found[("other_covariate", "restitution.particle-particle")] == "found"   # wrong sign: not the mechanism
+    assert found[("trial_order_drift", "static_friction.steel")] == "ruled_out"    # significant but tiny
+    assert found[("camera_tilt", None)] == "not_testable"
+
+
+def test_ill_conditioned_from_campaign_terms():
+    # the response surface codes the carried factors B and F as its own A and B
+    results = {"factors": {"B": {"parameter": "e_pp"}, "F": {"parameter": "mu_s_pw"}},
+               "box_behnken": {"factors": ["B", "F"], "fit": {"factors": {"A": "B", "B": "F"}},
+                               "terms_vs_noise": {
+                   "Intercept": {"coefficient": 34.0, "se_noise": 0.1, "exceeds_noise": True},
+                   "A": {"coefficient": 0.05, "se_noise": 0.1, "exceeds_noise": False},
+                   "B": {"coefficient": 2.0, "se_noise": 0.1, "exceeds_noise": True},
+                   "AB": {"coefficient": 0.02, "se_noise": 0.12, "exceeds_noise": False},
+                   "A^2": {"coefficient": -0.1, "se_noise": 0.15, "exceeds_noise": False},
+                   "B^2": {"coefficient": -0.4, "se_noise": 0.15, "exceeds_noise": True}}}}
+    out = ill_conditioned(results)
+    assert [(f.verdict, f.covariate) for f in out] == [("found", "e_pp")]
+    assert out[0].ci95 == pytest.approx([0.05 - 0.196, 0.05 + 0.196])
+    assert ill_conditioned(None)[0].verdict == "not_testable"
+
+
+def test_selected_effects_get_false_coverage_rate_intervals_benjamini_yekutieli2005():
+    def make(p, effect):
+        return diagnosis.CovariateTest(series="s", sheet="drop", source="measured", covariate="c", method="mean",
+                                       n=10, effect=effect, ci95=(effect - 1, effect + 1), effect_unit="1",
+                                       span=None, practical=abs(effect), threshold=0.5, p_value=p, se=0.4, dof=9)
+    tests = diagnosis.adjust([make(1e-6, 3.0), make(0.3, 0.2), make(0.8, 0.1), make(0.02, 0.9)], alpha=0.01)
+    assert [t.significant and t.relevant for t in tests] == [True, False, False, False]
+    # R = 1 selected of m = 4: marginal level 1 - 0.05 / 4
+    half = stats.t.ppf(1 - 0.05 / 4 / 2, 9) * 0.4
+    assert tests[0].ci_selected == pytest.approx((3.0 - half, 3.0 + half))
+    assert all(t.ci_selected is None for t in tests[1:])

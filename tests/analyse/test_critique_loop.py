@@ -1,0 +1,121 @@
+"""The critique loop end to end: twins and discrepancies, a campaign's ill-conditioned parameter,
+``demcal critique`` and the report's critique tables."""
+
+import argparse
+import json
+import math
+
+import numpy as np
+import pytest
+
+from analyse.campaign import CampaignConfig, calibrate
+from analyse.critique import run_critique
+from analyse.critique.cli import register
+from analyse.critique.twins import paired_discrepancy, independent_discrepancy
+from demcal.errors import InputError
+from measure.pipeline import measure_workbook
+from simulate.virtual_lab import Truth, write_virtual_workbook
+
+NOISE_SD = 0.3
+
+
+def friction_only_runner(inputs: dict) -> dict:
+    """A repose stand-in whose angle depends on mu_s_pw and mu_r_pp only, with seed noise: the
+    campaign must carry a third factor that the angle cannot identify."""
+    p = inputs["params"]
+    noise = np.random.default_rng(inputs["seed"]).normal(0.0, NOISE_SD)
+    angle = 35.0 + 40.0 * (p["mu_s_pw"] - 0.2) + 60.0 * (p["mu_r_pp"] - 0.53) + noise
+    return {"rig": "repose", "observable": {"angle_deg": angle, "angle_profile_deg": angle},
+            "record": {}, "wall_s": 0.0, "steps": 0, "spheres": 0, "sphere_steps_per_s": 0.0,
+            "seed": inputs["seed"]}
+
+
+def test_discrepancy_intervals_hand_calculation():
+    d = paired_discrepancy("x", "drop", [0.40, 0.36, 0.38, 0.34], [0.30, 0.30, 0.31, 0.29])
+    diffs = np.array([0.10, 0.06, 0.07, 0.05])
+    half = 3.182446305284263 * diffs.std(ddof=1) / 2.0            # t(0.975, 3) s / sqrt(4)
+    assert d.difference == pytest.approx(diffs.mean()) and d.combined_u95 == pytest.approx(half)
+    assert d.exceeds
+    w = independent_discrepancy("angle", "repose", [35.0, 36.0, 35.5], [35.2, 35.9])
+    se = math.sqrt(np.var([35.0, 36.0, 35.5], ddof=1) / 3 + np.var([35.2, 35.9], ddof=1) / 2)
+    assert w.difference == pytest.approx(35.5 - 35.55)
+    assert not w.exceeds and w.combined_u95 > 2 * se       # Welch's t with few degrees of freedom
+
+
+def test_drop_and_incline_twins_of_a_clean_lab(tmp_path):
+    """Segments released end on: the drop twin reproduces sqrt(h2/h1), so it may feed the DEM."""
+    vw = write_virtual_workbook(Truth(), tmp_path / "lab", rng=3, photos="none", pairs=("particle-steel",),
+                                drop_heights_mm=(400.0,), n_drop=4, surfaces=("steel",), n_incline=6,
+                                n_tracks=0)
+    c = run_critique(vw.path, rigs=("drop", "incline"), store_dir=tmp_path / "store")
+    rows = {d.observable.split(" ")[0]: d for d in c.discrepancies}
+    drop = rows["restitution.particle-steel"]
+    assert drop.n_simulated == 4 and not drop.exceeds
+    assert drop.simulated == pytest.approx(drop.measured, abs=0.04)
+    slide = rows["static_friction.steel"]
+    assert slide.simulated == pytest.approx(Truth().params.mu_s_pw * 0 + c.parameters["values"]["mu_s_pw"],
+                                            abs=0.01)              # tan(slide angle) = mu_s
+    assert any("may feed the DEM directly" in s for s in c.summary)
+    assert not c.found()
+    # a second critique reuses every twin run from the store
+    again = run_critique(vw.path, rigs=("drop", "incline"), store_dir=tmp_path / "store")
+    assert sum(r["ran"] for r in again.twin_runs) == 0
+    doc = json.loads(json.dumps(c.to_dict()))
+    assert {"discrepancies", "findings", "extensions", "summary", "tests"} <= set(doc)
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory):
+    root = tmp_path_factory.mktemp("critique_campaign")
+    vw = write_virtual_workbook(Truth(), root / "lab", rng=5, n_photos=3, n_drop=4)
+    out = root / "campaign"
+    calibrate(vw.path, out, CampaignConfig(workers=1, progress=False, noise_repeats=4),
+              runner=friction_only_runner, measurement=measure_workbook(vw.path))
+    return out
+
+
+def test_campaign_ill_conditioned_parameter_and_repose_twin(campaign):
+    c = run_critique(campaign, twins=True, rigs=("repose",))
+    ill = [f for f in c.findings if f.mechanism == "ill_conditioned_parameter"]
+    results = json.loads((campaign / "results.json").read_text())
+    carried = results["box_behnken"]["factors"]
+    param = {f: results["factors"][f]["parameter"] for f in carried}
+    # mu_s_pw and mu_r_pp move the angle; the third factor carried cannot be identified
+    assert {f.covariate for f in ill if f.verdict == "found"} == set(param.values()) - {"mu_s_pw", "mu_r_pp"}
+    assert all(f.ci95[0] < 0 < f.ci95[1] for f in ill if f.verdict == "found")
+    repose = [d for d in c.discrepancies if d.observable.startswith("repose_angle_deg")][0]
+    assert repose.n_simulated == 3                      # the campaign's validation runs
+    assert repose.simulated == pytest.approx(np.mean(results["validation"]["responses"]))
+
+
+def test_cli_writes_critique_json_and_the_report_renders_it(campaign, tmp_path):
+    from report.tables import critique_tables, load_campaign
+
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers())
+    out = tmp_path / "critique.json"
+    args = parser.parse_args(["critique", str(campaign), "--json", str(out), "--rigs", "repose"])
+    assert args.handler(args) == 0
+    doc = json.loads(out.read_text())
+    assert json.loads((campaign / "critique.json").read_text())["findings"] == doc["findings"]
+    for f in doc["findings"]:
+        assert {"mechanism", "verdict", "sheet", "covariate", "effect", "ci95", "p_adjusted"} <= set(f)
+    assert {f["mechanism"] for f in doc["findings"]} >= {"velocity_dependent_restitution", "camera_tilt",
+                                                        "ill_conditioned_parameter"}
+    tables = {t.id: t for t in critique_tables(load_campaign(campaign))}
+    assert tables["C2"].columns[:7] == ("mechanism", "verdict", "sheet", "covariate", "effect", "ci95",
+                                        "p_adjusted")
+    assert len(tables["C2"].rows) == len(doc["findings"]) and tables["C1"].rows
+
+
+def test_cli_errors_name_the_option(tmp_path):
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers())
+    vw = write_virtual_workbook(Truth(), tmp_path / "lab", rng=1, photos="none", n_drop=1, n_incline=2)
+    args = parser.parse_args(["critique", str(vw.path)])
+    with pytest.raises(InputError, match="--json"):
+        args.handler(args)
+    args = parser.parse_args(["critique", str(vw.path), "--json", str(tmp_path / "o.json"),
+                              "--extensions", "magic"])
+    with pytest.raises(InputError, match="unknown extension"):
+        args.handler(args)
