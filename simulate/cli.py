@@ -46,8 +46,8 @@ def register(subparsers) -> None:
                                                 "last one to DIR (.vtp, for ParaView)")
     g = p.add_argument_group("repose rig")
     g.add_argument("--profile", choices=("paper", "quick"), default="quick",
-                   help="paper: the source paper's case (10 s, 500 segments); quick: the smaller, "
-                        "faster case of calibration campaigns (default)")
+                   help="paper: the source paper's case (10 s simulated); quick: the same carton and "
+                        "fill with the idle time cut (about 2.5 s), for calibration campaigns (default)")
     g.add_argument("--workbook", metavar="PATH",
                    help="take the carton, lift speed and fill count from this workbook's meta sheet")
     g.add_argument("--annotate", metavar="PNG", help="write the annotated side view of the heap")

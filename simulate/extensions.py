@@ -41,7 +41,7 @@ elastic-plastic spheres. Powder Technol. 99, 154-162.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import numpy as np
 from scipy import stats
@@ -57,6 +57,9 @@ EXTENSIONS = ("velocity_dependent_restitution", "inverted_restitution", "size_di
 
 #: Standard gravity [m/s^2], as the drop rig uses it.
 G = 9.81
+
+#: Loosest stopping tolerance of :func:`invert_drop_twin` on the mean apparent restitution [-].
+MAX_TOLERANCE = 0.01
 
 #: Parameter of ``DEMParameters`` holding the restitution of each pair the rigs know.
 RESTITUTION_PARAMETER = {"particle-steel": "e_pw", "particle-particle": "e_pp"}
@@ -216,7 +219,8 @@ class InvertedRestitution:
         Contact restitution found [-] (NaN when the twin cannot reach the target).
     contact_ci95 : tuple of float
         95 % interval of ``contact``: the interval of the mean paired residual (measured minus
-        twin) at the solution, divided by the local slope d(twin mean)/de [-].
+        twin) at the solution, divided by the local slope d(twin mean)/de (least squares over
+        the evaluations within 0.2 of the solution) [-].
     twin_mean : float
         Twin's mean apparent restitution at ``contact`` [-].
     residual_ci95 : tuple of float
@@ -267,7 +271,9 @@ def invert_drop_twin(twin, measured, *, pair: str = "particle-steel", start: flo
     lo, hi : float
         Search range of e [-].
     tol : float
-        Stop when |twin mean - target| < tol [-] or the bracket is narrower than tol.
+        Stop when |twin mean - target| < tol [-] or the bracket is narrower than tol; tol is
+        raised to a quarter of the half-width of the measured mean's 95 % interval, at most
+        ``MAX_TOLERANCE``.
     max_evaluations : int
 
     Returns
@@ -278,6 +284,10 @@ def invert_drop_twin(twin, measured, *, pair: str = "particle-steel", start: flo
     if y.ndim != 1 or y.size < 2:
         raise InputError("invert_drop_twin needs at least 2 measured trials")
     target = float(y.mean())
+    # no point in matching the mean much closer than its own uncertainty (but never looser than
+    # MAX_TOLERANCE)
+    half = float(stats.t.ppf(0.975, y.size - 1)) * float(y.std(ddof=1)) / math.sqrt(y.size)
+    tol = max(tol, min(0.25 * half, MAX_TOLERANCE))
     e = float(np.clip(start if start is not None else target, lo, hi))
     evals: list[tuple[float, float]] = []
     cache: dict[float, np.ndarray] = {}
@@ -326,12 +336,14 @@ def invert_drop_twin(twin, measured, *, pair: str = "particle-steel", start: flo
     n = resid.size
     half = float(stats.t.ppf(0.975, n - 1)) * float(resid.std(ddof=1)) / math.sqrt(n)
     r_mean = float(resid.mean())
-    pts = sorted(evals, key=lambda em: abs(em[0] - best_e))
-    slope = math.nan
-    for other_e, other_m in pts[1:]:
-        if other_e != best_e:
-            slope = (best_m - other_m) / (best_e - other_e)
-            break
+    # local slope: least squares over the evaluations within 0.2 of the solution (a secant over
+    # a tiny step would be dominated by the twin's jagged response)
+    near = [(em_e, em_m) for em_e, em_m in evals if abs(em_e - best_e) <= 0.2]
+    if len({em_e for em_e, _ in near}) < 2:
+        near = [(best_e, best_m), max(evals, key=lambda em: abs(em[0] - best_e))]
+    ex = np.array([em[0] for em in near])
+    ey = np.array([em[1] for em in near])
+    slope = float(np.polyfit(ex, ey, 1)[0]) if np.unique(ex).size >= 2 else math.nan
     converged = abs(best_m - target) < max(tol, half)
     note = ""
     if not converged:

@@ -45,7 +45,8 @@ kind (default size)                       what changes
                                           into rotation as in the drop twin
 ``size_dependence`` (0.02 per mm)         contact e tracks the specimen's length
 ``block_effect`` (2 deg)                  one operator reads incline angles ``size`` higher
-                                          (levels of the covariate offset evenly over ``size``)
+                                          (levels of the covariate offset evenly over ``size``;
+                                          by ``date``, the sheet's trials span the days)
 ``trial_order_drift`` (0.004 per trial)   static friction rises with trial order
 ``moisture_dependence`` (0.01 per %)      static friction rises with moisture content
 ``camera_tilt`` (2 deg)                   an uncorrected camera roll: the left flank reads
@@ -64,7 +65,7 @@ import hashlib
 import json
 import math
 import os
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -448,14 +449,20 @@ def _density(truth: Truth, rng, n: int) -> pd.DataFrame:
                          "volume_before_ml": np.full(n, 100.0), "volume_after_ml": 100.0 + displaced})
 
 
-def _session(rng, n: int, truth: Truth, day: str, specimens: pd.DataFrame) -> dict:
-    """Covariates of ``n`` trials in random order: trial order, alternating operators, a day,
-    a specimen each."""
+def _session(rng, n: int, truth: Truth, day: str, specimens: pd.DataFrame, *, spread_days=False) -> dict:
+    """Covariates of ``n`` trials in random order: trial order, alternating operators, a day
+    (or, with ``spread_days``, a random day of the campaign each), a specimen each."""
     ops = list(truth.operators)
+    days = list(rng.choice(list(truth.days), n)) if spread_days else [day] * n
     return {"trial_order": np.arange(1, n + 1),
             "operator": [ops[k % len(ops)] for k in range(n)],
-            "date": [day] * n,
+            "date": days,
             "specimen_id": rng.choice(specimens["specimen_id"].to_numpy(), n)}
+
+
+def _by_day(effects, sheet: str) -> bool:
+    """Whether a block effect by date is planted in ``sheet`` (its trials then span the days)."""
+    return any(e.kind == "block_effect" and e.sheet == sheet and e.covariate == "date" for e in effects)
 
 
 def _join_specimens(frame: pd.DataFrame, specimens: pd.DataFrame) -> pd.DataFrame:
@@ -512,7 +519,8 @@ def _drops(truth: Truth, rng, effects, specimens, *, pairs, heights_mm, n_drop, 
     for pair in pairs:
         e_pair = truth.restitution(pair)
         n = n_drop * len(heights_mm)
-        rows = pd.DataFrame(_session(rng, n, truth, truth.days[0], specimens))
+        rows = pd.DataFrame(_session(rng, n, truth, truth.days[0], specimens,
+                                     spread_days=_by_day(effects, "drop")))
         rows["pair"] = pair
         rows["drop_height_mm"] = rng.permutation(np.repeat(np.asarray(heights_mm, float), n_drop))
         hand = [e for e in orient if e.acts_on(f"restitution.{pair}")]
@@ -566,7 +574,8 @@ def _inclines(truth: Truth, rng, effects, specimens, *, surfaces, n_incline):
     for surface in surfaces:
         for mode in ("slide", "roll"):
             quantity = f"{'static' if mode == 'slide' else 'rolling'}_friction.{surface}"
-            rows = pd.DataFrame(_session(rng, n_incline, truth, day, specimens))
+            rows = pd.DataFrame(_session(rng, n_incline, truth, day, specimens,
+                                         spread_days=_by_day(effects, "incline")))
             rows["surface"], rows["mode"] = surface, mode
             rows = _join_specimens(rows, specimens)
             contrib = _contributions(effects, "incline", quantity, rows, truth, spec_mean)
@@ -629,8 +638,14 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
     rows, expected = [], []
     ops = list(truth.operators)
     day = truth.days[-1]
+    for e in block:
+        if e.covariate not in ("operator", "date"):
+            raise InputError(f"block_effect in the repose sheet: covariate must be operator or date, "
+                             f"got {e.covariate!r}")
+    spread = _by_day(effects, "repose")
     for i in range(n):
-        row = {"photo_id": f"P{i + 1}", "operator": ops[i % len(ops)], "date": day}
+        row = {"photo_id": f"P{i + 1}", "operator": ops[i % len(ops)],
+               "date": str(rng.choice(list(truth.days))) if spread else day}
         offset = sum(_level_offset(tuple({"operator": truth.operators, "date": truth.days,
                                           "batch": truth.batches}[e.covariate]),
                                    row.get(e.covariate, truth.batches[0]), e.size) for e in block)
@@ -652,7 +667,7 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
         name = f"photos/heap_{i + 1}.jpg"
         cv2.imwrite(str(root / name), img, [cv2.IMWRITE_JPEG_QUALITY, 95])
         rows.append({"photo_id": row["photo_id"], "file": name, "side": side, "operator": row["operator"],
-                     "date": day})
+                     "date": row["date"]})
     frame = pd.DataFrame(rows)
     for e in tilt:
         q = "flank_difference_deg" if e.quantity == "flanks" else "base_tilt_deg"

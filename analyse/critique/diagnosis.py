@@ -193,6 +193,9 @@ class CovariateTest:
         interval (Benjamini & Yekutieli 2005), effect +- t(1 - R q / (2 m), dof) se with R
         tests selected out of m and q = ``FCR_LEVEL``: the interval keeps its 95 % meaning
         after the effect was chosen for being large.
+    explained_by : str or None
+        Another selected covariate of the same series that accounts for this one
+        (``explain_away``); such a test names no cause.
     levels : dict
         Level -> (mean, n) for ``anova``.
     """
@@ -217,6 +220,7 @@ class CovariateTest:
     significant: bool = False
     relevant: bool = False
     ci_selected: tuple | None = None
+    explained_by: str | None = None
     levels: dict = field(default_factory=dict)
 
     @property
@@ -508,7 +512,70 @@ def run_tests(series_list, *, method: str = "bh", alpha: float = DEFAULT_ALPHA) 
         t, u = series_tests(s)
         tests += t
         skipped += u
-    return adjust(tests, method=method, alpha=alpha), skipped
+    tests = adjust(tests, method=method, alpha=alpha)
+    return explain_away(tests, series_list), skipped
+
+
+def _columns(raw, keep) -> np.ndarray | None:
+    """Design columns of a covariate on the rows ``keep``: centred x (and x^2 with three or more
+    values) for a numeric covariate, level dummies (first level dropped) for a categorical one."""
+    vals = [raw[i] for i in keep]
+    if all(_is_number(v) for v in vals):
+        x = np.asarray(vals, dtype=float)
+        x = x - x.mean()
+        return np.column_stack([x, x * x]) if np.unique(x).size >= 3 else x[:, None]
+    labels = [str(v) for v in vals]
+    levels = sorted(set(labels))
+    return np.column_stack([[lab == lev for lab in labels] for lev in levels[1:]]).astype(float)
+
+
+def partial_pvalue(series: Series, covariate: str, control: str) -> float:
+    """p-value of ``covariate`` in a least-squares model of the series that already holds
+    ``control`` (F-test of the covariate's columns, ``_columns``), on the rows having both."""
+    a, b = series.covariates[covariate], series.covariates[control]
+    keep = [i for i in range(len(series.values)) if a[i] is not None and b[i] is not None]
+    y = np.asarray(series.values, dtype=float)[keep]
+    Xc = np.column_stack([np.ones(len(keep)), _columns(b, keep)])
+    Xf = np.column_stack([Xc, _columns(a, keep)])
+    rank_c, rank_f = np.linalg.matrix_rank(Xc), np.linalg.matrix_rank(Xf)
+    dof = len(keep) - rank_f
+    if rank_f <= rank_c or dof <= 0:
+        return 1.0              # the covariate adds nothing the control does not hold
+    rss = [float(np.sum((y - X @ np.linalg.lstsq(X, y, rcond=None)[0]) ** 2)) for X in (Xc, Xf)]
+    if rss[1] <= 0:
+        return 0.0
+    F = (rss[0] - rss[1]) / (rank_f - rank_c) / (rss[1] / dof)
+    return float(stats.f.sf(F, rank_f - rank_c, dof))
+
+
+def explain_away(tests, series_list) -> list:
+    """Mark selected covariate effects that another selected covariate of the same series explains.
+
+    Covariates can be confounded (a batch whose segments happen to be longer carries a size
+    effect; a day carries a drift). For every pair of selected (significant and relevant) tests
+    on the same series, the covariate's p-value is recomputed with the other covariate in the
+    model (``partial_pvalue``); if it is no longer below the cut-off that selected it (the
+    largest unadjusted p-value among the significant tests), the test is marked
+    ``explained_by`` the other covariate and names no cause.
+    """
+    selected = [t for t in tests if t.significant and t.relevant and t.method != "mean"]
+    if len(selected) < 2:
+        return tests
+    cut = max(t.p_value for t in tests if t.significant)
+    by_name = {s.name: s for s in series_list}
+    explained = {}
+    for t in selected:
+        for other in selected:
+            if other is t or other.series != t.series or other.covariate == t.covariate:
+                continue
+            s = by_name.get(t.series)
+            if s is None or t.covariate not in s.covariates or other.covariate not in s.covariates:
+                continue
+            if partial_pvalue(s, t.covariate, other.covariate) > cut:
+                explained[id(t)] = other.covariate
+                break
+    return [replace(t, explained_by=explained[id(t)], ci_selected=None) if id(t) in explained else t
+            for t in tests]
 
 
 # ----------------------------------------------------------------------------------------------

@@ -1,9 +1,10 @@
 """The gain of a model extension: the same discrepancy before and after, on data not used to fit.
 
 For each extension that answers a found mechanism (``analyse.critique.mechanisms``), the drop
-trials of the pair are split by row order: every other trial is used to fit the extension,
-the rest are held out (``split_trials``); the velocity law holds out the highest drop height
-instead, so that its gain is an extrapolation to a speed it never saw. The twins of the
+trials of the pair are split by row order into two halves (``split_trials``): the inverted
+restitution is fitted on each half and judged on the other (two-fold cross-fit, every trial
+held out once), the size extension is judged on one half; the velocity law holds out the
+highest drop height instead, so that its gain is an extrapolation to a speed it never saw. The twins of the
 held-out trials are run with the model before (the calibrated parameter, or the constant
 fitted to the same training trials) and after the extension; the discrepancy measure is
 
@@ -143,44 +144,72 @@ def _gain(name, mechanism, measure, quantity, held_out, before, after, rng, **kw
 
 
 def inverted_restitution_gain(runner, params, lab_pair: str, rig_pair: str, trials, before_twins: dict,
-                              *, rng) -> tuple[ExtensionGain, object]:
-    """Contact restitution by inverting the drop twin on half of the trials, measured on the other
-    half. ``before_twins`` maps a row to its twin with the calibrated parameters.
+                              *, rng) -> tuple[ExtensionGain, list]:
+    """Contact restitution by inverting the drop twin, cross-fitted over two halves of the trials.
+
+    The trials are split by row order (``split_trials``); the twin is inverted on each half and
+    run with that contact restitution on the other half, so every trial is held out once and
+    judged by a fit that never saw it (two-fold cross-validation). ``before_twins`` maps a row
+    to its twin with the calibrated parameters.
 
     Returns
     -------
-    (ExtensionGain, simulate.extensions.InvertedRestitution)
+    (ExtensionGain, list of simulate.extensions.InvertedRestitution)
+        The gain, and the inversion of each half.
     """
     quantity = f"restitution.{lab_pair}"
-    fit, held = split_trials(trials)
+    halves = split_trials(trials)
     param = restitution_parameter(rig_pair)
+    calibrated = getattr(params, param)
+    inversions, before, after, notes = [], [], [], []
+    for k, (fit, held) in enumerate((halves, halves[::-1]), 1):
+        def twin(e, fit=fit):
+            ext = describe("inverted_restitution", pair=lab_pair, parameter=param, value=float(e))
+            out = run_drop_twins(runner, params.with_(**{param: float(e)}), fit, rig_pair, quantity=quantity,
+                                 extension=ext, desc=f"inverting the drop twin ({lab_pair}, half {k}, e = {e:.3g})")
+            return [t.simulated for t in out]
 
-    def twin(e):
-        ext = describe("inverted_restitution", pair=lab_pair, parameter=param, value=float(e))
-        out = run_drop_twins(runner, params.with_(**{param: float(e)}), fit, rig_pair, quantity=quantity,
-                             extension=ext, desc=f"inverting the drop twin ({lab_pair}, e = {e:.3g})")
-        return [t.simulated for t in out]
-
-    inv = invert_drop_twin(twin, [t[1] for t in fit], pair=lab_pair, start=getattr(params, param))
-    before = [before_twins[t[0]].residual for t in held]
-    ext = describe("inverted_restitution", pair=lab_pair, parameter=param, value=inv.contact,
-                   fitted_rows=[t[0] for t in fit])
-    fitted = (f"{param} = {inv.contact:.3g} [{inv.contact_ci95[0]:.3g}, {inv.contact_ci95[1]:.3g}] from "
-              f"{len(fit)} drops (calibrated {getattr(params, param):.3g})")
-    held_text = f"{len(held)} drops not used to fit (every other row)"
-    if not inv.converged:
+        inv = invert_drop_twin(twin, [t[1] for t in fit], pair=lab_pair, start=calibrated)
+        inversions.append(inv)
+        if not inv.converged:
+            notes.append(f"half {k}: {inv.note}")
+            continue
+        ext = describe("inverted_restitution", pair=lab_pair, parameter=param, value=inv.contact,
+                       fitted_rows=[t[0] for t in fit])
+        after_tw = run_drop_twins(runner, params.with_(**{param: inv.contact}), held, rig_pair,
+                                  quantity=quantity, extension=ext,
+                                  desc=f"held-out drops ({lab_pair}, half {k}, inverted e)")
+        before += [before_twins[t[0]].residual for t in held]
+        after += [t.residual for t in after_tw]
+    fitted = "; ".join(f"half {k}: {param} = {inv.contact:.3g} [{inv.contact_ci95[0]:.3g}, "
+                       f"{inv.contact_ci95[1]:.3g}] from {len(h[0])} drops"
+                       for k, (inv, h) in enumerate(zip(inversions, (halves, halves[::-1])), 1)) + \
+        f" (calibrated {calibrated:.3g})"
+    ext = describe("inverted_restitution", pair=lab_pair, parameter=param,
+                   values=[inv.contact for inv in inversions], cross_fit="two halves by row order")
+    held_text = f"{len(after)} drops, each judged by the inversion of the other half (two-fold cross-fit)"
+    if len(after) < 2:
         nan = (math.nan, math.nan)
         return ExtensionGain("inverted_restitution", "orientation_rotation", "abs_mean_residual", quantity,
-                             held_text, before=float(abs(np.mean(before))), before_ci95=nan, after=math.nan,
-                             after_ci95=nan, gain=math.nan, ci95=nan, n_held_out=len(held),
-                             fitted=f"{param}: not found", note=inv.note, extension=ext), inv
-    after_tw = run_drop_twins(runner, params.with_(**{param: inv.contact}), held, rig_pair, quantity=quantity,
-                              extension=ext, desc=f"held-out drops ({lab_pair}, inverted e)")
-    after = [t.residual for t in after_tw]
+                             held_text, before=math.nan, before_ci95=nan, after=math.nan, after_ci95=nan,
+                             gain=math.nan, ci95=nan, n_held_out=len(after), fitted=fitted,
+                             note="; ".join(notes), extension=ext), inversions
     return _gain("inverted_restitution", "orientation_rotation", "abs_mean_residual", quantity, held_text,
                  before, after, rng, fitted=fitted, extension=ext,
-                 note="the twin's contact restitution set so that its mean apparent restitution over the "
-                      "fitted drops equals theirs"), inv
+                 note="; ".join(["the twin's contact restitution set so that its mean apparent restitution over "
+                                 "the fitted drops equals theirs"] + notes)), inversions
+
+
+def combined_inversion(inversions) -> dict | None:
+    """The contact restitution of the halves together: their mean and the hull of their
+    intervals (None unless every half converged)."""
+    if not inversions or not all(inv.converged for inv in inversions):
+        return None
+    values = [inv.contact for inv in inversions]
+    return {"contact": float(np.mean(values)), "halves": values,
+            "ci95": (float(min(inv.contact_ci95[0] for inv in inversions)),
+                     float(max(inv.contact_ci95[1] for inv in inversions))),
+            "target": float(np.mean([inv.target for inv in inversions]))}
 
 
 def velocity_gain(runner, params, lab_pair: str, rig_pair: str, trials, *, rng,

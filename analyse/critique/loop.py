@@ -9,8 +9,11 @@
                    "p_adjusted", "quantity", "source", "effect_unit", "evidence"}],
      "extensions": [{"name", "mechanism", "before", "after", "gain", "ci95", "measure",
                      "held_out", ...}],
-     "summary": [str], "tests": [...], "untestable": [...], "parameters": {...},
-     "twin_runs": [...], "provenance": {...}}
+     "summary": [str], "extension_records": [...], "tests": [...], "untestable": [...],
+     "catalogue": [...], "parameters": {...}, "twin_runs": [...], "provenance": {...}}
+
+``extensions`` holds flat rows for the report's table; ``extension_records`` the same with the
+provenance record of each extension (``simulate.extensions.describe``).
 
 Steps (DESIGN.md, "The critique loop"):
 
@@ -32,9 +35,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy import stats
 
-from analyse.critique.diagnosis import CORRECTIONS, DEFAULT_ALPHA, Series, measured_series, run_tests
-from analyse.critique.mechanisms import CATALOGUE, Finding, ill_conditioned, judge
+from analyse.critique.diagnosis import (CORRECTIONS, DEFAULT_ALPHA, PRACTICAL_THRESHOLDS, Series,
+                                        measured_series, run_tests)
+from analyse.critique.mechanisms import CATALOGUE, ill_conditioned, judge
 from analyse.critique.twins import (TwinRunner, constant_discrepancy, drop_trials, incline_groups,
                                     incline_twin_runner, independent_discrepancy, paired_discrepancy,
                                     repose_validation_angles, rig_pair, run_drop_twins, twin_parameters,
@@ -88,6 +93,7 @@ class Critique:
                 "findings": [f.to_dict() for f in self.findings],
                 "extensions": [e.to_dict() for e in self.extensions],
                 "summary": list(self.summary),
+                "extension_records": [e.as_dict() for e in self.extensions],
                 "tests": [t.to_dict() for t in self.tests],
                 "untestable": [u.to_dict() for u in self.untestable],
                 "catalogue": [m.to_dict() for m in CATALOGUE],
@@ -222,6 +228,12 @@ def _drop_twins(runner, measurement, workbook, params, wall, discrepancies, stat
         logged = sum(t[3] is not None for t in trials)
         note = (f"contact {param} = {e_contact:.3g}; each drop at its height and "
                 f"{'logged' if logged == len(trials) else f'logged ({logged}) or random'} orientation")
+        direct = _direct_use(twin, e_contact)
+        if direct is not None:
+            note += (f"; twin apparent / contact = {direct['ratio']:.3g}: " +
+                     ("whether sqrt(h2/h1) may feed the DEM directly is undetermined with these drops"
+                      if direct["verdict"] == "undetermined" else
+                      f"sqrt(h2/h1) {direct['verdict']} feed the DEM directly"))
         discrepancies.append(paired_discrepancy(f"{quantity} (drop twin, apparent sqrt(h2/h1))", "drop",
                                                 [t.measured for t in twin], [t.simulated for t in twin], note))
         ok = [t for t in twin if math.isfinite(t.simulated)]
@@ -308,7 +320,7 @@ def _pairs_named(findings, mechanism: str, state: dict) -> list:
 
 
 def _extensions(runner, params, findings, state, chosen, seed, summary) -> list:
-    from analyse.critique.gain import inverted_restitution_gain, size_gain, velocity_gain
+    from analyse.critique.gain import combined_inversion, inverted_restitution_gain, size_gain, velocity_gain
 
     gains = []
     rng = np.random.default_rng(seed)
@@ -323,9 +335,10 @@ def _extensions(runner, params, findings, state, chosen, seed, summary) -> list:
                 summary.append(f"inverted_restitution ({pair}) not evaluated: {exc}")
                 continue
             gains.append(g)
-            s["inverted"] = inv
-            if inv.converged and inv.target > 0:
-                scale[pair] = inv.contact / inv.target
+            s["inverted"] = combined_inversion(inv)
+            s["inversion_notes"] = [i.note for i in inv if not i.converged]
+            if s["inverted"] is not None and s["inverted"]["target"] > 0:
+                scale[pair] = s["inverted"]["contact"] / s["inverted"]["target"]
     if "velocity_dependent_restitution" in chosen:
         for pair in _pairs_named(findings, "velocity_dependent_restitution", state):
             s = state[pair]
@@ -349,37 +362,52 @@ def _extensions(runner, params, findings, state, chosen, seed, summary) -> list:
     return gains
 
 
+def _direct_use(twins, e_contact: float) -> dict | None:
+    """Whether the drop twin's apparent restitution equals its contact one, over the lab's trials:
+    the mean, its Student-t interval, and the verdict ``may`` (the offset from the contact value
+    is below the practical threshold of restitution, 0.03), ``may not`` (above it, with an
+    interval excluding 0) or ``undetermined``."""
+    sim = np.array([t.simulated for t in twins if math.isfinite(t.simulated)])
+    if sim.size < 2:
+        return None
+    half = float(stats.t.ppf(0.975, sim.size - 1)) * float(sim.std(ddof=1)) / math.sqrt(sim.size)
+    offset = float(sim.mean()) - e_contact
+    bar = PRACTICAL_THRESHOLDS["restitution"]
+    verdict = "may" if abs(offset) < bar else "may not" if abs(offset) > half else "undetermined"
+    return {"mean": float(sim.mean()), "half": half, "offset": offset, "n": int(sim.size),
+            "ratio": float(sim.mean()) / e_contact, "verdict": verdict}
+
+
 def _drop_statements(state: dict, params) -> list:
     """Whether sqrt(h2/h1) may feed the DEM directly, per pair, with the numbers."""
     out = []
     for pair, s in state.items():
-        tw = [t for t in s["twins"].values() if math.isfinite(t.simulated)]
-        if len(tw) < 2:
+        d = _direct_use(s["twins"].values(), s["contact"])
+        if d is None:
             continue
-        y = np.array([t.measured for t in tw])
-        sim = np.array([t.simulated for t in tw])
-        e = s["contact"]
-        from scipy import stats
-        n = sim.size
-        half = float(stats.t.ppf(0.975, n - 1)) * float(sim.std(ddof=1)) / math.sqrt(n)
-        offset = float(sim.mean()) - e
-        direct = abs(offset) <= max(half, 0.03)
-        text = (f"restitution.{pair}: the lab's sqrt(h2/h1) is {y.mean():.3g}; the drop twin with contact "
-                f"{s['parameter']} = {e:.3g}, at the lab's {n} drop heights and orientations, rebounds with an "
-                f"apparent {sim.mean():.3g} [{sim.mean() - half:.3g}, {sim.mean() + half:.3g}] "
-                f"(ratio {sim.mean() / e:.3g}). ")
-        if direct:
-            text += ("sqrt(h2/h1) may feed the DEM directly: the twin's apparent restitution equals its "
-                     "contact restitution within the uncertainty and the 0.03 practical threshold.")
+        y = np.mean([t.measured for t in s["twins"].values() if math.isfinite(t.simulated)])
+        e, offset = s["contact"], d["offset"]
+        text = (f"restitution.{pair}: the lab's sqrt(h2/h1) is {y:.3g}; the drop twin with contact "
+                f"{s['parameter']} = {e:.3g}, at the lab's {d['n']} drop heights and orientations, rebounds "
+                f"with an apparent {d['mean']:.3g} [{d['mean'] - d['half']:.3g}, {d['mean'] + d['half']:.3g}] "
+                f"(ratio {d['ratio']:.3g}). ")
+        if d["verdict"] == "may":
+            text += ("sqrt(h2/h1) may feed the DEM directly: the twin's apparent restitution is within the "
+                     f"0.03 practical threshold of its contact restitution (offset {offset:.3g}).")
+        elif d["verdict"] == "undetermined":
+            text += (f"Whether sqrt(h2/h1) may feed the DEM directly is undetermined: the offset {offset:.3g} "
+                     f"is within the uncertainty +-{d['half']:.3g} of these drops.")
         else:
             text += ("sqrt(h2/h1) may not feed the DEM directly: the twin's apparent restitution differs from "
                      f"its contact restitution by {offset:.3g} (part of the energy goes into rotation).")
             inv = s.get("inverted")
-            if inv is not None and inv.converged:
+            if inv is not None:
+                halves = ", ".join(f"{v:.3g}" for v in inv["halves"])
                 text += (f" The contact restitution that reproduces the drops is {s['parameter']} = "
-                         f"{inv.contact:.3g} [{inv.contact_ci95[0]:.3g}, {inv.contact_ci95[1]:.3g}].")
-            elif inv is not None:
-                text += f" Inverting the twin failed: {inv.note}."
+                         f"{inv['contact']:.3g} (halves {halves}; interval [{inv['ci95'][0]:.3g}, "
+                         f"{inv['ci95'][1]:.3g}]).")
+            elif s.get("inversion_notes"):
+                text += f" Inverting the twin failed: {'; '.join(s['inversion_notes'])}."
         out.append(text)
     return out
 

@@ -5,7 +5,8 @@ Every mechanism is judged from tests (``analyse.critique.diagnosis``), never ass
 
 - ``found``: at least one test of its signature is significant after the multiple-testing
   correction *and* reaches the practical threshold (and has the expected sign, where the
-  mechanism has one); one finding per such test, the strongest first;
+  mechanism has one), and no other selected covariate of the same series explains it
+  (``diagnosis.explain_away``); one finding per such test, the strongest first;
 - ``ruled_out``: its signature was tested and no test passed both bars; the finding shows the
   closest test (effect and interval), so the reader sees how large an effect is excluded;
 - ``not_testable``: the data lack the covariate or its variation (one drop height, no
@@ -235,11 +236,12 @@ def judge(tests, untestable=(), *, notes: dict | None = None) -> list:
     for mech in [m.id for m in CATALOGUE if m.id != "ill_conditioned_parameter"] + ["other_covariate"]:
         ts = by_mech.get(mech, [])
         sign = MECHANISMS[mech].sign if mech in MECHANISMS else 0
-        hits = [t for t in ts if t.significant and t.relevant and (sign == 0 or np.sign(t.effect) == sign)]
+        hits = [t for t in ts if t.significant and t.relevant and t.explained_by is None
+                and (sign == 0 or np.sign(t.effect) == sign)]
         if mech == "velocity_dependent_restitution":
             # a significant rise with height is not this mechanism: report it as unexplained
             for t in ts:
-                if t.significant and t.relevant and np.sign(t.effect) > 0:
+                if t.significant and t.relevant and t.explained_by is None and np.sign(t.effect) > 0:
                     found.append(_finding("other_covariate", "found", t,
                                           "restitution rises with drop height, against the catalogue's "
                                           "signature: "))
@@ -249,8 +251,11 @@ def judge(tests, untestable=(), *, notes: dict | None = None) -> list:
             continue
         if ts:
             best = min(ts, key=lambda t: (t.p_adjusted, -t.practical))
+            why = (f"explained by {best.explained_by} (its effect vanishes with {best.explained_by} in the "
+                   f"model): " if best.explained_by else "")
             ruled.append(_finding(mech, "ruled_out", best,
-                                  f"{len(ts)} test(s), none significant and above the threshold; closest: "))
+                                  f"{len(ts)} test(s), none significant and above the threshold "
+                                  f"unless explained by another covariate; closest: {why}"))
             continue
         reason = notes.get(mech)
         if reason is None:

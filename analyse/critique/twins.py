@@ -34,15 +34,14 @@ from __future__ import annotations
 
 import math
 import tempfile
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from scipy import stats
 
 from analyse.runs import RunStore, run_all, run_key
-from demcal.errors import InputError, SimulationError
-from demcal.jsonio import read_json
+from demcal.errors import SimulationError
 
 G = 9.81
 

@@ -25,6 +25,7 @@ simulated time [s]; ``final``: True on the last call, with the final state).
 from __future__ import annotations
 
 import importlib
+import operator
 from dataclasses import dataclass
 
 from demcal.errors import InputError
@@ -114,13 +115,14 @@ class RunTally:
 
 
 def check_seed(seed) -> int:
-    """A run seed: a non-negative integer."""
-    if isinstance(seed, bool) or not isinstance(seed, (int,)) and not hasattr(seed, "__index__"):
+    """A run seed: a non-negative integer (Python or numpy)."""
+    try:
+        value = operator.index(seed)
+    except TypeError:
+        value = None
+    if value is None or isinstance(seed, bool) or value < 0:
         raise InputError(f"seed must be a non-negative integer, got {seed!r}")
-    seed = int(seed)
-    if seed < 0:
-        raise InputError(f"seed must be a non-negative integer, got {seed!r}")
-    return seed
+    return value
 
 
 __all__ = ["RIGS", "RigResult", "RunTally", "check_seed", "rig_function", "run_meta", "run_rig"]

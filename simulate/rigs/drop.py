@@ -69,7 +69,7 @@ from simulate.walls import Plane
 #: The paper's drop height [m] ("fixed at 400 mm").
 PAPER_DROP_HEIGHT = 0.400
 #: Time steps per (shortest) contact for the automatic time step (the apparent restitution of
-#: a single sphere is then within 0.5 % of the contact value).
+#: a single sphere is then within about 1 % of the contact value).
 STEPS_PER_CONTACT = 100
 #: Gap between the lowest point and the plate at which the simulation starts [m].
 START_GAP = 0.002

@@ -17,10 +17,10 @@ the heap settle. The heap is then measured in three ways:
     of the spheres' x-z discs on a 1 mm grid (what the silhouette shows), right flank: the full
     slope from the crest (inside the carton too) down to the toe.
 ``angle_outside_deg``
-    The same fit restricted to the profile beyond the end plate (x > L). With the paper's
-    carton only about 10 % of the segments leave it, so this heap is small and its angle noisy
-    (LIGGGHTS, 5 seeds: 23.1 +- 4.2 deg against 32.6 +- 1.8 deg for the full slope; DESIGN.md);
-    it is reported, not compared.
+    The same fit restricted to the profile beyond the end plate (x > L), from its own top at
+    the plate line to its toe. With the paper's carton only about 10 % of the segments leave
+    it, so this heap is a few segments high and its angle noisy (DESIGN.md); it is reported,
+    not compared.
 
 Profiles (``PROFILES``):
 
@@ -30,18 +30,15 @@ Profiles (``PROFILES``):
     of the carton (z from 0.4 to 0.96 of its height), the end plate lifted at t = 4 s at the
     logged speed, 10 s in all, dt = 7.43678e-5 s.
 ``quick``
-    For calibration campaigns (about 45 runs within 15 minutes on 2 cores, so about 20 s per
-    run on one core). The carton is scaled down by ``QUICK_SCALE`` in every dimension and the
-    fill count by its cube (same fill height relative to the carton; 500 -> 108 segments in
-    120 x 60 mm). The segments are inserted over 0.3 s in the lower part of the carton, the
-    plate is lifted at the logged speed as soon as the fill has settled (rms speed below
-    ``SETTLED_SPEED``) and stopped once its lower edge is a segment diameter above the highest
-    sphere, and the run ends when the heap has settled after the plate is clear (or at 4 s).
-    Same time step and contact model as the paper case. The heap is coarser (fewer segments
-    across it), so its angle differs from the paper case's by a few degrees, but it responds
-    to the contact parameters in the same directions (see the module's ``quick`` check in the
-    tests' notes: mu_s particle-steel and mu_r particle-particle up -> angle up, e down ->
-    angle up).
+    For calibration campaigns (about 45 runs within 15 minutes on 2 cores). The same carton,
+    fill count, lift speed, time step and contact model as the paper case; only the idle
+    time is cut: the segments are inserted over 0.5 s into the whole height of the carton
+    (z from 0.1 to 0.96 of it), the plate is lifted as soon as the fill has settled (rms speed
+    of the bodies below ``SETTLED_SPEED``, about 0.4 s later) and stopped once its lower edge
+    is a segment diameter above the highest sphere, and the run ends when the heap has
+    settled after that (or at 4 s): about 2.4 s simulated instead of 10. The heap forms while
+    the plate rises, exactly as in the paper case, so the angles agree within the seed
+    scatter and respond to the contact parameters in the same directions.
 
 Observable keys: ``angle_deg``, ``angle_profile_deg``, ``angle_outside_deg`` [deg],
 ``escaped`` (bodies that left the simulation domain), ``outside_fraction`` (share of the
@@ -61,8 +58,6 @@ from simulate.params import DEMParameters
 from simulate.rigs import RigResult, RunTally, check_seed, run_meta
 from simulate.scenes import PAPER_DURATION, PAPER_TIME_STEP, build_paper_repose_case
 
-#: Linear scale of the quick profile's carton relative to the workbook's.
-QUICK_SCALE = 0.6
 #: rms speed of the bodies below which a fill or a heap counts as settled [m/s].
 SETTLED_SPEED = 0.005
 #: Resolution of the rendered side view [px/m] (0.5 mm per pixel).
@@ -188,8 +183,8 @@ class ReposeProfile:
 PROFILES = {
     "paper": ReposeProfile("paper", scale=1.0, dt=PAPER_TIME_STEP, fill_time=1.0, fill_bottom=0.4,
                            fill_top=0.96, lift_time=4.0, duration=PAPER_DURATION, early_end=False),
-    "quick": ReposeProfile("quick", scale=QUICK_SCALE, dt=PAPER_TIME_STEP, fill_time=0.3, fill_bottom=0.1,
-                           fill_top=0.9, lift_time=None, duration=4.0, early_end=True),
+    "quick": ReposeProfile("quick", scale=1.0, dt=PAPER_TIME_STEP, fill_time=0.5, fill_bottom=0.1,
+                           fill_top=0.96, lift_time=None, duration=4.0, early_end=True),
 }
 
 
@@ -382,7 +377,6 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
         raise InputError(f"geometry must be a ReposeGeometry, got {type(base).__name__}")
     geo = base.scaled(prof.scale) if prof.scale != 1.0 else base
     L, W, H = geo.box_length, geo.box_width, geo.box_height
-    seg = params.segment_length_m
     fill_margin = min(0.010, 0.1 * W)
     sim = build_paper_repose_case(
         params, seed, n_clumps=geo.fill_count, box_length=L, box_width=W, box_height=H,
@@ -418,7 +412,8 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
     advance_to(min(prof.fill_time, prof.duration))
     t_lift = prof.lift_time
     if t_lift is None:
-        while sim.time < 0.5 * prof.duration and rms_speed() > SETTLED_SPEED:
+        while sim.time < 0.5 * prof.duration and (rms_speed() > SETTLED_SPEED or any(
+                f.inserted < f.n_total for f in sim.factories)):
             advance(chunk)
         t_lift = sim.time
     else:
@@ -443,6 +438,9 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
     body = sim.positions()
     heap = heap_angles(pos, rad, L, annotate_to=annotate_to)
     notes = list(heap.notes)
+    inserted = sum(f.inserted for f in sim.factories)
+    if inserted < geo.fill_count:
+        notes.append(f"only {inserted} of {geo.fill_count} segments found room in the carton")
     if sim.time < t_clear:
         notes.append(f"the run ended at {sim.time:.2f} s, before the plate was clear ({t_clear:.2f} s)")
     n_act = int(act.sum())
@@ -461,5 +459,5 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
     options = {"profile": prof.name, "geometry": base.to_dict(), "force": force}
     meta = run_meta(seed, prof.dt, tally, sim.n_spheres, sim.time, profile=prof.name, notes=notes,
                     profile_settings=prof.to_dict(), bodies=sim.n_bodies,
-                    inserted=sum(f.inserted for f in sim.factories))
+                    inserted=inserted)
     return RigResult("repose", observable, rec, meta, params.to_dict(), Provenance(seed=seed, options=options))

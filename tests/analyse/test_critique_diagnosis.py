@@ -153,3 +153,37 @@ def test_selected_effects_get_false_coverage_rate_intervals_benjamini_yekutieli2
     half = stats.t.ppf(1 - 0.05 / 4 / 2, 9) * 0.4
     assert tests[0].ci_selected == pytest.approx((3.0 - half, 3.0 + half))
     assert all(t.ci_selected is None for t in tests[1:])
+
+
+def test_partial_pvalue_matches_statsmodels_nested_f_test():
+    import pandas as pd
+    from statsmodels.formula.api import ols
+
+    rng = np.random.default_rng(9)
+    n = 40
+    length = rng.normal(25, 1.5, n)
+    batch = np.where(rng.random(n) < 0.5, "B1", "B2")
+    y = 0.3 + 0.02 * (length - 25) + rng.normal(0, 0.02, n)
+    s = Series("restitution.particle-steel", "drop", "measured", "restitution", "1", tuple(range(n)),
+               tuple(y), {"length_mm": tuple(length), "batch": tuple(batch)})
+    frame = pd.DataFrame({"y": y, "L": length - length.mean(), "b": batch})
+    small = ols("y ~ C(b)", frame).fit()
+    big = ols("y ~ C(b) + L + I(L**2)", frame).fit()
+    want = big.compare_f_test(small)[1]
+    assert diagnosis.partial_pvalue(s, "length_mm", "batch") == pytest.approx(want, rel=1e-8)
+
+
+def test_a_block_confounded_with_size_is_explained_away():
+    rng = np.random.default_rng(3)
+    n = 60
+    length = rng.normal(25, 1.6, n)
+    batch = np.where(length > np.median(length), "long", "short")      # batches differ in size only
+    y = 0.35 + 0.03 * (length - 25) + rng.normal(0, 0.02, n)
+    s = Series("restitution.particle-steel", "drop", "measured", "restitution", "1", tuple(range(n)),
+               tuple(y), {"length_mm": tuple(length), "batch": tuple(batch)})
+    tests, _ = diagnosis.run_tests([s], alpha=0.01)
+    by_cov = {t.covariate: t for t in tests}
+    assert by_cov["batch"].significant and by_cov["batch"].explained_by == "length_mm"
+    assert by_cov["length_mm"].explained_by is None
+    found = [(f.mechanism, f.covariate) for f in judge(tests) if f.verdict == "found"]
+    assert found == [("size_dependence", "length_mm")]

@@ -4,6 +4,7 @@
 import argparse
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,7 +12,7 @@ import pytest
 from analyse.campaign import CampaignConfig, calibrate
 from analyse.critique import run_critique
 from analyse.critique.cli import register
-from analyse.critique.twins import paired_discrepancy, independent_discrepancy
+from analyse.critique.twins import independent_discrepancy, paired_discrepancy
 from demcal.errors import InputError
 from measure.pipeline import measure_workbook
 from simulate.virtual_lab import Truth, write_virtual_workbook
@@ -53,8 +54,9 @@ def test_drop_and_incline_twins_of_a_clean_lab(tmp_path):
     assert drop.n_simulated == 4 and not drop.exceeds
     assert drop.simulated == pytest.approx(drop.measured, abs=0.04)
     slide = rows["static_friction.steel"]
-    assert slide.simulated == pytest.approx(Truth().params.mu_s_pw * 0 + c.parameters["values"]["mu_s_pw"],
-                                            abs=0.01)              # tan(slide angle) = mu_s
+    # the twins run with the measured means; tan(slide angle) of the twin is its mu_s
+    assert c.parameters["values"]["mu_s_pw"] == pytest.approx(slide.measured)
+    assert slide.simulated == pytest.approx(slide.measured, abs=0.01) and not slide.exceeds
     assert any("may feed the DEM directly" in s for s in c.summary)
     assert not c.found()
     # a second critique reuses every twin run from the store
@@ -119,3 +121,40 @@ def test_cli_errors_name_the_option(tmp_path):
                               "--extensions", "magic"])
     with pytest.raises(InputError, match="unknown extension"):
         args.handler(args)
+
+
+# ---------------------------------------------------------------------------------------------
+# long runs (opt in with -m validation): the drop twins of a whole workbook and the inversion
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "data" / "astragalus"
+
+
+@pytest.mark.validation
+def test_example_campaign_drop_twin_says_whether_sqrt_h2_h1_may_feed_the_dem(tmp_path):
+    """data/astragalus: every drop's twin at its logged orientation, with e = the measured mean."""
+    c = run_critique(EXAMPLE, rigs=("drop",), store_dir=tmp_path / "store")
+    steel = next(d for d in c.discrepancies if d.observable.startswith("restitution.particle-steel"))
+    assert steel.exceeds and steel.simulated < steel.measured            # the twin rebounds lower
+    assert "may not feed the DEM directly" in steel.note
+    assert any(s.startswith("restitution.particle-steel") and "may not feed the DEM directly" in s
+               and "contact restitution that reproduces the drops" in s for s in c.summary)
+    assert ("orientation_rotation", "twin") in {(f.mechanism, f.source) for f in c.found()}
+    gain = next(g for g in c.extensions if g.name == "inverted_restitution" and g.quantity.endswith("steel"))
+    assert gain.n_held_out == 20 and math.isfinite(gain.gain)
+    assert gain.after < gain.before                                     # the bias falls on held-out drops
+
+
+@pytest.mark.validation
+def test_loop_recovers_the_contact_restitution_of_hand_dropped_segments(tmp_path):
+    """Virtual drops at any orientation, made with the twin's physics at e_pw = 0.35: the loop
+    names orientation_rotation and the inverted contact restitution covers 0.35."""
+    from simulate.virtual_lab import PlantedEffect
+
+    vw = write_virtual_workbook(Truth(), tmp_path / "lab", effects=(PlantedEffect("orientation_rotation"),),
+                                rng=8, photos="none", pairs=("particle-steel",), drop_heights_mm=(400.0,),
+                                n_drop=16, surfaces=("steel",), n_incline=6, n_tracks=0)
+    c = run_critique(vw.path, rigs=("drop",), store_dir=tmp_path / "store")
+    assert "orientation_rotation" in {f.mechanism for f in c.found()}
+    gain = next(g for g in c.extensions if g.name == "inverted_restitution")
+    halves = gain.extension["values"]
+    assert all(abs(v - 0.35) < 0.1 for v in halves), halves

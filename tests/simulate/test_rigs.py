@@ -24,7 +24,7 @@ from simulate.clump import make_template
 from simulate.params import DEMParameters
 from simulate.rigs import RIGS, RigResult, run_rig
 from simulate.rigs.drop import release_orientation
-from simulate.rigs.repose import PROFILES, ReposeGeometry, heap_angles, top_profile
+from simulate.rigs.repose import PROFILES, ReposeGeometry, ReposeProfile, heap_angles, top_profile
 from simulate.rigs.surfaces import make_surface, surface_from_pair
 
 PARAMS = DEMParameters()
@@ -251,9 +251,8 @@ def test_top_profile_is_the_upper_envelope_of_the_discs():
 def test_tiny_repose_run_makes_a_heap_measured_both_ways():
     """A few segments in a small carton, short times: the plate is lifted, segments flow out,
     and both angle methods give a finite slope."""
-    tiny = PROFILES["quick"].__class__(name="tiny", scale=1.0, dt=PROFILES["quick"].dt, fill_time=0.2,
-                                       fill_bottom=0.1, fill_top=0.9, lift_time=None, duration=1.5,
-                                       early_end=True)
+    tiny = ReposeProfile(name="tiny", scale=1.0, dt=PROFILES["quick"].dt, fill_time=0.2, fill_bottom=0.1,
+                         fill_top=0.9, lift_time=None, duration=1.5, early_end=True)
     geo = ReposeGeometry(box_length=0.08, box_width=0.06, box_height=0.08, fill_count=40)
     params = PARAMS.with_(rolling_lever="liggghts_reff")
     res = run_rig("repose", params, seed=2, profile=tiny, geometry=geo)
