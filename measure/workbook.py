@@ -652,7 +652,7 @@ def read_workbook(path) -> Workbook:
     InputError
         If ``path`` does not exist or is neither an ``.xlsx`` file nor a folder.
     """
-    source = resolve_workbook(path)
+    source = resolve_workbook(path).absolute()  # absolute: provenance and audit work from any folder
     files: dict = {}
     if source.is_dir():
         root = source
