@@ -250,12 +250,27 @@ class _StoredRuns:
         return records
 
 
-def _responses(records) -> np.ndarray:
-    y = np.array([r["result"]["observable"][RESPONSE] for r in records], dtype=float)
-    if not np.all(np.isfinite(y)):
-        bad = [r["key"] for r, v in zip(records, y) if not np.isfinite(v)]
-        raise AnalysisError(f"{len(bad)} DEM runs gave no finite {RESPONSE} (e.g. run {bad[0]})")
-    return y
+#: Used when the photo method finds no slope (e.g. a frictionless floor spreads the heap flat).
+FALLBACK_RESPONSE = "angle_profile_deg"
+
+
+def _responses(records, fallbacks: list | None = None) -> np.ndarray:
+    """The response of each run: the photo-method angle, else the direct profile fit (the run
+    key is then appended to ``fallbacks``); an error when neither is finite."""
+    y = []
+    for r in records:
+        obs = r["result"]["observable"]
+        value = obs.get(RESPONSE)
+        if value is None or not math.isfinite(value):
+            value = obs.get(FALLBACK_RESPONSE)
+            if value is None or not math.isfinite(value):
+                raise AnalysisError(f"DEM run {r['key']} gave neither {RESPONSE} nor "
+                                    f"{FALLBACK_RESPONSE} (run record "
+                                    f"runs/{r['key']}.json)")
+            if fallbacks is not None:
+                fallbacks.append(r["key"])
+        y.append(float(value))
+    return np.array(y)
 
 
 def _run_refs(records) -> list[dict]:
@@ -361,12 +376,14 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
     def settings(actual_by_letter: dict) -> dict:
         return {param_of[f]: float(v) for f, v in actual_by_letter.items()}
 
+    fallbacks: list = []  # runs measured by the profile fit because the photo method found no slope
+
     # 2. Plackett-Burman screening --------------------------------------------------------
     pb = plackett_burman(len(letters), runs=12)
     pb_actual = to_actual(pb.coded[:, :len(letters)], low, high)
     pb_records = execute("Plackett-Burman", [inputs(settings(dict(zip(letters, row))), config.seed)
                                              for row in pb_actual])
-    y_pb = _responses(pb_records)
+    y_pb = _responses(pb_records, fallbacks)
     dummies = pb.coded[:, len(letters):]
     screening = plackett_burman_screening(pb.coded[:, :len(letters)], y_pb, factors=letters,
                                           dummies=dummies if dummies.size else None,
@@ -377,7 +394,7 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
     centre = {f: (factors[f]["low"] + factors[f]["high"]) / 2 for f in letters}
     noise_seeds = [config.seed + 1000 + i for i in range(config.noise_repeats)]
     noise_records = execute("noise", [inputs(settings(centre), s) for s in noise_seeds])
-    y_noise = _responses(noise_records)
+    y_noise = _responses(noise_records, fallbacks)
     sigma = float(np.std(y_noise, ddof=1))
     se_effect = sigma * math.sqrt(4.0 / len(y_pb))  # mean(+) - mean(-), n/2 runs each
     effect_vs_noise = {f: {"effect": screening.effects[f], "se_noise": se_effect,
@@ -410,7 +427,7 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
                                n_levels=config.climb_levels, fixed=means)
     climb_records = execute("steepest climb", [inputs(settings(dict(zip(letters, row))), config.seed)
                                                for row in plan.levels])
-    y_climb = _responses(climb_records)
+    y_climb = _responses(climb_records, fallbacks)
     climb = steepest_climb_analysis(plan, y_climb, target)
 
     # 5. Box-Behnken --------------------------------------------------------------------------
@@ -431,7 +448,7 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
         centre_count += is_centre
         bbd_tasks.append(inputs(settings({**fixed, **dict(zip(chosen, row))}), seed))
     bbd_records = execute("Box-Behnken", bbd_tasks)
-    y_bbd = _responses(bbd_records)
+    y_bbd = _responses(bbd_records, fallbacks)
     fit = fit_response_surface(bbd.coded, y_bbd, "quadratic", factors=chosen,
                                response_name=RESPONSE, low=b_low, high=b_high)
     canonical = canonical_analysis(fit)
@@ -447,11 +464,16 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
     # 7. validation ------------------------------------------------------------------------------
     val_settings = settings({**fixed, **best_actual})
     val_records = execute("validation", [inputs(val_settings, s) for s in config.validation_seeds])
-    y_val = _responses(val_records)
+    y_val = _responses(val_records, fallbacks)
     validation = validate_repeats(y_val, target)
 
     calibrated = base.with_(**{param_of[f]: means[f] for f in letters}).with_(**val_settings)
     results = {
+        "response": {"name": RESPONSE, "fallback": FALLBACK_RESPONSE,
+                     "fallback_runs": fallbacks,
+                     "note": (f"{len(fallbacks)} run(s) left no slope for the photo method (e.g. the "
+                              f"heap spread flat); their response is the direct profile fit"
+                              if fallbacks else "")},
         "material": measurement.material,
         "target_angle_deg": target,
         "config": {k_: (list(v) if isinstance(v, tuple) else v) for k_, v in config.__dict__.items()},

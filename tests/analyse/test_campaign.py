@@ -52,3 +52,17 @@ def test_campaign_finds_the_active_factors_and_the_target(measurement, tmp_path)
     again = calibrate(EXAMPLE, tmp_path, config, runner=standin_runner, measurement=measurement)
     assert all(stage["ran"] == 0 for stage in again["stages"])
     assert again["box_behnken"]["response"] == res["box_behnken"]["response"]
+
+
+def test_response_falls_back_to_the_profile_fit_when_the_photo_method_finds_no_slope():
+    from analyse.campaign import _responses
+    from demcal.errors import AnalysisError
+
+    records = [{"key": "a", "result": {"observable": {"angle_deg": 31.0, "angle_profile_deg": 30.0}}},
+               {"key": "b", "result": {"observable": {"angle_deg": None, "angle_profile_deg": 0.03}}}]
+    fallbacks = []
+    assert _responses(records, fallbacks).tolist() == [31.0, 0.03]
+    assert fallbacks == ["b"]
+    records[1]["result"]["observable"]["angle_profile_deg"] = float("nan")
+    with pytest.raises(AnalysisError, match="run b"):
+        _responses(records)
