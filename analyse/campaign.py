@@ -250,25 +250,27 @@ class _StoredRuns:
         return records
 
 
-#: Used when the photo method finds no slope (e.g. a frictionless floor spreads the heap flat).
-FALLBACK_RESPONSE = "angle_profile_deg"
+#: Used in this order when the photo method finds no slope (e.g. a frictionless floor spreads
+#: the heap flat): the direct profile fit of the full slope, then the heap beyond the carton.
+FALLBACK_RESPONSES = ("angle_profile_deg", "angle_outside_deg")
 
 
 def _responses(records, fallbacks: list | None = None) -> np.ndarray:
-    """The response of each run: the photo-method angle, else the direct profile fit (the run
-    key is then appended to ``fallbacks``); an error when neither is finite."""
+    """The response of each run: the photo-method angle, else the first finite one of
+    ``FALLBACK_RESPONSES`` (``{"key", "used"}`` is then appended to ``fallbacks``); an error
+    when none is finite."""
     y = []
     for r in records:
         obs = r["result"]["observable"]
-        value = obs.get(RESPONSE)
-        if value is None or not math.isfinite(value):
-            value = obs.get(FALLBACK_RESPONSE)
-            if value is None or not math.isfinite(value):
-                raise AnalysisError(f"DEM run {r['key']} gave neither {RESPONSE} nor "
-                                    f"{FALLBACK_RESPONSE} (run record "
-                                    f"runs/{r['key']}.json)")
-            if fallbacks is not None:
-                fallbacks.append(r["key"])
+        for name in (RESPONSE,) + FALLBACK_RESPONSES:
+            value = obs.get(name)
+            if value is not None and math.isfinite(value):
+                break
+        else:
+            raise AnalysisError(f"DEM run {r['key']} gave none of {RESPONSE}, "
+                                f"{', '.join(FALLBACK_RESPONSES)} (run record runs/{r['key']}.json)")
+        if name != RESPONSE and fallbacks is not None:
+            fallbacks.append({"key": r["key"], "used": name})
         y.append(float(value))
     return np.array(y)
 
@@ -469,10 +471,10 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
 
     calibrated = base.with_(**{param_of[f]: means[f] for f in letters}).with_(**val_settings)
     results = {
-        "response": {"name": RESPONSE, "fallback": FALLBACK_RESPONSE,
+        "response": {"name": RESPONSE, "fallbacks": list(FALLBACK_RESPONSES),
                      "fallback_runs": fallbacks,
                      "note": (f"{len(fallbacks)} run(s) left no slope for the photo method (e.g. the "
-                              f"heap spread flat); their response is the direct profile fit"
+                              f"heap spread flat); their response is the fallback named per run"
                               if fallbacks else "")},
         "material": measurement.material,
         "target_angle_deg": target,

@@ -59,10 +59,13 @@ def test_response_falls_back_to_the_profile_fit_when_the_photo_method_finds_no_s
     from demcal.errors import AnalysisError
 
     records = [{"key": "a", "result": {"observable": {"angle_deg": 31.0, "angle_profile_deg": 30.0}}},
-               {"key": "b", "result": {"observable": {"angle_deg": None, "angle_profile_deg": 0.03}}}]
+               {"key": "b", "result": {"observable": {"angle_deg": None, "angle_profile_deg": 0.03}}},
+               {"key": "c", "result": {"observable": {"angle_deg": None, "angle_profile_deg": None,
+                                                      "angle_outside_deg": 2.6}}}]
     fallbacks = []
-    assert _responses(records, fallbacks).tolist() == [31.0, 0.03]
-    assert fallbacks == ["b"]
+    assert _responses(records, fallbacks).tolist() == [31.0, 0.03, 2.6]
+    assert fallbacks == [{"key": "b", "used": "angle_profile_deg"},
+                         {"key": "c", "used": "angle_outside_deg"}]
     records[1]["result"]["observable"]["angle_profile_deg"] = float("nan")
     with pytest.raises(AnalysisError, match="run b"):
         _responses(records)
