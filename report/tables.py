@@ -489,6 +489,12 @@ def table_pb_design(c: Campaign) -> Table:
                  formats=("d", *["coded"] * len(cols), ".4g", "d", "mono"))
 
 
+def _number(value) -> str:
+    """A stored number for running text; ``n/a`` when it is missing (JSON null, e.g. Lenth's
+    PSE when most contrasts are exactly zero)."""
+    return "n/a" if value is None else f"{value:.4g}"
+
+
 def _anova_rows(anova, effects=None, extra=None):
     rows = []
     for a in anova:
@@ -516,9 +522,9 @@ def table_pb_anova(c: Campaign) -> Table:
              "Effect = mean(+1) - mean(-1); contribution = Design-Expert's % of the model sum of "
              "squares; effect/noise = |effect| over the standard error the seed-to-seed noise "
              "alone would give it (Table 5a).",
-             f"Lenth's method over all contrasts: PSE {_get(s, 'lenth', 'pse', default=float('nan')):.4g} deg, "
-             f"ME {_get(s, 'lenth', 'me', default=float('nan')):.4g} deg, active: "
-             f"{', '.join(_get(s, 'lenth', 'active', default=[])) or 'none'}."]
+             f"Lenth's method over all contrasts: PSE {_number(_get(s, 'lenth', 'pse'))} deg, "
+             f"ME {_number(_get(s, 'lenth', 'me'))} deg, active: "
+             f"{', '.join(_get(s, 'lenth', 'active', default=None) or []) or 'none'}."]
     note = _get(r, "significant", "note")
     if note:
         notes.append(f"Carried forward: {', '.join(r['significant']['carried_forward'])} ({note}).")

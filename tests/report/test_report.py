@@ -284,3 +284,19 @@ def test_report_command_renders_critique_json(campaign, tmp_path, capsys):
     assert "Critique of the calibrated model" in html and "velocity-dependent restitution" in html
     assert "Table C3" in html
     assert (out / "tables.json").read_text().count("critique.json") >= 3  # hashed and named as source
+
+
+def test_tables_render_when_lenth_has_no_pse(campaign, tmp_path):
+    """Lenth's PSE is stored as null when most contrasts are exactly zero; Table 5 says n/a."""
+    import json
+    import shutil
+
+    from report.tables import build_tables, load_campaign
+
+    out = tmp_path / "campaign"
+    shutil.copytree(campaign["out"], out)
+    results = json.loads((out / "results.json").read_text())
+    results["plackett_burman"]["screening"]["lenth"] = {"pse": None, "me": None, "active": None}
+    (out / "results.json").write_text(json.dumps(results))
+    table5 = next(t for t in build_tables(load_campaign(out)) if t.id == "5")
+    assert any("PSE n/a deg" in note for note in table5.notes)
