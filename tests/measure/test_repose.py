@@ -99,7 +99,7 @@ def heap_photo_case(k, n=N_PHOTOS, seed=20240):
     return p
 
 
-def test_photo_set_covers_the_brief():
+def test_photo_set_covers_the_required_conditions():
     """The set spans what the estimator must survive (checked on the case parameters)."""
     ps = [heap_photo_params(k) for k in range(N_PHOTOS)]
     angles = [a for p in ps for a in p["truth"].values()]
