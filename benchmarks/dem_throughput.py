@@ -42,7 +42,7 @@ def main(argv=None) -> int:
     parser.add_argument("--duration", type=float, default=PAPER_DURATION, help="simulated time [s]")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--n-clumps", type=int, default=500)
-    parser.add_argument("--rolling-lever", default="edem_com")
+    parser.add_argument("--rolling-lever", default="liggghts_reff")
     parser.add_argument("--vtk", default=None, help="write the final frame to this .vtp file")
     args = parser.parse_args(argv)
 

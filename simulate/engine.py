@@ -217,8 +217,8 @@ def _contact_forces(hist_dt, lever_mode, n_bodies, bx, bv, bw, bf, bt, brm, brv,
                 brm[bi] += mr * f_el * a
                 brm[bj] += mr * f_el * (rj - 0.5 * overlap)
             else:
-                brm[bi] += mr * f_el * r_star
-                brm[bj] += mr * f_el * r_star
+                # no static stop from particle contacts: this torque resists only the rolling
+                # relative to the neighbour, and a body turning with its neighbours keeps turning
                 tx, ty, tz = relative_rolling_torque(mr, f_el, r_star, wxi - wxj, wyi - wyj,
                                                      wzi - wzj, nx, ny, nz)
                 brv[bi, 0] -= tx
@@ -458,7 +458,7 @@ class Simulation:
     gravity : 3-sequence
         [m/s2]; may be changed between runs (``sim.gravity = ...``, e.g. to tilt a plate).
     rolling_lever : str
-        ``"edem_com"`` (default), ``"edem_sphere"`` or ``"liggghts_reff"``
+        ``"liggghts_reff"`` (default), ``"edem_com"`` or ``"edem_sphere"``
         (``simulate.contact.rolling``).
     skin : float or None
         Verlet skin [m]; default 0.4 of the smallest sphere radius.
@@ -474,7 +474,7 @@ class Simulation:
     """
 
     def __init__(self, materials: MaterialTable, *, domain_lo, domain_hi, dt: float,
-                 gravity=(0.0, 0.0, -9.81), rolling_lever: str = "edem_com", skin: float | None = None,
+                 gravity=(0.0, 0.0, -9.81), rolling_lever: str = "liggghts_reff", skin: float | None = None,
                  max_dt_fraction: float = DEFAULT_MAX_FRACTION, force: bool = False,
                  max_speed: float = 50.0, chunk_steps: int = 200):
         if not isinstance(materials, MaterialTable):
@@ -916,8 +916,10 @@ class Simulation:
 
     def rolling_resistance(self) -> tuple[np.ndarray, np.ndarray]:
         """Rolling-friction terms of each body at the last force evaluation: the summed torque
-        magnitude sum(mu_r F_n R_lever) [N m] over its contacts, and (``liggghts_reff`` only)
-        the summed torque vector [N m], both before the cap (``simulate.contact.rolling``)."""
+        magnitude sum(mu_r F_n R_lever) [N m] over the contacts that can hold it still (all
+        contacts with the EDEM levers, wall contacts only with ``liggghts_reff``), and
+        (``liggghts_reff`` only) the summed torque vector [N m], both before the cap
+        (``simulate.contact.rolling``)."""
         return self._b["brm"][:self.n_bodies].copy(), self._b["brv"][:self.n_bodies].copy()
 
     def wall_origins(self) -> np.ndarray:

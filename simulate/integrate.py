@@ -99,9 +99,10 @@ def half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, 
     ``brm[b]`` is the summed magnitude of the body's rolling torques. With the EDEM conventions
     (``relative`` False) the torque is ``brm[b]`` against the unit angular velocity after the
     other torques; with the LIGGGHTS convention (``relative`` True) it is the vector ``brv[b]``
-    summed over the contacts. If the resistance ``brm[b]`` over ``h`` could absorb the body's
-    whole angular momentum, the rotation stops (the torque acts as a static constraint up to
-    its magnitude); otherwise the torque acts in full, scaled down only so that it never
+    summed over the contacts, and ``brm[b]`` counts its wall contacts only (a wall does not
+    turn, so there relative rolling is the body's own). If the resistance ``brm[b]`` over ``h``
+    could absorb the body's whole angular momentum, the rotation stops (the torque acts as a
+    static constraint up to its magnitude); otherwise the torque acts in full, scaled down only so that it never
     reverses the spin about the current axis. Updates v, L and w of the body.
     """
     im = binvm[b]

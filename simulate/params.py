@@ -50,8 +50,9 @@ class DEMParameters:
     mean_mass_kg : float or None
         Measured mean segment mass [kg], used only by ``mass_model="scaled"``.
     rolling_lever : str
-        Lever arm of the rolling-friction torque: ``"edem_com"`` (default), ``"edem_sphere"`` or
-        ``"liggghts_reff"``; see ``simulate.contact.rolling``.
+        Lever arm of the rolling-friction torque: ``"liggghts_reff"`` (default), ``"edem_com"``
+        or ``"edem_sphere"``; see ``simulate.contact.rolling`` for the conventions and the
+        reason for the default.
     """
 
     poisson_ratio: float = 0.25
@@ -71,7 +72,7 @@ class DEMParameters:
     spheres_per_clump: int = 5
     mass_model: str = "union"
     mean_mass_kg: float | None = None
-    rolling_lever: str = "edem_com"
+    rolling_lever: str = "liggghts_reff"
 
     def __post_init__(self):
         for name in ("e_pp", "e_pw"):

@@ -7,13 +7,13 @@ Each contact adds to body i a torque of magnitude mu_r F_n R_lever against its r
 with F_n the elastic (Hertz) part of the normal force (as LIGGGHTS' ``cdt``, which uses
 k_n d_n), and the lever arm ``R_lever`` chosen by name (``ROLLING_LEVERS``):
 
-``"edem_com"`` (default)
+``"edem_com"``
     EDEM's definition, "the distance of the contact point from the centre of mass", applied to
     the clump: |contact point - clump centre of mass|. ``w`` is the body's angular velocity.
 ``"edem_sphere"``
     The distance from the contact point to the centre of the member sphere that touches
     (R - d_n/2, EDEM's value for a single sphere). ``w`` is the body's angular velocity.
-``"liggghts_reff"``
+``"liggghts_reff"`` (default)
     LIGGGHTS ``rolling_friction cdt``: R_eff = R_i R_j / (R_i + R_j) between particles and the
     sphere radius against walls; ``w`` is the relative angular velocity w_i - w_j (the body's
     own against a wall), the torque has its component along the contact normal removed and is
@@ -23,6 +23,14 @@ k_n d_n), and the lever arm ``R_lever`` chosen by name (``ROLLING_LEVERS``):
 For a clump the three differ several-fold: a segment touching the floor at its end sphere has
 a lever of about 12 mm with ``edem_com``, 5.5 mm with ``edem_sphere`` and 2.75 mm with
 ``liggghts_reff`` against another sphere.
+
+Why the default is LIGGGHTS' and not EDEM's. EDEM's text does not say which centre a
+multi-sphere particle uses, and EDEM is not available to check against; LIGGGHTS is, side by
+side (``benchmarks/``). With the paper's measured parameters (mu_r p-p 0.53) both EDEM readings
+jam the paper's carton: in the quick repose profile 2-4 % of the segments leave it and the
+face stands at 55-68 deg (``edem_com``, ``edem_sphere``; 2-3 seeds each), where the lab
+photographed 35.8 deg. With ``liggghts_reff`` 7-10 % leave and the face reads 34-37 deg in six
+of eight seeds (the other two 42 and 48 deg). The EDEM readings stay selectable.
 
 Cap. A constant torque does not vanish as w -> 0, so an explicit step makes the body spin back
 and forth (Ai et al. 2011). The engine therefore applies the rolling torque of a body after its

@@ -14,7 +14,7 @@ def test_defaults_are_the_paper_values():
     assert (p.e_pp, p.e_pw, p.mu_s_pp, p.mu_s_pw, p.mu_r_pp, p.mu_r_pw) == (0.3, 0.35, 0.65, 0.2, 0.53, 0.15)
     assert (p.wall_density_kg_m3, p.wall_poisson_ratio, p.wall_shear_modulus_pa) == (7850.0, 0.3, 8e10)
     assert (p.segment_length_m, p.segment_diameter_m, p.spheres_per_clump) == (0.025, 0.011, 5)
-    assert (p.mass_model, p.rolling_lever) == ("union", "edem_com")
+    assert (p.mass_model, p.rolling_lever) == ("union", "liggghts_reff")
 
 
 def test_from_names_converts_strings():
