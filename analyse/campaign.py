@@ -11,15 +11,23 @@ Steps (``calibrate``):
 3. seed-to-seed noise of the DEM: the screening centre run repeated with different seeds;
    each effect is compared with it;
 4. steepest climb of the significant factors toward the measured angle, others at their
-   measured means; the best level becomes the Box-Behnken centre, its neighbours -1/+1;
+   measured means; the best level becomes the Box-Behnken centre, its neighbours -1/+1 (when
+   the best level is an end of the climb the window moves inward: no level leaves the
+   measured range);
 5. Box-Behnken (12 edge runs + 5 centre points with different seeds), full quadratic,
    Design-Expert ANOVA, canonical analysis;
 6. optimisation to the measured angle: several solutions, the one closest to the measured
    means preferred;
 7. validation: the preferred solution simulated with three fresh seeds.
 
+Replicates. A heap of 500 segments either flows out or stands as a cliff, so one DEM run's
+angle scatters by several degrees from seed to seed, as much as the effects being screened.
+Each design point (screening, noise repeat, climb level, Box-Behnken run) is therefore run
+with ``replicates`` seeds and its response is their median, which a single jammed heap does
+not drag; validation runs stay single, three seeds, as in the paper.
+
 Every DEM run goes through the run store (``analyse.runs``): a rerun of a killed campaign
-redoes nothing that had finished. Screening runs share one seed (common random numbers make
+redoes nothing that had finished. Screening runs share their seeds (common random numbers make
 effects sharper); repeated centre points and validation runs use their own seeds.
 """
 
@@ -55,6 +63,9 @@ SCREENING_FACTORS = (
     ("G", "mu_r_pw", "rolling_friction.{wall}"),
 )
 
+#: Seed offset between the replicates of one design point.
+REPLICATE_SEED_STRIDE = 10_000
+
 #: Admissible range of each DEM parameter; design levels are clipped into it.
 PARAMETER_BOUNDS = {"poisson_ratio": (0.0, 0.49), "e_pp": (0.01, 1.0), "e_pw": (0.01, 1.0),
                     "mu_s_pp": (0.0, 5.0), "mu_s_pw": (0.0, 5.0), "mu_r_pp": (0.0, 5.0),
@@ -79,7 +90,10 @@ class CampaignConfig:
     scheduler : str or None
         Dask scheduler address; runs go to that cluster instead of local processes.
     seed : int
-        Seed of every screening, climb and Box-Behnken edge run.
+        Seed of every screening, climb and Box-Behnken edge run (of their first replicate).
+    replicates : int
+        DEM runs per design point, with seeds ``seed + REPLICATE_SEED_STRIDE * r``; the
+        point's response is their median.
     noise_repeats : int
         Extra seeds of the screening centre run, for the seed-to-seed noise.
     climb_levels : int
@@ -98,6 +112,7 @@ class CampaignConfig:
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)
     scheduler: str | None = None
     seed: int = 1
+    replicates: int = 3
     noise_repeats: int = 4
     climb_levels: int = 6
     validation_seeds: tuple = (101, 102, 103)
@@ -110,6 +125,8 @@ class CampaignConfig:
             raise InputError(f"levels must be 'minmax' or 'sd', got {self.levels!r}")
         if self.noise_repeats < 2:
             raise InputError(f"noise_repeats must be >= 2, got {self.noise_repeats}")
+        if int(self.replicates) != self.replicates or self.replicates < 1:
+            raise InputError(f"replicates must be a positive integer, got {self.replicates!r}")
 
     @classmethod
     def from_dict(cls, d: dict) -> "CampaignConfig":
@@ -275,6 +292,13 @@ def _responses(records, fallbacks: list | None = None) -> np.ndarray:
     return np.array(y)
 
 
+def _point_responses(records, replicates: int, fallbacks: list) -> tuple[np.ndarray, np.ndarray]:
+    """Median response of each design point and the (points, replicates) array it comes from;
+    ``records`` holds each point's replicates one after the other."""
+    y = _responses(records, fallbacks).reshape(-1, replicates)
+    return np.median(y, axis=1), y
+
+
 def _run_refs(records) -> list[dict]:
     return [{"key": r["key"], "seed": r["inputs"]["seed"], "wall_s": r["result"].get("wall_s")}
             for r in records]
@@ -380,12 +404,20 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
 
     fallbacks: list = []  # runs measured by the profile fit because the photo method found no slope
 
+    def run_points(stage: str, points: list) -> tuple[np.ndarray, np.ndarray, list]:
+        """Run each (settings, seed) design point ``config.replicates`` times; returns the
+        points' median responses, every replicate's response and the run records."""
+        tasks = [inputs(point, seed + REPLICATE_SEED_STRIDE * r)
+                 for point, seed in points for r in range(config.replicates)]
+        records = execute(stage, tasks)
+        y, y_all = _point_responses(records, config.replicates, fallbacks)
+        return y, y_all, records
+
     # 2. Plackett-Burman screening --------------------------------------------------------
     pb = plackett_burman(len(letters), runs=12)
     pb_actual = to_actual(pb.coded[:, :len(letters)], low, high)
-    pb_records = execute("Plackett-Burman", [inputs(settings(dict(zip(letters, row))), config.seed)
-                                             for row in pb_actual])
-    y_pb = _responses(pb_records, fallbacks)
+    y_pb, y_pb_all, pb_records = run_points(
+        "Plackett-Burman", [(settings(dict(zip(letters, row))), config.seed) for row in pb_actual])
     dummies = pb.coded[:, len(letters):]
     screening = plackett_burman_screening(pb.coded[:, :len(letters)], y_pb, factors=letters,
                                           dummies=dummies if dummies.size else None,
@@ -395,9 +427,9 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
     # 3. seed-to-seed noise at the screening centre ----------------------------------------
     centre = {f: (factors[f]["low"] + factors[f]["high"]) / 2 for f in letters}
     noise_seeds = [config.seed + 1000 + i for i in range(config.noise_repeats)]
-    noise_records = execute("noise", [inputs(settings(centre), s) for s in noise_seeds])
-    y_noise = _responses(noise_records, fallbacks)
-    sigma = float(np.std(y_noise, ddof=1))
+    y_noise, y_noise_all, noise_records = run_points("noise", [(settings(centre), s) for s in noise_seeds])
+    sigma = float(np.std(y_noise, ddof=1))  # of a design point's response (a median)
+    sigma_run = float(np.std(y_noise_all, ddof=1))  # of one DEM run
     se_effect = sigma * math.sqrt(4.0 / len(y_pb))  # mean(+) - mean(-), n/2 runs each
     effect_vs_noise = {f: {"effect": screening.effects[f], "se_noise": se_effect,
                            "ratio": abs(screening.effects[f]) / se_effect if se_effect > 0 else math.inf,
@@ -427,10 +459,9 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
                                {f: factors[f]["high"] for f in letters},
                                screening.effects, chosen, increase=increase,
                                n_levels=config.climb_levels, fixed=means)
-    climb_records = execute("steepest climb", [inputs(settings(dict(zip(letters, row))), config.seed)
-                                               for row in plan.levels])
-    y_climb = _responses(climb_records, fallbacks)
-    climb = steepest_climb_analysis(plan, y_climb, target)
+    y_climb, y_climb_all, climb_records = run_points(
+        "steepest climb", [(settings(dict(zip(letters, row))), config.seed) for row in plan.levels])
+    climb = steepest_climb_analysis(plan, y_climb, target, extrapolate=False)
 
     # 5. Box-Behnken --------------------------------------------------------------------------
     k = len(chosen)
@@ -443,14 +474,13 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
     bbd_actual = to_actual(bbd.coded, b_low, b_high)
     fixed = {f: means[f] for f in letters if f not in chosen}
     centre_count = 0
-    bbd_tasks = []
+    bbd_points = []
     for coded_row, row in zip(bbd.coded, bbd_actual):
         is_centre = not np.any(coded_row)
         seed = config.seed + centre_count if is_centre else config.seed
         centre_count += is_centre
-        bbd_tasks.append(inputs(settings({**fixed, **dict(zip(chosen, row))}), seed))
-    bbd_records = execute("Box-Behnken", bbd_tasks)
-    y_bbd = _responses(bbd_records, fallbacks)
+        bbd_points.append((settings({**fixed, **dict(zip(chosen, row))}), seed))
+    y_bbd, y_bbd_all, bbd_records = run_points("Box-Behnken", bbd_points)
     fit = fit_response_surface(bbd.coded, y_bbd, "quadratic", factors=chosen,
                                response_name=RESPONSE, low=b_low, high=b_high)
     canonical = canonical_analysis(fit)
@@ -486,19 +516,23 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
         "plackett_burman": {
             "design_coded": pb.coded.tolist(), "columns": list(pb.columns),
             "design_actual": pb_actual.tolist(), "response": y_pb.tolist(),
+            "replicate_responses": y_pb_all.tolist(),
             "runs": _run_refs(pb_records), "screening": screening.to_dict(),
             "effects_vs_noise": effect_vs_noise},
         "noise": {"settings": centre, "seeds": noise_seeds, "responses": y_noise.tolist(),
-                  "sd": sigma, "runs": _run_refs(noise_records),
+                  "replicate_responses": y_noise_all.tolist(), "sd": sigma, "sd_single_run": sigma_run,
+                  "replicates": config.replicates, "runs": _run_refs(noise_records),
                   "bbd_centre_sd": centre_sd},
         "significant": {"flagged": flagged, "carried_forward": chosen, "note": "; ".join(chosen_note)},
         "steepest_climb": {"plan": plan.to_dict(), "response": y_climb.tolist(),
+                           "replicate_responses": y_climb_all.tolist(),
                            "runs": _run_refs(climb_records), "result": climb.to_dict(),
                            "increase": increase},
         "box_behnken": {"factors": chosen, "low": b_low.tolist(), "high": b_high.tolist(),
                         "centre": [climb.centre[f] for f in chosen], "fixed": fixed,
                         "design_coded": bbd.coded.tolist(), "design_actual": bbd_actual.tolist(),
-                        "response": y_bbd.tolist(), "runs": _run_refs(bbd_records),
+                        "response": y_bbd.tolist(), "replicate_responses": y_bbd_all.tolist(),
+                        "runs": _run_refs(bbd_records),
                         "fit": fit.to_dict(), "canonical": canonical.to_dict(),
                         "terms_vs_noise": term_vs_noise},
         "optimisation": optimum.to_dict(),

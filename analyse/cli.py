@@ -255,6 +255,8 @@ def register(subparsers) -> None:
     cal.add_argument("--levels", choices=("minmax", "sd"), default="minmax",
                      help="screening levels: measured min/max (default, as the paper) or mean -+ sd")
     cal.add_argument("--seed", type=int, default=1, help="seed of the design runs (default 1)")
+    cal.add_argument("--replicates", type=int, default=3,
+                     help="DEM runs (seeds) per design point, response = their median (default 3)")
     cal.add_argument("--no-report", action="store_true", help="skip the HTML/PDF report")
     cal.set_defaults(handler=_run_calibrate)
 
@@ -265,7 +267,7 @@ def _run_calibrate(args) -> int:
 
     workbook = resolve_workbook(args.workbook)
     config = CampaignConfig(profile=args.profile, levels=args.levels, seed=args.seed,
-                            scheduler=args.scheduler,
+                            replicates=args.replicates, scheduler=args.scheduler,
                             **({} if args.workers is None else {"workers": args.workers}))
     if config.workers < 1:
         raise InputError(f"--workers must be >= 1, got {config.workers}")

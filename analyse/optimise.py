@@ -144,7 +144,8 @@ def steepest_climb_plan(low: dict, high: dict, effects: dict, significant, *, in
     low, high : dict
         Factor -> lower and upper end of its range (the screening's -1/+1) [factor units].
     effects : dict
-        Factor -> screening effect (only its sign is used) [response units].
+        Factor -> screening effect (only its sign is used) [response units]; a factor with a
+        zero or missing effect is stepped as if its effect were positive.
     significant : iterable of str
         Factors to step.
     increase : bool
@@ -176,10 +177,8 @@ def steepest_climb_plan(low: dict, high: dict, effects: dict, significant, *, in
             raise InputError(f"factor {f}: high {hi!r} must exceed low {lo!r}")
         if f in stepped:
             e = float(effects[f]) if f in effects else 0.0
-            if e == 0.0:
-                raise InputError(f"factor {f} has no (or a zero) effect; its direction is "
-                                 f"undefined")
-            sign = int(np.sign(e)) * (1 if increase else -1)
+            # a factor without effect (carried only to fill the design) has no direction: up
+            sign = (int(np.sign(e)) if e != 0.0 else 1) * (1 if increase else -1)
             directions[f] = sign
             steps[f] = (hi - lo) / (n_levels - 1)
             levels[:, j] = lo + frac * (hi - lo) if sign > 0 else hi - frac * (hi - lo)
@@ -205,9 +204,11 @@ class SteepestClimbResult:
         Stepped factor -> Box-Behnken centre (the best level) and its -1/+1 levels (the
         neighbouring levels, ordered so low < high) [factor units].
     at_edge : bool
-        True when the best level is the first or last one: the missing neighbour is
-        extrapolated by one step, and a longer climb may be warranted.
+        True when the best level is the first or last one: a longer climb may be warranted.
     note : str
+    centre_level : int
+        1-based number of the level at the Box-Behnken centre: the best level, or its inner
+        neighbour when the best level is at an end and the window is kept inside the climb.
     """
 
     responses: np.ndarray
@@ -219,22 +220,26 @@ class SteepestClimbResult:
     high: dict
     at_edge: bool
     note: str
+    centre_level: int = 0
 
     def to_dict(self) -> dict:
         return {"responses": self.responses.tolist(),
                 "relative_error_pct": self.relative_error_pct.tolist(), "target": self.target,
                 "best_level": self.best_level, "centre": dict(self.centre),
                 "low": dict(self.low), "high": dict(self.high), "at_edge": self.at_edge,
-                "note": self.note}
+                "note": self.note, "centre_level": self.centre_level or self.best_level}
 
 
-def steepest_climb_analysis(plan: SteepestClimbPlan, responses,
-                            target: float) -> SteepestClimbResult:
+def steepest_climb_analysis(plan: SteepestClimbPlan, responses, target: float, *,
+                            extrapolate: bool = True) -> SteepestClimbResult:
     """Relative error per level, the best level, and the Box-Behnken levels around it.
 
     The best level (smallest |response - target|) becomes the Box-Behnken centre and the levels
     on either side its -1 and +1, as in the source paper (level 4 the centre, levels 3 and 5
-    the low and high levels).
+    the low and high levels). When the best level is the first or last one, its missing
+    neighbour is extrapolated by one step (``extrapolate``, the paper's rule carried to the
+    edge), or, with ``extrapolate=False``, the window moves one level inward so that every
+    Box-Behnken level stays inside the climbed (measured) range.
     """
     y = np.asarray(responses, dtype=float).ravel()
     n = plan.levels.shape[0]
@@ -247,21 +252,28 @@ def steepest_climb_analysis(plan: SteepestClimbPlan, responses,
     rel = 100.0 * np.abs(y - target) / abs(target)
     best = int(np.argmin(rel))
     at_edge = best in (0, n - 1)
+    mid = best if extrapolate or not at_edge else (1 if best == 0 else n - 2)
     centre, lo, hi = {}, {}, {}
     for f in plan.stepped:
         j = plan.factors.index(f)
         col = plan.levels[:, j]
-        c = col[best]
+        c = col[mid]
         step = col[1] - col[0]
-        before = col[best - 1] if best > 0 else c - step
-        after = col[best + 1] if best < n - 1 else c + step
+        before = col[mid - 1] if mid > 0 else c - step
+        after = col[mid + 1] if mid < n - 1 else c + step
         centre[f], lo[f], hi[f] = float(c), float(min(before, after)), float(max(before, after))
-    note = (f"level {best + 1} of {n} has the smallest relative error "
-            f"({rel[best]:.3g} %); it is the Box-Behnken centre and its neighbours are -1/+1")
-    if at_edge:
+    note = f"level {best + 1} of {n} has the smallest relative error ({rel[best]:.3g} %)"
+    if mid == best:
+        note += "; it is the Box-Behnken centre and its neighbours are -1/+1"
+    if at_edge and extrapolate:
         note += ("; the best level is at the end of the climb, so the missing neighbour was "
                  "extrapolated by one step: consider extending the climb")
-    return SteepestClimbResult(y, rel, float(target), best + 1, centre, lo, hi, at_edge, note)
+    elif at_edge:
+        note += (f"; it is at the end of the climb, so the Box-Behnken window is levels "
+                 f"{min(mid, best)}-{max(mid, best) + 1} (centre level {mid + 1}) to stay inside "
+                 f"the measured range: the target may lie beyond it")
+    return SteepestClimbResult(y, rel, float(target), best + 1, centre, lo, hi, at_edge, note,
+                               mid + 1)
 
 
 # --------------------------------------------------------------------------------------------

@@ -332,6 +332,89 @@ def provenance(c: Campaign) -> dict:
 
 
 # ----------------------------------------------------------------------------------------------
+# critique text (critique.json's own sentences and numbers; nothing recomputed)
+
+#: Observable of a drop-twin row of critique.json's discrepancies (``analyse.critique.loop``).
+_DROP_TWIN = re.compile(r"^(restitution\.(\S+)) \(drop twin, apparent")
+#: The verdict loop.py writes into the note of a simulated drop-twin row.
+_DIRECT_VERDICT = re.compile(r"sqrt\(h2/h1\) (may not|may) feed the DEM directly|"
+                             r"whether sqrt\(h2/h1\) may feed the DEM directly is undetermined")
+
+
+def _g(x) -> str:
+    return "–" if not isinstance(x, (int, float)) or isinstance(x, bool) or x != x else f"{x:.3g}"
+
+
+def _ci(ci) -> str:
+    return f"[{_g(ci[0])}, {_g(ci[1])}]" if isinstance(ci, (list, tuple)) and len(ci) == 2 else ""
+
+
+def _extension_sentence(e: dict) -> str:
+    lo, hi = (e.get("ci95") or [None, None])[:2]
+    verdict = ("it helps" if isinstance(lo, (int, float)) and lo > 0 else
+               "it makes it worse" if isinstance(hi, (int, float)) and hi < 0 else "no clear gain")
+    return (f"Extension {e.get('name')} ({e.get('mechanism')}): {e.get('measure')}"
+            + (f" on {e['held_out']}" if e.get("held_out") else "")
+            + f" {_g(e.get('before'))} before, {_g(e.get('after'))} after, gain {_g(e.get('gain'))} "
+            f"{_ci(e.get('ci95'))}: {verdict} (Table C3).")
+
+
+def _direct_headline(d: dict, quantity: str) -> str:
+    """One drop-twin row of Table C1 as the answer to "may sqrt(h2/h1) feed the DEM directly?"."""
+    note = d.get("note") or ""
+    if d.get("simulated") is None:
+        return (f"{quantity}: not assessed; the lab's sqrt(h2/h1) is {_g(d.get('measured'))} "
+                f"{_ci(d.get('measured_ci95'))}, the drop twin was {note or 'not run'}.")
+    m = _DIRECT_VERDICT.search(note)
+    verdict = m.group(0) if m else "critique.json states no verdict on direct use (too few simulated drops)"
+    beyond = {True: "beyond", False: "within"}.get(d.get("exceeds"), "against")
+    return (f"{quantity}: {verdict}. The lab's drops give sqrt(h2/h1) = {_g(d.get('measured'))} "
+            f"{_ci(d.get('measured_ci95'))} (n {d.get('n_measured', '–')}); the drop twin rebounds with an "
+            f"apparent {_g(d.get('simulated'))} {_ci(d.get('simulated_ci95'))} (n {d.get('n_simulated', '–')}): "
+            f"measured minus twin {_g(d.get('difference'))}, {beyond} its 95 % uncertainty "
+            f"±{_g(d.get('combined_u95'))} (Table C1).")
+
+
+def critique_text(critique: dict) -> dict:
+    """The critique's sentences for the start of its section.
+
+    ``direct``: per restitution pair with a drop twin, whether sqrt(h2/h1) may feed the DEM
+    directly (the twin's apparent restitution against the measured one, from Table C1's row),
+    followed by critique.json's own summary sentences on that pair (its drop statement, the gain
+    of each extension of that quantity; an extension row the summary does not state is stated
+    from Table C3). ``summary``: the other summary sentences, in their order. Every summary
+    sentence appears once.
+    """
+    summary = [str(x) for x in critique.get("summary") or []]
+    used: set = set()
+    direct = []
+    for d in critique.get("discrepancies") or []:
+        m = _DROP_TWIN.match(str(d.get("observable", "")))
+        if not m:
+            continue
+        quantity, pair = m.groups()
+        mine = [i for i, s in enumerate(summary) if i not in used and (
+            s.startswith(f"{quantity}: ") or s.startswith("Extension ") and f"({quantity})" in s
+            or re.match(rf"\w+ \({re.escape(pair)}\) not evaluated", s))]
+        used.update(mine)
+        paragraphs = [summary[i] for i in mine]
+        for e in critique.get("extensions") or []:
+            if str(e.get("measure", "")).endswith(f" of {quantity}") and not any(
+                    s.startswith(f"Extension {e.get('name')} ({quantity})") for s in paragraphs):
+                paragraphs.append(_extension_sentence(e))
+        direct.append({"headline": _direct_headline(d, quantity), "paragraphs": paragraphs})
+    return {"direct": direct, "summary": [s for i, s in enumerate(summary) if i not in used]}
+
+
+def marked_rows(table: dict) -> set:
+    """Rows (from 0) to print in bold: those whose ``Verdict`` says significant (Table C4)."""
+    if "Verdict" not in table["columns"]:
+        return set()
+    j = table["columns"].index("Verdict")
+    return {i for i, row in enumerate(table["rows"]) if str(row[j]).startswith("significant")}
+
+
+# ----------------------------------------------------------------------------------------------
 
 def _data_uri(path: Path) -> str:
     return "data:image/png;base64," + base64.b64encode(Path(path).read_bytes()).decode("ascii")
@@ -376,7 +459,8 @@ def render_html(c: Campaign, tables: list[dict], figures: list) -> str:
         "runner_warn": runner_warn,
         "synthetic": c.measurement.get("meta", {}).get("synthetic"),
         "notes": c.measurement.get("notes", []), "critique": c.critique is not None,
-        "critique_summary": [str(x) for x in (c.critique or {}).get("summary", [])],
+        "critique_text": critique_text(c.critique or {}),
+        "marked": {t["id"]: marked_rows(t) for t in tables},
         "provenance": provenance(c), "references": REFERENCES, "results": r,
         "critique_ids": [t["id"] for t in tables if t["id"].startswith("C")],
     }

@@ -285,6 +285,26 @@ def _runs_source(results: dict, part: str) -> dict:
     return {"kind": "runs", "keys": [r["key"] for r in results[part]["runs"]]}
 
 
+def _replicates(results: dict, part: str) -> tuple[int, list, list]:
+    """Replicates per design point, and per point its runs and its replicate angles (a campaign
+    runs each point with several seeds and takes the median, ``analyse.campaign``)."""
+    k = int(results.get("config", {}).get("replicates", 1))
+    runs = results[part]["runs"]
+    angles = results[part].get("replicate_responses") or [[y] for y in results[part]["response"]]
+    return k, [runs[i:i + k] for i in range(0, len(runs), k)], angles
+
+
+def _replicate_cells(runs: list, angles: list) -> tuple[str, str]:
+    """The replicate angles and their seeds of one design point, as text."""
+    return (" / ".join(f"{a:.4g}" for a in angles), " / ".join(str(r["seed"]) for r in runs))
+
+
+def _replicate_note(k: int) -> str:
+    return (f"Each design point was simulated with {k} seeds; its angle is their median (the "
+            "replicate angles and seeds are listed). Every run's key is in Table A2."
+            if k > 1 else "Every run's key is in Table A2.")
+
+
 def _paper_measured(campaign: Campaign, name: str):
     """(value, spread) the paper printed for a measured quantity, or (None, None)."""
     paper = campaign.paper
@@ -475,18 +495,20 @@ def table_pb_design(c: Campaign) -> Table:
     pb = c.results["plackett_burman"]
     cols = list(pb["columns"])
     shown = ["d" + col.split("_")[-1] if col.startswith("dummy") else col for col in cols]
+    k, point_runs, angles = _replicates(c.results, "plackett_burman")
     rows = []
-    for i, (coded, y, run) in enumerate(zip(pb["design_coded"], pb["response"], pb["runs"]), 1):
-        rows.append((i, *[int(round(v)) for v in coded], y, run["seed"], run["key"][:12]))
+    for i, (coded, y, runs, ys) in enumerate(zip(pb["design_coded"], pb["response"], point_runs, angles), 1):
+        rows.append((i, *[int(round(v)) for v in coded], y, *_replicate_cells(runs, ys)))
     return Table("4", "Design and results of the Plackett-Burman test",
-                 ("Run", *shown, "Angle of repose", "Seed", "Run key"),
-                 ("", *[""] * len(cols), "deg", "", ""), tuple(rows),
+                 ("Run", *shown, "Angle of repose", "Replicates", "Seeds"),
+                 ("", *[""] * len(cols), "deg", "deg", ""), tuple(rows),
                  notes=(f"Columns {', '.join(s for s in shown if s.startswith('d'))} are the unused "
                         "(dummy) columns of the 12-run design; they estimate the error. Actual "
-                        "levels in Table 3; every run's full key in Table A2.",),
+                        "levels in Table 3.", _replicate_note(k)),
                  sources=(_runs_source(c.results, "plackett_burman"),
-                          _results_source("plackett_burman.design_coded, plackett_burman.response")),
-                 formats=("d", *["coded"] * len(cols), ".4g", "d", "mono"))
+                          _results_source("plackett_burman.design_coded, plackett_burman.response, "
+                                          "plackett_burman.replicate_responses")),
+                 formats=("d", *["coded"] * len(cols), ".4g", "", ""))
 
 
 def _number(value) -> str:
@@ -543,20 +565,26 @@ def table_noise(c: Campaign) -> Table:
     """Table 5a: seed-to-seed noise of the DEM at the screening centre."""
     r = c.results
     n = r["noise"]
-    rows = [(f"centre run, seed {s}", y) for s, y in zip(n["seeds"], n["responses"])]
-    rows.append(("SD between seeds (n - 1)", n["sd"]))
+    k, point_runs, angles = _replicates(r, "noise")
+    rows = [(f"centre point {i}, seeds {_replicate_cells(runs, ys)[1]}", y, _replicate_cells(runs, ys)[0])
+            for i, (runs, ys, y) in enumerate(zip(point_runs, angles, n["responses"]), 1)]
+    rows.append(("SD between centre points (n - 1)", n["sd"], ""))
+    if k > 1 and n.get("sd_single_run") is not None:
+        rows.append(("SD of a single run (all replicates)", n["sd_single_run"], ""))
     se = next(iter(r["plackett_burman"].get("effects_vs_noise", {}).values()), {}).get("se_noise")
-    rows.append(("Standard error of a screening effect from that noise", se))
-    rows.append(("SD of the Box-Behnken centre points", n.get("bbd_centre_sd")))
-    bbd_keys = [run["key"] for run, coded in zip(r["box_behnken"]["runs"], r["box_behnken"]["design_coded"])
-                if not any(coded)]
+    rows.append(("Standard error of a screening effect from that noise", se, ""))
+    rows.append(("SD of the Box-Behnken centre points", n.get("bbd_centre_sd"), ""))
+    _, bbd_runs, _ = _replicates(r, "box_behnken")
+    bbd_keys = [run["key"] for runs, coded in zip(bbd_runs, r["box_behnken"]["design_coded"])
+                if not any(coded) for run in runs]
     return Table("5a", "Seed-to-seed noise of the simulated angle of repose",
-                 ("Item", "Angle of repose"), ("", "deg"), tuple(rows),
+                 ("Item", "Angle of repose", "Replicates"), ("", "deg", "deg"), tuple(rows),
                  notes=("The screening centre (all factors at the middle of their range) run with "
-                        "different seeds; the paper does not measure this noise.",),
+                        "different seeds; the paper does not measure this noise. A centre point's "
+                        "angle is the median of its replicates, like every design point's.",),
                  sources=(_runs_source(r, "noise"), {"kind": "runs", "keys": bbd_keys},
                           _results_source("noise")),
-                 formats=("", ".4g"))
+                 formats=("", ".4g", ""))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -569,10 +597,16 @@ def table_climb(c: Campaign) -> Table:
     plan, res = sc["plan"], sc["result"]
     stepped = list(plan["stepped"])
     best = int(res["best_level"])
+    mid = int(res.get("centre_level") or best)
+    k, point_runs, angles = _replicates(r, "steepest_climb")
     rows = []
-    for i, (lv, y, err) in enumerate(zip(plan["levels"], sc["response"], res["relative_error_pct"]), 1):
-        role = {best: "centre (0)", best - 1: "low (-1)", best + 1: "high (+1)"}.get(i, "")
-        rows.append((i, *[lv[f] for f in stepped], y, err, role))
+    for i, (lv, y, err, ys) in enumerate(zip(plan["levels"], sc["response"], res["relative_error_pct"],
+                                             angles), 1):
+        # each factor steps in its own direction: a neighbour is -1 for some factors, +1 for others
+        role = {mid: "centre (0)", mid - 1: "-1/+1", mid + 1: "-1/+1"}.get(i, "")
+        if i == best != mid:
+            role = "best, outside the window"
+        rows.append((i, *[lv[f] for f in stepped], y, " / ".join(f"{a:.4g}" for a in ys), err, role))
     wall = _wall(c.measurement)
     names = [parameter_label(r["factors"][f]["parameter"], wall)[1] for f in stepped]
     fixed = [f for f in plan["factors"] if f not in stepped]
@@ -588,13 +622,16 @@ def table_climb(c: Campaign) -> Table:
                      "the low and high levels (its Table 6 is not available).")
     if res.get("at_edge"):
         notes.append("The best level is at the edge of the climb: the optimum may lie beyond it.")
+    if k > 1:
+        notes.append(_replicate_note(k))
     return Table("6", "Design and results of the steepest climb test",
                  ("Level", *[f"{f} ({n})" for f, n in zip(stepped, names)], "Angle of repose",
-                  "Relative error", "Box-Behnken"),
-                 ("", *[""] * len(stepped), "deg", "%", ""), tuple(rows), notes=tuple(n for n in notes if n),
+                  "Replicates", "Relative error", "Box-Behnken"),
+                 ("", *[""] * len(stepped), "deg", "deg", "%", ""), tuple(rows),
+                 notes=tuple(n for n in notes if n),
                  sources=(_runs_source(r, "steepest_climb"), _results_source("steepest_climb"))
                  + tuple(_reference_source(c, "screening.steepest_climb")),
-                 formats=("d", *[".4g"] * len(stepped), ".4g", ".3g", ""))
+                 formats=("d", *[".4g"] * len(stepped), ".4g", "", ".3g", ""))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -631,19 +668,21 @@ def table_bbd_design(c: Campaign) -> Table:
     r = c.results
     b = r["box_behnken"]
     letters = _bbd_letters(r)
+    k, point_runs, angles = _replicates(r, "box_behnken")
     rows = []
-    for i, (coded, actual, y, run) in enumerate(zip(b["design_coded"], b["design_actual"], b["response"],
-                                                    b["runs"]), 1):
-        rows.append((i, *[int(round(v)) for v in coded], *actual, y, run["seed"], run["key"][:12]))
+    for i, (coded, actual, y, runs, ys) in enumerate(zip(b["design_coded"], b["design_actual"],
+                                                         b["response"], point_runs, angles), 1):
+        rows.append((i, *[int(round(v)) for v in coded], *actual, y, *_replicate_cells(runs, ys)))
     return Table("8", "Design and results of the Box-Behnken test",
                  ("Run", *[code for code, _ in letters], *[f"{letter} actual" for _, letter in letters],
-                  "Angle of repose", "Seed", "Run key"),
-                 ("", *[""] * len(letters), *[""] * len(letters), "deg", "", ""), tuple(rows),
+                  "Angle of repose", "Replicates", "Seeds"),
+                 ("", *[""] * len(letters), *[""] * len(letters), "deg", "deg", ""), tuple(rows),
                  notes=("Centre points (0, 0, 0) are repeated with different seeds; edge runs "
-                        "share the design seed.",),
+                        "share the design seeds.", _replicate_note(k)),
                  sources=(_runs_source(r, "box_behnken"),
-                          _results_source("box_behnken.design_coded, box_behnken.response")),
-                 formats=("d", *["coded"] * len(letters), *[".4g"] * len(letters), ".4g", "d", "mono"))
+                          _results_source("box_behnken.design_coded, box_behnken.response, "
+                                          "box_behnken.replicate_responses")),
+                 formats=("d", *["coded"] * len(letters), *[".4g"] * len(letters), ".4g", "", ""))
 
 
 def table_bbd_anova(c: Campaign) -> Table:
@@ -872,8 +911,78 @@ def _generic(table_id: str, title: str, items: list, source: dict, path: str) ->
                  notes=tuple(notes), sources=({"kind": "critique", **source, "path": path},))
 
 
+#: Fields of a covariate test (``analyse.critique.diagnosis.CovariateTest``) that Table C4
+#: shows or names in its notes; any other field goes under the table row by row.
+_TEST_FIELDS = {"series", "sheet", "source", "covariate", "method", "n", "effect", "ci95", "effect_unit",
+                "span", "practical", "threshold", "p_value", "se", "dof", "p_curvature", "p_adjusted",
+                "significant", "relevant", "ci_selected", "explained_by", "levels"}
+
+
+def _p_key(p) -> float:
+    """Sort key of a p-value: missing or NaN last."""
+    return p if isinstance(p, (int, float)) and not isinstance(p, bool) and p == p else float("inf")
+
+
+def covariate_verdict(t: dict) -> str:
+    """What the critique concluded from one covariate test, in a few words."""
+    if not t.get("significant"):
+        return "not significant"
+    if t.get("relevant") is False:
+        return "significant, below threshold"
+    if t.get("explained_by"):
+        return f"significant, explained by {t['explained_by']}"
+    return "significant: cause"
+
+
+def table_covariate_tests(c: Campaign) -> Table:
+    """Table C4: every covariate test of the critique (``critique.json`` ``tests``), sorted by
+    adjusted p-value; ``Test`` is the test's position in that list, so each row can be found
+    again. All tests are listed; the fields too wide for an A4 column are named in the notes."""
+    items = list((c.critique or {}).get("tests") or [])
+    order = sorted(range(len(items)), key=lambda i: (_p_key(items[i].get("p_adjusted")),
+                                                     _p_key(items[i].get("p_value")), i))
+    rows, notes = [], []
+    for i in order:
+        t = items[i]
+        rows.append((i + 1, t.get("series"), t.get("sheet"), t.get("source"), t.get("covariate"),
+                     t.get("method"), t.get("n"), t.get("effect"), t.get("ci95"), t.get("effect_unit"),
+                     t.get("practical"), t.get("threshold"), t.get("p_value"), t.get("p_adjusted"),
+                     covariate_verdict(t)))
+    opts = _get(c.critique, "provenance", "options", default={}) or {}
+    how = {"bh": "Benjamini-Hochberg", "holm": "Holm"}.get(opts.get("correction"), opts.get("correction"))
+    notes.append("Sorted by adjusted p-value" + (f" ({how}, all tests together)" if how else "")
+                 + "; significant rows in bold" + (f" (adjusted p < {opts['alpha']:g})"
+                                                   if isinstance(opts.get("alpha"), (int, float)) else "")
+                 + ". Test: position in critique.json's tests. Effect: slope per covariate unit (trend, "
+                 "line), range of level means (anova) or mean (mean), with its marginal 95 % interval; "
+                 "over range: the effect across the covariate's observed range, in the unit of the series, "
+                 "against the practical threshold. A cause is significant, above the threshold and not "
+                 "explained by another covariate.")
+    if items:
+        notes.append("Standard errors, degrees of freedom, covariate spans, curvature p-values and the "
+                     "level means of each anova are in critique.json (tests).")
+    else:
+        notes.append("None: critique.json holds no covariate tests.")
+    for i in order:
+        t = items[i]
+        if t.get("ci_selected"):
+            lo, hi = t["ci_selected"]
+            notes.append(f"Test {i + 1}: interval after selection (false-coverage rate, Benjamini & "
+                         f"Yekutieli 2005) [{lo:.3g}, {hi:.3g}] {t.get('effect_unit') or ''}".rstrip() + ".")
+        for key in t:
+            if key not in _TEST_FIELDS and t[key] not in (None, "", {}, []):
+                value = t[key] if isinstance(t[key], str) else json.dumps(t[key], sort_keys=True)
+                notes.append(f"Test {i + 1}, {key}: {value}")
+    return Table("C4", "Covariate tests of the residual structure (every test, by adjusted p-value)",
+                 ("Test", "Series", "Sheet", "Source", "Covariate", "Method", "n", "Effect", "95 % CI",
+                  "Effect unit", "Over range", "Threshold", "p", "Adjusted p", "Verdict"),
+                 ("",) * 15, tuple(rows), notes=tuple(notes),
+                 sources=({"kind": "critique", **c.critique_source, "path": "tests"},),
+                 formats=("d", "", "", "", "", "", "d", ".3g", ".3g", "", ".3g", ".3g", "p", "p", ""))
+
+
 def critique_tables(c: Campaign) -> list[Table]:
-    """Tables C1-C3 from ``critique.json``: discrepancies, findings, extensions."""
+    """Tables C1-C4 from ``critique.json``: discrepancies, findings, extensions, covariate tests."""
     if c.critique is None:
         return []
     cr = c.critique
@@ -882,7 +991,8 @@ def critique_tables(c: Campaign) -> list[Table]:
             _generic("C2", "Candidate mechanisms tested against the residuals",
                      list(cr.get("findings", [])), c.critique_source, "findings"),
             _generic("C3", "Model extensions and their gain", list(cr.get("extensions", [])),
-                     c.critique_source, "extensions")]
+                     c.critique_source, "extensions"),
+            table_covariate_tests(c)]
 
 
 # ----------------------------------------------------------------------------------------------

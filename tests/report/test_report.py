@@ -134,8 +134,13 @@ def test_design_tables_match_the_run_records(campaign):
     def angle(key):
         return json.loads((out / "runs" / f"{key}.json").read_text())["result"]["observable"]["angle_deg"]
 
-    pb_keys = next(s for s in tables["4"]["sources"] if s["kind"] == "runs")["keys"]
-    assert _column(tables["4"], "Angle of repose") == [angle(k) for k in pb_keys]
+    # each design point's angle is the median of its replicate runs, stored point by point
+    k = json.loads((out / "results.json").read_text())["config"]["replicates"]
+    for table in ("4", "8"):
+        keys = next(s for s in tables[table]["sources"] if s["kind"] == "runs")["keys"]
+        runs = np.array([angle(key) for key in keys]).reshape(-1, k)
+        assert _column(tables[table], "Angle of repose") == pytest.approx(np.median(runs, axis=1), abs=0)
+        assert _column(tables[table], "Replicates") == [" / ".join(f"{a:.4g}" for a in row) for row in runs]
     # Plackett-Burman effects: mean(+1) - mean(-1) of Table 4's columns
     y = np.array(_column(tables["4"], "Angle of repose"))
     effects = dict(zip(_column(tables["5"], "Source"), _column(tables["5"], "Effect")))
@@ -283,6 +288,9 @@ def test_report_command_renders_critique_json(campaign, tmp_path, capsys):
     html = (out / "report.html").read_text(encoding="utf-8")
     assert "Critique of the calibrated model" in html and "velocity-dependent restitution" in html
     assert "Table C3" in html
+    # no drop twin: the report says the question of sqrt(h2/h1) was not assessed
+    assert "Not assessed: this critique ran no drop twin" in html
+    assert tables["C4"]["rows"] == [] and "None: critique.json holds no covariate tests." in tables["C4"]["notes"]
     assert (out / "tables.json").read_text().count("critique.json") >= 3  # hashed and named as source
 
 
@@ -300,3 +308,193 @@ def test_tables_render_when_lenth_has_no_pse(campaign, tmp_path):
     (out / "results.json").write_text(json.dumps(results))
     table5 = next(t for t in build_tables(load_campaign(out)) if t.id == "5")
     assert any("PSE n/a deg" in note for note in table5.notes)
+
+
+# ----------------------------------------------------------------------------------------------
+# critique section: summary, whether sqrt(h2/h1) may feed the DEM, every covariate test (C4)
+
+def _test(i, series, covariate, method, effect, ci, unit, practical, threshold, p, p_adj, *, source="measured",
+          sheet="drop", significant=False, relevant=False, ci_selected=None, explained_by=None, levels=None):
+    """One entry of critique.json's tests, with every field of diagnosis.CovariateTest."""
+    return {"series": series, "sheet": sheet, "source": source, "covariate": covariate, "method": method,
+            "n": 20 + i, "effect": effect, "ci95": ci, "effect_unit": unit,
+            "span": None if method in ("anova", "mean") else 300.0, "practical": practical,
+            "threshold": threshold, "p_value": p, "se": 0.01 * (i + 1), "dof": 18 + i,
+            "p_curvature": 0.5 if method == "trend" else None, "p_adjusted": p_adj,
+            "significant": significant, "relevant": relevant, "ci_selected": ci_selected,
+            "explained_by": explained_by, "levels": levels or {}}
+
+
+#: A small critique.json in the layout analyse.critique.loop writes (sentences in its words).
+CRITIQUE = {
+    "discrepancies": [
+        {"observable": "restitution.particle-steel (drop twin, apparent sqrt(h2/h1))", "sheet": "drop",
+         "measured": 0.352, "measured_ci95": [0.339, 0.365], "simulated": 0.281,
+         "simulated_ci95": [0.268, 0.294], "difference": 0.0712, "combined_u95": 0.0121, "exceeds": True,
+         "n_measured": 20, "n_simulated": 20,
+         "note": "contact e_pw = 0.352; each drop at its height and logged orientation; twin apparent / "
+                 "contact = 0.798: sqrt(h2/h1) may not feed the DEM directly"},
+        {"observable": "restitution.particle-wood (drop twin, apparent)", "sheet": "drop", "measured": 0.41,
+         "measured_ci95": [0.38, 0.44], "simulated": None, "simulated_ci95": None, "difference": None,
+         "combined_u95": None, "exceeds": None, "n_measured": 6, "n_simulated": 0,
+         "note": "not simulated: no DEM contact parameters for particle-wood (the DEM knows "
+                 "particle-particle and particle-steel)"},
+        {"observable": "repose_angle_deg (photo method)", "sheet": "repose", "measured": 35.64,
+         "measured_ci95": [31.45, 39.82], "simulated": 35.64, "simulated_ci95": [34.91, 36.38],
+         "difference": -0.0092, "combined_u95": 4.02, "exceeds": False, "n_measured": 3, "n_simulated": 3,
+         "note": "3 validation runs of the campaign (DIR/runs)"}],
+    "findings": [{"mechanism": "orientation_rotation", "verdict": "found", "sheet": "drop",
+                  "covariate": "orientation_deg", "effect": 0.00052, "ci95": [0.00031, 0.00073],
+                  "p_adjusted": 0.00042, "quantity": "residual:restitution.particle-steel",
+                  "source": "twin residual", "effect_unit": "1/deg", "evidence": "see Table C4, test 3"}],
+    "extensions": [{"name": "inverted_restitution", "mechanism": "orientation_rotation", "before": 0.0712,
+                    "after": 0.00814, "gain": 0.0631, "ci95": [0.0512, 0.0748],
+                    "measure": "abs_mean_residual of restitution.particle-steel",
+                    "held_out": "20 drops, each judged by the inversion of the other half (two-fold cross-fit)",
+                    "before_ci95": [0.06, 0.082], "after_ci95": [0.002, 0.019], "n_held_out": 20,
+                    "fitted": "half 1: e_pw = 0.441 [0.425, 0.458] from 10 drops; half 2: e_pw = 0.452 "
+                              "[0.436, 0.469] from 10 drops (calibrated 0.352)", "note": ""}],
+    "summary": [
+        "restitution.particle-steel: the lab's sqrt(h2/h1) is 0.352; the drop twin with contact e_pw = 0.352, "
+        "at the lab's 20 drop heights and orientations, rebounds with an apparent 0.281 [0.268, 0.294] "
+        "(ratio 0.798). sqrt(h2/h1) may not feed the DEM directly: the twin's apparent restitution differs "
+        "from its contact restitution by -0.0711 (part of the energy goes into rotation). The contact "
+        "restitution that reproduces the drops is e_pw = 0.447 (halves 0.441, 0.452; interval [0.43, 0.465]).",
+        "Extension inverted_restitution (restitution.particle-steel): abs_mean_residual on 20 drops, each "
+        "judged by the inversion of the other half (two-fold cross-fit) 0.0712 before, 0.00814 after, gain "
+        "0.0631 [0.0512, 0.0748]: it helps. Fitted: half 1: e_pw = 0.441 [0.425, 0.458] from 10 drops; "
+        "half 2: e_pw = 0.452 [0.436, 0.469] from 10 drops (calibrated 0.352).",
+        "Found: orientation_rotation. orientation_rotation: residual:restitution.particle-steel (twin "
+        "residual, sheet drop) vs orientation_deg: trend effect 0.00052 1/deg [0.00031, 0.00073] "
+        "(marginal 95 %), 0.0468 over the observed range of orientation_deg; p 1.2e-05, adjusted 0.00042; "
+        "practical threshold 0.03."],
+    "tests": [
+        _test(0, "length_mm", "moisture_pct", "trend", -0.205, [-0.395, -0.0146], "mm/%", 2.29, 0.5, 0.1045,
+              0.9345, sheet="specimens"),
+        _test(1, "length_mm", "batch", "anova", 0.885, [-0.379, 2.15], "mm", 0.885, 0.5, 0.368, 0.9345,
+              sheet="specimens", levels={"B1": [25.06, 11], "B2": [24.7, 9]}),
+        _test(2, "residual:restitution.particle-steel", "orientation_deg", "trend", 0.00052,
+              [0.00031, 0.00073], "1/deg", 0.0468, 0.03, 1.2e-05, 0.00042, source="twin residual",
+              significant=True, relevant=True, ci_selected=[0.00025, 0.00079]),
+        _test(3, "residual:restitution.particle-steel", "drop_height_mm", "trend", 0.00011, [4e-05, 0.00018],
+              "1/mm", 0.033, 0.03, 0.0003, 0.0042, source="twin residual", significant=True, relevant=True,
+              explained_by="orientation_deg"),
+        _test(4, "restitution.particle-steel", "drop_height_mm", "line", 2.1e-05, [8e-06, 3.4e-05], "1/mm",
+              0.0063, 0.03, 0.0009, 0.0084, significant=True),
+        _test(5, "twin_minus_contact:restitution.particle-steel", "orientation_deg", "mean", -0.0711,
+              [-0.084, -0.058], "1", 0.0711, 0.03, 0.047, 0.094, source="twin", relevant=True),
+        _test(6, "restitution.particle-steel", "specimen_mass_g", "trend", 0.0031, [-0.01, 0.016], "1/g",
+              0.0012, 0.03, None, None),
+        _test(7, "static_friction.steel", "operator", "anova", 0.021, [-0.006, 0.048], "1", 0.021, 0.03, 0.21,
+              0.52, sheet="incline", levels={"A": [0.6, 5], "B": [0.62, 5]})],
+    "untestable": [], "catalogue": [], "parameters": {}, "twin_runs": [],
+    "provenance": {"options": {"alpha": 0.01, "correction": "bh"}},
+}
+
+
+@pytest.fixture(scope="module")
+def critique_report(campaign, tmp_path_factory):
+    """The example campaign with the critique.json above, its report built (HTML and PDF)."""
+    out = tmp_path_factory.mktemp("critique") / "campaign"
+    shutil.copytree(campaign["out"], out)
+    (out / "critique.json").write_text(json.dumps(CRITIQUE))
+    html_path, pdf_path = build_report(out)
+    return {"out": out, "html": html_path.read_text(encoding="utf-8"), "pdf": pdf_path,
+            "tables": {t["id"]: t for t in json.loads((out / "tables.json").read_text())["tables"]}}
+
+
+def _html_rows(text: str, table_id: str) -> list[tuple[str, list[str]]]:
+    """(tr attributes, cell HTML) of every body row of one table of the report."""
+    block = text[text.index(f'id="table-{table_id}"'):]
+    body = block[block.index("<tbody>"):block.index("</tbody>")]
+    return [(attrs, [c.strip() for c in re.findall(r"<td[^>]*>(.*?)</td>", row, re.S)])
+            for attrs, row in re.findall(r"<tr([^>]*)>(.*?)</tr>", body, re.S)]
+
+
+def test_critique_summary_opens_the_critique_section(critique_report):
+    import html as htmllib
+
+    text = critique_report["html"]
+    start, c1 = text.index("Critique of the calibrated model"), text.index('id="table-C1"')
+    for sentence in CRITIQUE["summary"]:
+        para = f"<p>{htmllib.escape(sentence)}</p>"
+        assert text.count(para) == 1, sentence[:40]                  # each sentence once, as a paragraph
+        assert start < text.index(para) < c1                         # before the tables
+    # the answer on sqrt(h2/h1) leads, with the twin's apparent restitution against the measured one
+    box = text[text.index('<div class="direct-use">'):]
+    box = box[:box.index("</div>")]
+    assert ("<b>restitution.particle-steel: sqrt(h2/h1) may not feed the DEM directly. The lab&#x27;s drops "
+            "give sqrt(h2/h1) = 0.352 [0.339, 0.365] (n 20); the drop twin rebounds with an apparent 0.281 "
+            "[0.268, 0.294] (n 20): measured minus twin 0.0712, beyond its 95 % uncertainty ±0.0121 "
+            "(Table C1).</b>") in box
+    # ... and the gain of the extension that fixes it, from the summary
+    assert "gain 0.0631 [0.0512, 0.0748]: it helps" in box and "0.0712 before, 0.00814 after" in box
+    assert "restitution.particle-wood: not assessed; the lab&#x27;s sqrt(h2/h1) is 0.41 [0.38, 0.44]" in box
+    assert htmllib.escape(CRITIQUE["summary"][2]) not in box         # the finding follows the box
+    assert box.index("restitution.particle-steel: sqrt") < box.index("restitution.particle-wood")
+
+
+def test_table_c4_lists_every_covariate_test_sorted_and_marked(critique_report):
+    from report.render import format_cell
+
+    c4 = critique_report["tables"]["C4"]
+    tests = CRITIQUE["tests"]
+    assert len(c4["rows"]) == len(tests)
+    # sorted by adjusted p (ties by p, then list order), the untested one (p None) last
+    assert _column(c4, "Test") == [3, 4, 5, 6, 8, 1, 2, 7]
+    for row in c4["rows"]:
+        r, t = dict(zip(c4["columns"], row)), tests[row[0] - 1]
+        assert (r["Series"], r["Covariate"], r["Method"], r["n"], r["Effect"], r["95 % CI"], r["p"],
+                r["Adjusted p"]) == (t["series"], t["covariate"], t["method"], t["n"], t["effect"], t["ci95"],
+                                     t["p_value"], t["p_adjusted"])
+    verdicts = dict(zip(_column(c4, "Test"), _column(c4, "Verdict")))
+    assert verdicts == {3: "significant: cause", 4: "significant, explained by orientation_deg",
+                        5: "significant, below threshold", 6: "not significant", 8: "not significant",
+                        1: "not significant", 2: "not significant", 7: "not significant"}
+    assert "Test 3: interval after selection (false-coverage rate, Benjamini & Yekutieli 2005) " \
+           "[0.00025, 0.00079] 1/deg." in c4["notes"]
+    assert c4["notes"][0].startswith("Sorted by adjusted p-value (Benjamini-Hochberg, all tests together); "
+                                     "significant rows in bold (adjusted p < 0.01).")
+    # every row in the HTML, cell by cell as stored, the significant ones in bold
+    rows = _html_rows(critique_report["html"], "C4")
+    assert [cells for _, cells in rows] == [[format_cell(v, f) for v, f in zip(row, c4["formats"])]
+                                            for row in c4["rows"]]
+    assert [int(cells[0]) for attrs, cells in rows if 'class="marked"' in attrs] == [3, 4, 5]
+    cause = next(cells for _, cells in rows if cells[0] == "3")
+    assert cause[1:6] == ["residual:restitution.particle-steel", "drop", "twin residual", "orientation_deg",
+                          "trend"]
+    assert cause[7:] == ["0.00052", "[0.00031, 0.00073]", "1/deg", "0.0468", "0.03", "&lt; 0.0001", "0.0004",
+                         "significant: cause"]
+
+
+def test_pdf_shows_the_critique_summary_and_table_c4(critique_report):
+    from pypdf import PdfReader
+
+    reader = PdfReader(str(critique_report["pdf"]))
+    # compared without whitespace: the PDF breaks lines at spaces and after hyphens
+    flat = re.sub(r"\s+", "", "".join(page.extract_text() for page in reader.pages))
+
+    def squeeze(s):
+        return re.sub(r"\s+", "", s)
+
+    assert squeeze("Table C4" + critique_report["tables"]["C4"]["title"]) in flat
+    assert squeeze(CRITIQUE["summary"][0]) in flat
+    assert squeeze("restitution.particle-steel: sqrt(h2/h1) may not feed the DEM directly.") in flat
+    assert squeeze("residual:restitution.particle-steel") in flat and squeeze("significant: cause") in flat
+
+
+def test_audit_rederives_the_critique_tables(critique_report, capsys, tmp_path):
+    code, text = _audit(capsys, critique_report["out"])
+    assert code == 0, text
+    for tid in ("C1", "C2", "C3", "C4"):
+        assert re.search(rf"^Table {tid} \(.*\): OK$", text, re.M), tid
+    # a changed C4 cell is named
+    out = tmp_path / "copy"
+    shutil.copytree(critique_report["out"], out)
+    doc = json.loads((out / "tables.json").read_text())
+    c4 = next(t for t in doc["tables"] if t["id"] == "C4")
+    c4["rows"][0][c4["columns"].index("Adjusted p")] = 0.5
+    (out / "tables.json").write_text(json.dumps(doc))
+    code, text = _audit(capsys, out)
+    assert code == 1
+    assert "Table C4, row 1 (3), column 'Adjusted p': stored 0.5, re-derived 0.00042" in text

@@ -1,0 +1,86 @@
+"""A calibration campaign on the real DEM, killed midway (SIGKILL) and run again, completes
+without redoing any run that had finished (the run store, analyse.runs).
+
+The rig is the repose twin itself, on a tiny carton (80 x 50 x 100 mm, 25 segments) so that one
+run takes a second or two: the example workbook with its meta carton changed."""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import openpyxl
+
+ROOT = Path(__file__).resolve().parents[2]
+TINY_CARTON = {"box_length_mm": 80, "box_width_mm": 50, "box_height_mm": 100, "fill_count": 25}
+#: replicates 1, 2 noise repeats and 3 climb levels: 12 + 2 + 3 + 17 + 3 = 37 DEM runs
+CONFIG = "CampaignConfig(workers=1, progress=False, replicates=1, noise_repeats=2, climb_levels=3)"
+KILL_AFTER = 6
+
+
+def tiny_repose_runner(inputs: dict) -> dict:
+    """The campaign's repose runner; a heap of 25 segments that slid flat and shows no slope
+    counts as 0 deg (this test is about the run store, not about the angle)."""
+    from analyse.campaign import repose_runner
+
+    result = repose_runner(inputs)
+    obs = result["observable"]
+    if all(obs[k] is None or obs[k] != obs[k] for k in ("angle_deg", "angle_profile_deg")):
+        obs["angle_deg"] = 0.0
+    return result
+
+
+def tiny_workbook(tmp_path: Path) -> Path:
+    root = tmp_path / "lab"
+    shutil.copytree(ROOT / "data" / "astragalus", root)
+    path = root / "workbook.xlsx"
+    wb = openpyxl.load_workbook(path)
+    for row in wb["meta"].iter_rows(min_row=2):
+        if row[0].value in TINY_CARTON:
+            row[1].value = TINY_CARTON[row[0].value]
+    wb.save(path)
+    return path
+
+
+def test_killed_dem_campaign_resumes_without_redoing_finished_runs(tmp_path):
+    workbook, out = tiny_workbook(tmp_path), tmp_path / "campaign"
+    script = f"""
+import sys
+sys.path.insert(0, {str(ROOT)!r})
+from analyse.campaign import CampaignConfig, calibrate
+from tests.analyse.test_campaign_resume import tiny_repose_runner
+calibrate({str(workbook)!r}, {str(out)!r}, {CONFIG}, runner=tiny_repose_runner)
+"""
+    proc = subprocess.Popen([sys.executable, "-c", script], cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    runs = out / "runs"
+    deadline = time.time() + 600
+    while time.time() < deadline and proc.poll() is None:
+        if runs.exists() and len(list(runs.glob("*.json"))) >= KILL_AFTER:
+            break
+        time.sleep(0.05)
+    assert proc.poll() is None, f"the campaign ended before it could be killed: {proc.stderr.read()}"
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    before = {p.name: p.read_bytes() for p in runs.glob("*.json")}
+    assert KILL_AFTER <= len(before) < 37
+    assert not (out / "results.json").exists()
+
+    done = subprocess.run([sys.executable, "-c", script], cwd=ROOT, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    results = json.loads((out / "results.json").read_text())
+    ran = sum(s["ran"] for s in results["stages"])
+    reused = sum(s["reused"] for s in results["stages"])
+    records = {p.name: p.read_bytes() for p in runs.glob("*.json")}
+    # every run the campaign asked for is stored once, and the ones finished before the kill
+    # were reused as they were, not run again
+    assert len(records) == ran + len(before) == 37
+    assert reused >= len(before)
+    for name, content in before.items():
+        assert records[name] == content, f"run {name} finished before the kill but was redone"
+        assert json.loads(content)["status"] == "ok"
+    assert results["validation"]["result"]["mean"] > 0
