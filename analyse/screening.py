@@ -135,7 +135,9 @@ def lenth(effects: dict, alpha: float = 0.05) -> LenthResult:
     c = np.abs(np.array([effects[n] for n in names], dtype=float))
     m = c.size
     s0 = 1.5 * np.median(c)
-    pse = float(1.5 * np.median(c[c < 2.5 * s0]))
+    trimmed = c[c < 2.5 * s0]
+    # more than half the contrasts exactly zero (a noiseless stand-in): no pseudo standard error
+    pse = float(1.5 * np.median(trimmed)) if trimmed.size else float("nan")
     d = m / 3.0
     me = float(stats.t.ppf(1 - alpha / 2, d) * pse)
     gamma = (1 + (1 - alpha) ** (1 / m)) / 2
