@@ -497,7 +497,8 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
     val_settings = settings({**fixed, **best_actual})
     val_records = execute("validation", [inputs(val_settings, s) for s in config.validation_seeds])
     y_val = _responses(val_records, fallbacks)
-    validation = validate_repeats(y_val, target)
+    # the interval uses the single-run noise measured at the screening centre (more runs)
+    validation = validate_repeats(y_val, target, noise_sd=sigma_run, noise_df=y_noise_all.size - 1)
 
     calibrated = base.with_(**{param_of[f]: means[f] for f in letters}).with_(**val_settings)
     results = {

@@ -17,10 +17,11 @@ References
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize
+from scipy import optimize, stats
 
 from analyse.designs import to_coded
 from analyse.regression import ResponseSurface
@@ -593,6 +594,11 @@ class ValidationResult:
     target : float
     relative_error_pct : float
         100 |mean - target| / |target| [%].
+    ci95 : tuple of float
+        95 % confidence interval of the mean, t-based, from ``noise_sd`` when given (the DEM's
+        seed-to-seed noise measured with more runs) else from ``std`` [response units].
+    target_in_ci : bool
+        Whether the target lies inside ``ci95``: the runs cannot tell the mean from the target.
     """
 
     values: np.ndarray
@@ -601,14 +607,23 @@ class ValidationResult:
     std: float
     target: float
     relative_error_pct: float
+    ci95: tuple = (float("nan"), float("nan"))
+    target_in_ci: bool = False
 
     def to_dict(self) -> dict:
         return {"values": self.values.tolist(), "n": self.n, "mean": self.mean, "std": self.std,
-                "target": self.target, "relative_error_pct": self.relative_error_pct}
+                "target": self.target, "relative_error_pct": self.relative_error_pct,
+                "ci95": list(self.ci95), "target_in_ci": self.target_in_ci}
 
 
-def validate_repeats(values, target: float) -> ValidationResult:
-    """Mean of repeated runs and its relative error to the target (the source paper's check)."""
+def validate_repeats(values, target: float, *, noise_sd: float | None = None,
+                     noise_df: int | None = None) -> ValidationResult:
+    """Mean of repeated runs and its relative error to the target (the source paper's check),
+    with a 95 % confidence interval of the mean.
+
+    ``noise_sd`` (with its degrees of freedom ``noise_df``) is the seed-to-seed sd of one run
+    measured elsewhere with more runs; without it the repeats' own sd is used (n - 1 df).
+    """
     v = np.asarray(values, dtype=float).ravel()
     if v.size == 0 or not np.all(np.isfinite(v)):
         raise InputError("validation needs at least one finite repeat")
@@ -616,5 +631,11 @@ def validate_repeats(values, target: float) -> ValidationResult:
         raise InputError("target must be non-zero for a relative error")
     mean = float(v.mean())
     std = float(v.std(ddof=1)) if v.size > 1 else float("nan")
+    sd, df = (noise_sd, noise_df) if noise_sd is not None else (std, v.size - 1)
+    ci = (float("nan"), float("nan"))
+    if df and df > 0 and math.isfinite(sd):
+        half = float(stats.t.ppf(0.975, df)) * sd / math.sqrt(v.size)
+        ci = (mean - half, mean + half)
     return ValidationResult(v, int(v.size), mean, std, float(target),
-                            100.0 * abs(mean - target) / abs(target))
+                            100.0 * abs(mean - target) / abs(target), ci,
+                            bool(ci[0] <= target <= ci[1]))

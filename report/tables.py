@@ -864,12 +864,25 @@ def table_validation(c: Campaign) -> Table:
     rows.append(("measured angle (target)", None, res["target"], *blank, paper.get("target_deg")))
     rows.append(("relative error of the mean [%]", None, res["relative_error_pct"], *blank,
                  paper.get("relative_error_pct")))
+    ci = res.get("ci95") or [None, None]
+    if ci[0] is not None:
+        rows.append(("95 % CI of the mean, low", None, ci[0], *blank, None))
+        rows.append(("95 % CI of the mean, high", None, ci[1], *blank, None))
+    notes = ["'Angle compared' is the observable the campaign compares with the photos (the "
+             "response of every design); other angles the rig reports are shown beside it. The "
+             "relative error is in %."]
+    if ci[0] is not None:
+        noise = r.get("noise", {})
+        notes.append(f"The interval is t-based with the single-run seed-to-seed sd measured at the "
+                     f"screening centre ({_number(noise.get('sd_single_run'))} deg, "
+                     f"{len(sum(noise.get('replicate_responses', []), []))} runs). The target "
+                     + ("lies inside it: these runs cannot tell the calibrated heap from the measured one."
+                        if res.get("target_in_ci") else "lies outside it: the calibrated heap differs "
+                        "from the measured one by more than the DEM's seed noise."))
     return Table("12", "Validation: angle of repose simulated with the calibrated parameters",
                  ("Run", "Seed", "Angle compared (angle_deg)", *extra, "Paper"),
                  ("", "", "deg", *["deg"] * len(extra), "deg"), tuple(rows),
-                 notes=("'Angle compared' is the observable the campaign compares with the photos "
-                        "(the response of every design); other angles the rig reports are shown "
-                        "beside it. The last row is in %.",),
+                 notes=tuple(notes),
                  sources=(_runs_source(r, "validation"), _results_source("validation"))
                  + tuple(_reference_source(c, "validation")),
                  formats=("", "d", ".4g", *[".4g"] * len(extra), ".4g"))

@@ -145,6 +145,12 @@ def test_validation_repeats_source_paper():
     assert v.mean == pytest.approx(35.65, abs=5e-3)
     assert v.relative_error_pct == pytest.approx(100 * 0.14 / 35.79, rel=1e-9)
     assert v.n == 3 and v.std == pytest.approx(np.std([35.51, 36.01, 35.43], ddof=1))
+    # own sd 0.31432 with 2 df: t(0.975, 2) = 4.302653 -> half width 4.302653 * 0.31432 / sqrt(3)
+    assert v.ci95 == pytest.approx((35.65 - 0.78083, 35.65 + 0.78083), abs=1e-4) and v.target_in_ci
+    # a noise sd of 3.9 deg measured with 12 runs (11 df, t = 2.200985): half width 4.956
+    w = validate_repeats([31.1, 40.1, 44.6], 36.1, noise_sd=3.9, noise_df=11)
+    assert w.ci95 == pytest.approx((38.6 - 4.9558, 38.6 + 4.9558), abs=1e-3) and w.target_in_ci
+    assert not validate_repeats([40.0, 41.0, 42.0], 36.1, noise_sd=1.0, noise_df=11).target_in_ci
 
 
 def test_steepest_climb_by_hand():
