@@ -255,8 +255,9 @@ def register(subparsers) -> None:
     cal.add_argument("--levels", choices=("minmax", "sd"), default="minmax",
                      help="screening levels: measured min/max (default, as the paper) or mean -+ sd")
     cal.add_argument("--seed", type=int, default=1, help="seed of the design runs (default 1)")
-    cal.add_argument("--replicates", type=int, default=3,
-                     help="DEM runs (seeds) per design point, response = their median (default 3)")
+    cal.add_argument("--replicates", type=int, default=None,
+                     help="DEM runs (seeds) per design point, response = their median (default 3 "
+                          "with --profile quick, 1 with --profile paper as the paper did)")
     cal.add_argument("--no-report", action="store_true", help="skip the HTML/PDF report")
     cal.set_defaults(handler=_run_calibrate)
 

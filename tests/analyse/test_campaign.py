@@ -69,3 +69,21 @@ def test_response_falls_back_to_the_profile_fit_when_the_photo_method_finds_no_s
     records[1]["result"]["observable"]["angle_profile_deg"] = float("nan")
     with pytest.raises(AnalysisError, match="run b"):
         _responses(records)
+
+
+def test_replicates_default_by_profile_and_survive_the_stored_config():
+    assert CampaignConfig(progress=False).replicates == 3
+    assert CampaignConfig(profile="paper", progress=False).replicates == 1
+    stored = {k: v for k, v in CampaignConfig(profile="paper", replicates=2).__dict__.items()}
+    assert CampaignConfig.from_dict(stored).replicates == 2
+    with pytest.raises(Exception, match="replicates must be a positive integer"):
+        CampaignConfig(replicates=0)
+
+
+def test_design_point_response_is_the_median_of_its_replicates():
+    from analyse.campaign import _point_responses
+
+    records = [{"key": str(i), "result": {"observable": {"angle_deg": a}}}
+               for i, a in enumerate([30.0, 47.5, 31.0, 20.0, 22.0, 21.0])]
+    y, y_all = _point_responses(records, 3, [])
+    assert y.tolist() == [31.0, 21.0] and y_all.shape == (2, 3)
