@@ -30,7 +30,9 @@ quaternions (w, x, y, z) rotating the *template* frame into the world), ``rotati
 ``sphere_positions()`` [m], ``sphere_radii()`` [m], ``sphere_body()`` (clump id of each sphere),
 ``kinetic_energy()`` [J], ``body_kinetic_energy()``, ``masses()``, ``angular_momenta()``,
 ``contact_forces()`` (contact force and torque on each body at the last step [N], [N m]),
-``rolling_resistance()``, ``n_contacts()``, ``wall_origins()``, ``time`` [s], ``escaped``
+``rolling_resistance()``, ``n_contacts()``, ``contact_history()`` (per touching contact:
+tangential spring, first-touch impact speed, rolling spring torque), ``wall_origins()``,
+``time`` [s], ``escaped``
 (bodies that left the domain: id, time, position). ``evaluate_forces()`` recomputes the
 contact forces of the current state without stepping. Frames go to ParaView with
 ``simulate.vtk.write_vtp(path, sim)``.
@@ -51,6 +53,17 @@ The step (``run`` pseudocode; the whole loop runs in numba, returning to Python 
     every chunk: stop with SimulationError on non-finite state or runaway kinetic energy;
         deactivate and record bodies outside the domain; run the factories
 
+Engine hooks (off by default, switched by the material table, so that ``MaterialTable.
+from_parameters`` carries them from ``DEMParameters``; ``simulate.extensions.ENGINE_HOOKS``):
+a pair restitution that depends on the impact speed (``set_pair(restitution_exponent=n,
+restitution_v_ref=v)``: the dashpots of a contact use e(v) at its first-touch approach speed,
+kept in its history), and the spring-dashpot rolling model (``MaterialTable(rolling_model=
+"epsd")``, its spring torque kept in the history). The history rows are as wide as the hooks
+need, and carried across list rebuilds whole. A run with no hook on uses the default contact
+kernel, unchanged (the same trajectories, to the bit, as before the hooks existed); any hook
+switches to the extended one. Several clump templates per factory (a size distribution) are a
+``ParticleFactory`` option.
+
 Stability. ``run`` refuses a time step above ``max_dt_fraction`` (default 0.5) of the Rayleigh
 time of the smallest sphere (``UnsafeTimeStepError`` stating T_R, the fraction and the limit)
 unless the simulation was made with ``force=True``.
@@ -67,9 +80,9 @@ import numpy as np
 from demcal.errors import InputError, SimulationError
 from simulate._jit import kernel
 from simulate.clump import ClumpTemplate
-from simulate.contact.hertz_mindlin import normal_force, tangential_force
-from simulate.contact.rolling import (EDEM_COM, EDEM_SPHERE, LIGGGHTS_REFF, lever_index,
-                                      relative_rolling_torque)
+from simulate.contact.hertz_mindlin import impact_damping, normal_force, tangential_force
+from simulate.contact.rolling import (EDEM_COM, EDEM_SPHERE, EPSD, epsd_rolling_torque,
+                                      kick_mode, lever_index, relative_rolling_torque)
 from simulate.integrate import (drift, half_kick, matrix_from_quat, quat_from_matrix, quat_multiply,
                                 refresh_rotation)
 from simulate.materials import MaterialTable
@@ -79,6 +92,22 @@ from simulate.walls import Plane, Rectangle, pack_walls, wall_distance, wall_dis
 
 # ----------------------------------------------------------------------------------------------
 # kernels
+
+#: Columns of a contact's history row: the tangential spring displacement [m] (always), the
+#: normal approach speed at first touch [m/s] (velocity-dependent restitution) and the rolling
+#: spring torque [N m] (spring-dashpot rolling). The rows are only as wide as the hooks in use
+#: need (``history_width``), so the default path carries 3 columns as before.
+HIST_TANGENTIAL, HIST_IMPACT_SPEED, HIST_ROLLING = 0, 3, 4
+#: Moment of inertia about the contact point of a sphere of the clump's mass and the touching
+#: sphere's radius, over m R^2 (2/5 + 1): the I_r of the spring-dashpot rolling damping.
+SPHERE_CONTACT_INERTIA = 1.4
+
+
+def history_width(velocity_restitution: bool, rolling_model: int) -> int:
+    """Columns of contact history the engine hooks in use need (3, 4 or 7)."""
+    if rolling_model == EPSD:
+        return HIST_ROLLING + 3
+    return HIST_IMPACT_SPEED + 1 if velocity_restitution else HIST_IMPACT_SPEED
 
 
 @kernel
@@ -118,10 +147,14 @@ def _contact_forces(hist_dt, lever_mode, n_bodies, bx, bv, bw, bf, bt, brm, brv,
                     sbody, sx, srad, ppi, pj, ph, ws, wk, wh,
                     wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
                     e_star, g_star, damp, mu_s, mu_r):
-    """Contact forces, torques and rolling torques on every body from the Verlet lists.
+    """Contact forces, torques and rolling torques on every body from the Verlet lists: the
+    default contact law (constant restitution, constant torque rolling).
 
     ``hist_dt`` is the time step used to accumulate tangential displacement (0 for a force
-    evaluation that must not advance the contact history).
+    evaluation that must not advance the contact history). ``_contact_forces_extended`` is the
+    same law with the engine hooks; this one is kept apart, unchanged, because with the
+    reassociating fast-math flags any code merged into its loop changes the rounding of the
+    default path (and so, the contacts being chaotic, its trajectories).
     """
     for b in range(n_bodies):
         bf[b, 0] = 0.0
@@ -289,6 +322,235 @@ def _contact_forces(hist_dt, lever_mode, n_bodies, bx, bv, bw, bf, bt, brm, brv,
 
 
 @kernel
+def _contact_forces_extended(hist_dt, lever_mode, rolling_model, eta_r, n_bodies, bx, bv, bw, bf, bt, brm,
+                    brv, binvm, bmat, sbody, sx, srad, ppi, pj, ph, ws, wk, wh,
+                    wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
+                    e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min):
+    """``_contact_forces`` with the engine hooks (used when any is switched on).
+
+    ``hist_dt`` is the time step used to accumulate tangential displacement (0 for a force
+    evaluation that must not advance the contact history). A pair with ``e_exp`` != 0 takes
+    its dashpots from e(v) at its first-touch approach speed (history column
+    ``HIST_IMPACT_SPEED``); ``rolling_model`` ``EPSD`` replaces the constant torque by the
+    spring-dashpot torque (history columns ``HIST_ROLLING``..+2, damping ratio ``eta_r``),
+    summed into ``brv`` with its limits mu_r F_n R_r in ``brm``.
+    """
+    pw = ph.shape[1]
+    ww = wh.shape[1]
+    store = hist_dt > 0.0
+    for b in range(n_bodies):
+        bf[b, 0] = 0.0
+        bf[b, 1] = 0.0
+        bf[b, 2] = 0.0
+        bt[b, 0] = 0.0
+        bt[b, 1] = 0.0
+        bt[b, 2] = 0.0
+        brm[b] = 0.0
+        brv[b, 0] = 0.0
+        brv[b, 1] = 0.0
+        brv[b, 2] = 0.0
+    # ---- sphere-sphere
+    for k in range(ppi.shape[0]):
+        i = ppi[k]
+        j = pj[k]
+        xi = sx[i, 0]
+        yi = sx[i, 1]
+        zi = sx[i, 2]
+        dx = sx[j, 0] - xi
+        dy = sx[j, 1] - yi
+        dz = sx[j, 2] - zi
+        ri = srad[i]
+        rj = srad[j]
+        rsum = ri + rj
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 >= rsum * rsum:
+            ph[k, 0] = 0.0
+            ph[k, 1] = 0.0
+            ph[k, 2] = 0.0
+            for c in range(3, pw):
+                ph[k, c] = 0.0
+            continue
+        d = math.sqrt(d2)
+        inv = 1.0 / d
+        nx = dx * inv
+        ny = dy * inv
+        nz = dz * inv
+        overlap = rsum - d
+        a = ri - 0.5 * overlap  # contact point: middle of the overlap, along n from i
+        px = xi + nx * a
+        py = yi + ny * a
+        pz = zi + nz * a
+        bi = sbody[i]
+        bj = sbody[j]
+        aix = px - bx[bi, 0]
+        aiy = py - bx[bi, 1]
+        aiz = pz - bx[bi, 2]
+        ajx = px - bx[bj, 0]
+        ajy = py - bx[bj, 1]
+        ajz = pz - bx[bj, 2]
+        wxi = bw[bi, 0]
+        wyi = bw[bi, 1]
+        wzi = bw[bi, 2]
+        wxj = bw[bj, 0]
+        wyj = bw[bj, 1]
+        wzj = bw[bj, 2]
+        # velocity of i relative to j at the contact point
+        vrx = bv[bi, 0] + wyi * aiz - wzi * aiy - (bv[bj, 0] + wyj * ajz - wzj * ajy)
+        vry = bv[bi, 1] + wzi * aix - wxi * aiz - (bv[bj, 1] + wzj * ajx - wxj * ajz)
+        vrz = bv[bi, 2] + wxi * aiy - wyi * aix - (bv[bj, 2] + wxj * ajy - wyj * ajx)
+        vn = vrx * nx + vry * ny + vrz * nz
+        vtx = vrx - vn * nx
+        vty = vry - vn * ny
+        vtz = vrz - vn * nz
+        mi = bmat[bi]
+        mj = bmat[bj]
+        r_star = ri * rj / rsum
+        m_star = 1.0 / (binvm[bi] + binvm[bj])
+        cd = damp[mi, mj]
+        if e_exp[mi, mj] != 0.0:
+            cd = impact_damping(ph, k, HIST_IMPACT_SPEED, vn, log_e[mi, mj], e_exp[mi, mj],
+                                log_v_ref[mi, mj], v_min[mi, mj], store)
+        f_n, f_el, sqrt_rd = normal_force(e_star[mi, mj], r_star, m_star, cd, overlap, vn)
+        ftx, fty, ftz = tangential_force(ph, k, nx, ny, nz, vtx, vty, vtz, g_star[mi, mj],
+                                         m_star, cd, mu_s[mi, mj], sqrt_rd, f_n, hist_dt)
+        fx = ftx - f_n * nx
+        fy = fty - f_n * ny
+        fz = ftz - f_n * nz
+        bf[bi, 0] += fx
+        bf[bi, 1] += fy
+        bf[bi, 2] += fz
+        bf[bj, 0] -= fx
+        bf[bj, 1] -= fy
+        bf[bj, 2] -= fz
+        bt[bi, 0] += aiy * fz - aiz * fy
+        bt[bi, 1] += aiz * fx - aix * fz
+        bt[bi, 2] += aix * fy - aiy * fx
+        bt[bj, 0] -= ajy * fz - ajz * fy
+        bt[bj, 1] -= ajz * fx - ajx * fz
+        bt[bj, 2] -= ajx * fy - ajy * fx
+        mr = mu_r[mi, mj]
+        if mr > 0.0:
+            if rolling_model == EPSD:
+                k_r = 2.25 * (2.0 * e_star[mi, mj] * sqrt_rd) * mr * mr * r_star * r_star
+                i_ri = SPHERE_CONTACT_INERTIA * ri * ri / binvm[bi]
+                i_rj = SPHERE_CONTACT_INERTIA * rj * rj / binvm[bj]
+                c_r = eta_r * 2.0 * math.sqrt(i_ri * i_rj / (i_ri + i_rj) * k_r)
+                m_max = mr * f_el * r_star
+                sx_, sy_, sz_, tx, ty, tz = epsd_rolling_torque(
+                    ph[k, HIST_ROLLING], ph[k, HIST_ROLLING + 1], ph[k, HIST_ROLLING + 2],
+                    wxi - wxj, wyi - wyj, wzi - wzj, nx, ny, nz, k_r, c_r, m_max, hist_dt)
+                if store:
+                    ph[k, HIST_ROLLING] = sx_
+                    ph[k, HIST_ROLLING + 1] = sy_
+                    ph[k, HIST_ROLLING + 2] = sz_
+                brv[bi, 0] += tx
+                brv[bi, 1] += ty
+                brv[bi, 2] += tz
+                brv[bj, 0] -= tx
+                brv[bj, 1] -= ty
+                brv[bj, 2] -= tz
+                brm[bi] += m_max
+                brm[bj] += m_max
+            elif lever_mode == EDEM_COM:
+                brm[bi] += mr * f_el * math.sqrt(aix * aix + aiy * aiy + aiz * aiz)
+                brm[bj] += mr * f_el * math.sqrt(ajx * ajx + ajy * ajy + ajz * ajz)
+            elif lever_mode == EDEM_SPHERE:
+                brm[bi] += mr * f_el * a
+                brm[bj] += mr * f_el * (rj - 0.5 * overlap)
+            else:
+                # no static stop from particle contacts: this torque resists only the rolling
+                # relative to the neighbour, and a body turning with its neighbours keeps turning
+                tx, ty, tz = relative_rolling_torque(mr, f_el, r_star, wxi - wxj, wyi - wyj,
+                                                     wzi - wzj, nx, ny, nz)
+                brv[bi, 0] -= tx
+                brv[bi, 1] -= ty
+                brv[bi, 2] -= tz
+                brv[bj, 0] += tx
+                brv[bj, 1] += ty
+                brv[bj, 2] += tz
+    # ---- sphere-wall
+    for q in range(ws.shape[0]):
+        i = ws[q]
+        k = wk[q]
+        xi = sx[i, 0]
+        yi = sx[i, 1]
+        zi = sx[i, 2]
+        ri = srad[i]
+        d, nx, ny, nz = wall_distance(wkind, worig, wnorm, wu, wv, whalf, k, xi, yi, zi)
+        overlap = ri - d
+        if overlap <= 0.0:
+            wh[q, 0] = 0.0
+            wh[q, 1] = 0.0
+            wh[q, 2] = 0.0
+            for c in range(3, ww):
+                wh[q, c] = 0.0
+            continue
+        a = ri - 0.5 * overlap
+        bi = sbody[i]
+        aix = xi - nx * a - bx[bi, 0]
+        aiy = yi - ny * a - bx[bi, 1]
+        aiz = zi - nz * a - bx[bi, 2]
+        wxi = bw[bi, 0]
+        wyi = bw[bi, 1]
+        wzi = bw[bi, 2]
+        # velocity of the sphere relative to the wall at the contact point
+        vrx = bv[bi, 0] + wyi * aiz - wzi * aiy - wvel_now[k, 0]
+        vry = bv[bi, 1] + wzi * aix - wxi * aiz - wvel_now[k, 1]
+        vrz = bv[bi, 2] + wxi * aiy - wyi * aix - wvel_now[k, 2]
+        vn = vrx * nx + vry * ny + vrz * nz
+        vtx = vrx - vn * nx
+        vty = vry - vn * ny
+        vtz = vrz - vn * nz
+        mi = bmat[bi]
+        mk = wmat[k]
+        m_star = 1.0 / binvm[bi]
+        cd = damp[mi, mk]
+        if e_exp[mi, mk] != 0.0:
+            cd = impact_damping(wh, q, HIST_IMPACT_SPEED, -vn, log_e[mi, mk], e_exp[mi, mk],
+                                log_v_ref[mi, mk], v_min[mi, mk], store)
+        f_n, f_el, sqrt_rd = normal_force(e_star[mi, mk], ri, m_star, cd, overlap, -vn)
+        ftx, fty, ftz = tangential_force(wh, q, nx, ny, nz, vtx, vty, vtz, g_star[mi, mk],
+                                         m_star, cd, mu_s[mi, mk], sqrt_rd, f_n, hist_dt)
+        fx = ftx + f_n * nx
+        fy = fty + f_n * ny
+        fz = ftz + f_n * nz
+        bf[bi, 0] += fx
+        bf[bi, 1] += fy
+        bf[bi, 2] += fz
+        bt[bi, 0] += aiy * fz - aiz * fy
+        bt[bi, 1] += aiz * fx - aix * fz
+        bt[bi, 2] += aix * fy - aiy * fx
+        mr = mu_r[mi, mk]
+        if mr > 0.0:
+            if rolling_model == EPSD:
+                # a wall neither turns nor moves under the torque: R_r and I_r are the sphere's
+                k_r = 2.25 * (2.0 * e_star[mi, mk] * sqrt_rd) * mr * mr * ri * ri
+                c_r = eta_r * 2.0 * math.sqrt(SPHERE_CONTACT_INERTIA * ri * ri / binvm[bi] * k_r)
+                m_max = mr * f_el * ri
+                sx_, sy_, sz_, tx, ty, tz = epsd_rolling_torque(
+                    wh[q, HIST_ROLLING], wh[q, HIST_ROLLING + 1], wh[q, HIST_ROLLING + 2],
+                    wxi, wyi, wzi, nx, ny, nz, k_r, c_r, m_max, hist_dt)
+                if store:
+                    wh[q, HIST_ROLLING] = sx_
+                    wh[q, HIST_ROLLING + 1] = sy_
+                    wh[q, HIST_ROLLING + 2] = sz_
+                brv[bi, 0] += tx
+                brv[bi, 1] += ty
+                brv[bi, 2] += tz
+                brm[bi] += m_max
+            elif lever_mode == EDEM_COM:
+                brm[bi] += mr * f_el * math.sqrt(aix * aix + aiy * aiy + aiz * aiz)
+            elif lever_mode == EDEM_SPHERE:
+                brm[bi] += mr * f_el * a
+            else:
+                brm[bi] += mr * f_el * ri
+                tx, ty, tz = relative_rolling_torque(mr, f_el, ri, wxi, wyi, wzi, nx, ny, nz)
+                brv[bi, 0] -= tx
+                brv[bi, 1] -= ty
+                brv[bi, 2] -= tz
+
+
+@kernel
 def _wall_velocities(t, wvel, wwin, wvel_now):
     """Velocity of each wall during the step whose midpoint is ``t`` (zero outside its window)."""
     for k in range(wvel.shape[0]):
@@ -298,12 +560,13 @@ def _wall_velocities(t, wvel, wwin, wvel_now):
 
 
 @kernel
-def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, need_rebuild, need_forces,
+def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, extended, rolling_model, eta_r,
+             need_rebuild, need_forces,
              n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, bmat, bactive,
              n_spheres, sbody, soff, srad, sx, sx0, sxw,
              pstart, ppi, pj, ph, wstart, ws, wk, wh,
              wkind, worig, wnorm, wu, wv, whalf, wvel, wwin, wmat, wx0, wvel_now,
-             e_star, g_star, damp, mu_s, mu_r,
+             e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min,
              lo, inv_cell, dims, cell_start):
     """Advance the state by ``n_steps`` steps (see the module docstring for the step).
 
@@ -313,7 +576,7 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, need_rebuild, need_fo
     lists and the numbers of pair-list and wall-list rebuilds.
     """
     h = 0.5 * dt
-    relative = lever_mode == LIGGGHTS_REFF
+    mode = kick_mode(lever_mode, rolling_model)
     n_walls = wkind.shape[0]
     n_rebuilds = 0
     n_wall_rebuilds = 0
@@ -322,7 +585,7 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, need_rebuild, need_fo
             tau = h if step == 0 else dt
             for b in range(n_bodies):
                 if bactive[b]:
-                    half_kick(b, tau, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, relative)
+                    half_kick(b, tau, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, mode)
                     drift(b, dt, bx, bv, bq, bL, bw, bR, binvi)
             _wall_velocities(t + h, wvel, wwin, wvel_now)
             for k in range(n_walls):
@@ -353,14 +616,20 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, need_rebuild, need_fo
         need_rebuild = False
         # the first evaluation of a fresh state must not advance the contact history
         hist_dt = dt if step >= 0 else 0.0
-        _contact_forces(hist_dt, lever_mode, n_bodies, bx, bv, bw, bf, bt, brm,
-                        brv, binvm, bmat, sbody, sx, srad, ppi, pj, ph, ws, wk, wh, wkind,
-                        worig, wnorm, wu, wv, whalf, wvel_now, wmat, e_star, g_star, damp, mu_s,
-                        mu_r)
+        if extended:
+            _contact_forces_extended(hist_dt, lever_mode, rolling_model, eta_r, n_bodies, bx, bv, bw,
+                                     bf, bt, brm, brv, binvm, bmat, sbody, sx, srad, ppi, pj, ph, ws,
+                                     wk, wh, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
+                                     e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min)
+        else:
+            _contact_forces(hist_dt, lever_mode, n_bodies, bx, bv, bw, bf, bt, brm,
+                            brv, binvm, bmat, sbody, sx, srad, ppi, pj, ph, ws, wk, wh, wkind,
+                            worig, wnorm, wu, wv, whalf, wvel_now, wmat, e_star, g_star, damp, mu_s,
+                            mu_r)
     if n_steps > 0:
         for b in range(n_bodies):
             if bactive[b]:
-                half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, relative)
+                half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, mode)
     return t, pstart, ppi, pj, ph, wstart, ws, wk, wh, n_rebuilds, n_wall_rebuilds
 
 
@@ -459,7 +728,10 @@ class Simulation:
         [m/s2]; may be changed between runs (``sim.gravity = ...``, e.g. to tilt a plate).
     rolling_lever : str
         ``"liggghts_reff"`` (default), ``"edem_com"`` or ``"edem_sphere"``
-        (``simulate.contact.rolling``).
+        (``simulate.contact.rolling``), the lever of the constant torque rolling model. The
+        rolling model itself (``"constant_torque"`` or ``"epsd"``) and the velocity dependence
+        of the restitution come with ``materials`` (``MaterialTable(rolling_model=...)``,
+        ``set_pair(..., restitution_exponent=...)``, or ``MaterialTable.from_parameters``).
     skin : float or None
         Verlet skin [m]; default 0.4 of the smallest sphere radius.
     max_dt_fraction : float
@@ -545,6 +817,11 @@ class Simulation:
         if self.n_spheres:
             return 0.4 * float(self._s["srad"][:self.n_spheres].min())
         return 0.4 * min((float(t.radii.min()) for t in self.templates), default=0.005)
+
+    @property
+    def rolling_model(self) -> str:
+        """Rolling resistance model of the contacts (from the material table)."""
+        return self.materials.rolling_model
 
     def add_template(self, template: ClumpTemplate) -> int:
         """Register a clump template; returns its id."""
@@ -705,11 +982,11 @@ class Simulation:
         return t_r
 
     def _template_rayleigh_time(self) -> float:
-        """T_R from the factories' templates (before any particle exists)."""
+        """T_R from every template the factories may insert (before any particle exists)."""
         t_r = math.inf
         for f in self.factories:
             mat = self.materials.material(f.material)
-            r = float(self.templates[f.template].radii.min())
+            r = min(float(self.templates[k].radii.min()) for k in f.templates)
             t_r = min(t_r, rayleigh_time(r, mat.density, mat.shear_modulus, mat.poisson_ratio))
         return t_r
 
@@ -795,18 +1072,21 @@ class Simulation:
         if self._need_forces:
             refresh_rotation(self.n_bodies, B["bq"], B["bL"], B["bw"], B["bR"], B["binvi"])
         pt = self.materials.compile()
+        width = history_width(pt.velocity_restitution, pt.rolling_model)
+        self._ensure_history_width(width)
         g = self._gravity
         out = _advance(
             n_steps, self.time, self.dt, g[0], g[1], g[2], self.skin, self._lever,
-            self._need_rebuild, self._need_forces,
+            width > HIST_IMPACT_SPEED, pt.rolling_model, pt.rolling_damping_ratio, self._need_rebuild,
+            self._need_forces,
             self.n_bodies, B["bx"], B["bv"], B["bq"], B["bL"], B["bw"], B["bR"], B["bf"], B["bt"],
             B["brm"], B["brv"], B["binvm"], B["binvi"], B["bmat"], B["bactive"],
             self.n_spheres, S["sbody"], S["soff"], S["srad"], S["sx"], S["sx0"], S["sxw"],
             *self._pairs, *self._wpairs,
             W["kind"], W["origin"], W["normal"], W["axis_u"], W["axis_v"], W["half"], W["velocity"],
             W["window"], W["material"], self._wx0, self._wvel_now,
-            pt.e_star, pt.g_star, pt.damping, pt.mu_s, pt.mu_r,
-            self.domain_lo, inv_cell, dims, cell_start)
+            pt.e_star, pt.g_star, pt.damping, pt.mu_s, pt.mu_r, pt.log_e, pt.e_exponent, pt.log_v_ref,
+            pt.v_min, self.domain_lo, inv_cell, dims, cell_start)
         self.time = out[0]
         self._pairs = out[1:5]
         self._wpairs = out[5:9]
@@ -814,6 +1094,16 @@ class Simulation:
         self._need_rebuild = False
         self._need_forces = False
         return int(out[9])
+
+    def _ensure_history_width(self, width: int) -> None:
+        """Widen the contact history rows (zero-filled) if the hooks in use need more columns;
+        a hook switched on mid-run starts from empty slots, which the kernels fill."""
+        for name in ("_pairs", "_wpairs"):
+            start, a, b, hist = getattr(self, name)
+            if hist.shape[1] < width:
+                wide = np.zeros((hist.shape[0], width))
+                wide[:, :hist.shape[1]] = hist
+                setattr(self, name, (start, a, b, wide))
 
     def _check_state(self):
         n = self.n_bodies
@@ -911,20 +1201,62 @@ class Simulation:
 
     def contact_forces(self) -> tuple[np.ndarray, np.ndarray]:
         """Contact force [N] and torque about the centre of mass [N m] on each body at the last
-        step (rolling-friction torque excluded; it is applied in the integration, capped)."""
+        step (rolling-friction torque excluded: it is applied in the integration, capped for the
+        constant torque model; see ``rolling_resistance``)."""
         return self._b["bf"][:self.n_bodies].copy(), self._b["bt"][:self.n_bodies].copy()
 
     def rolling_resistance(self) -> tuple[np.ndarray, np.ndarray]:
-        """Rolling-friction terms of each body at the last force evaluation: the summed torque
-        magnitude sum(mu_r F_n R_lever) [N m] over the contacts that can hold it still (all
-        contacts with the EDEM levers, wall contacts only with ``liggghts_reff``), and
-        (``liggghts_reff`` only) the summed torque vector [N m], both before the cap
-        (``simulate.contact.rolling``)."""
+        """Rolling-friction terms of each body at the last force evaluation.
+
+        Constant torque model: the summed torque magnitude sum(mu_r F_n R_lever) [N m] over the
+        contacts that can hold it still (all contacts with the EDEM levers, wall contacts only
+        with ``liggghts_reff``), and (``liggghts_reff`` only) the summed torque vector [N m],
+        both before the cap. Spring-dashpot model (``epsd``): the summed limit torques
+        sum(mu_r F_n R_r) [N m] over all the body's contacts, and the summed spring-dashpot
+        torque applied to it [N m] (``simulate.contact.rolling``)."""
         return self._b["brm"][:self.n_bodies].copy(), self._b["brv"][:self.n_bodies].copy()
 
     def wall_origins(self) -> np.ndarray:
         """Current point (plane) or centre (rectangle) of each wall [m]."""
         return self._w["origin"].copy()
+
+    def contact_history(self) -> dict:
+        """History of the contacts touching now (copies; rows in Verlet-list order).
+
+        Returns
+        -------
+        dict
+            ``"pairs"``: ``i``, ``j`` (sphere ids, i < j); ``"walls"``: ``sphere``, ``wall``;
+            each with ``tangential`` (n, 3) the tangential spring displacement [m],
+            ``impact_speed`` (n,) the normal approach speed at first touch [m/s] (NaN unless
+            some pair has a velocity-dependent restitution; 0 for a contact not yet advanced
+            by a step) and ``rolling_torque`` (n, 3) the spring-dashpot rolling spring torque
+            on sphere i [N m] (zeros unless ``rolling_model`` is ``epsd``).
+        """
+        sx, r = self._s["sx"], self._s["srad"]
+        recorded = self.materials.compile().velocity_restitution
+
+        def columns(hist, touching):
+            h = hist[touching]
+            n = h.shape[0]
+            return {"tangential": h[:, 0:3].copy(),
+                    "impact_speed": (h[:, HIST_IMPACT_SPEED].copy()
+                                     if recorded and h.shape[1] > HIST_IMPACT_SPEED else np.full(n, np.nan)),
+                    "rolling_torque": (h[:, HIST_ROLLING:HIST_ROLLING + 3].copy()
+                                       if h.shape[1] > HIST_ROLLING else np.zeros((n, 3)))}
+
+        _, pi, pj, ph = self._pairs
+        touch = np.zeros(pi.size, bool)
+        if pi.size:
+            touch = np.linalg.norm(sx[pj] - sx[pi], axis=1) < r[pi] + r[pj]
+        pairs = {"i": pi[touch].copy(), "j": pj[touch].copy(), **columns(ph, touch)}
+        _, ws, wk, wh = self._wpairs
+        wtouch = np.zeros(ws.size, bool)
+        if ws.size:
+            dist = wall_distances(self._w, sx[ws])
+            wtouch = dist[np.arange(ws.size), wk] < r[ws]
+        walls = {"sphere": ws[wtouch].copy(), "wall": wk[wtouch].copy(), **columns(wh, wtouch)}
+        return {"pairs": pairs, "walls": walls}
 
     def n_contacts(self) -> tuple[int, int]:
         """Numbers of touching sphere-sphere and sphere-wall pairs now."""

@@ -2,30 +2,40 @@
 
 Each extension answers a mechanism of the critique catalogue (``analyse.critique.mechanisms``)
 and is recorded, by name and settings, in the provenance of every run that uses it
-(:func:`describe`). ``EXTENSIONS`` lists them:
+(:func:`describe`). Three of them are engine hooks switched by ``DEMParameters`` fields
+(``ENGINE_HOOKS``), so they are recorded with the parameters of every run as well;
+:func:`engine_hooks` names those a parameter set switches on, :func:`with_velocity_restitution`,
+:func:`with_spring_dashpot_rolling` and :func:`with_size_distribution` switch them on.
+``EXTENSIONS`` lists them all:
 
 ``velocity_dependent_restitution``
     e falls with impact speed. :func:`fit_velocity_restitution` fits the power law
     e(v) = e_ref (v / v_ref)^(-n) to drops from several heights (Johnson 1985, sec. 11.5:
-    n = 1/4 for fully plastic impacts). :func:`parameters_for_impact` gives the parameters of
-    a single-impact twin (the drop rig) at its impact speed, which is exact for one impact
-    of known speed; a law evaluated per contact inside the contact model (needed for heaps)
-    is an engine hook (see :class:`VelocityRestitution`).
+    n = 1/4 for fully plastic impacts). Engine hook (``e_pp_exponent``, ``e_pp_v_ref``,
+    ``e_pw_exponent``, ``e_pw_v_ref``): each contact takes e(v) at its normal approach speed
+    at first touch, kept in its history, for its whole duration
+    (``simulate.contact.hertz_mindlin``), in every rig and in heaps.
+    :func:`parameters_for_impact` instead sets the constant e of a single-impact twin (the
+    drop rig) to e(v) at its impact speed, which is the same for one impact of known speed.
 ``inverted_restitution``
     The contact restitution that makes the drop twin reproduce the measured apparent
     restitution: an elongated body turns part of its energy into rotation, so sqrt(h2/h1) is
     not the contact restitution. :func:`invert_drop_twin` solves twin(e) = measured.
 ``size_distribution``
     Segments drawn from the calliper size distribution (:class:`SizeDistribution`): a twin of
-    one trial uses its own specimen's length and diameter; a heap draws each segment from the
-    measured (length, diameter) pairs.
+    one trial uses its own specimen's length and diameter (:func:`segment_of_size`); a heap
+    draws each segment from the measured (length, diameter) pairs (engine hook
+    ``segment_sizes``: a particle factory with one template per pair,
+    ``simulate.scenes.build_paper_repose_case``).
 ``more_spheres``
     More spheres per clump (:func:`with_more_spheres`): a smoother surface, closer to the
     cylinder's volume and inertia (:func:`surface_ripple`).
 ``rolling_spring_dashpot``
-    Elastic-plastic spring-dashpot rolling resistance (Ai et al. 2011, model type C):
-    :func:`epsd_stiffness`, :func:`epsd_damping`, and the per-contact update
-    :func:`epsd_rolling_torque`, an evaluator for the contact kernel.
+    Elastic-plastic spring-dashpot rolling resistance (Ai et al. 2011, model type C). Engine
+    hook (``rolling_model="epsd"``, ``rolling_damping_ratio``): the contact kernel's rolling
+    model, with the spring torque of each contact in its history
+    (``simulate.contact.rolling``: :func:`epsd_stiffness`, :func:`epsd_damping`,
+    :func:`epsd_rolling_torque`).
 
 References
 ----------
@@ -47,8 +57,8 @@ import numpy as np
 from scipy import stats
 
 from demcal.errors import InputError
-from simulate._jit import evaluator
 from simulate.clump import ClumpTemplate, segment_template
+from simulate.contact.rolling import epsd_damping, epsd_rolling_torque, epsd_stiffness  # noqa: F401
 from simulate.params import DEMParameters
 
 #: Extension names, in the order of the critique's catalogue.
@@ -64,6 +74,14 @@ MAX_TOLERANCE = 0.01
 #: Parameter of ``DEMParameters`` holding the restitution of each pair the rigs know.
 RESTITUTION_PARAMETER = {"particle-steel": "e_pw", "particle-particle": "e_pp"}
 
+#: Extensions that are engine hooks: the ``DEMParameters`` fields that switch and set them.
+ENGINE_HOOKS = {
+    "velocity_dependent_restitution": ("e_pp_exponent", "e_pp_v_ref", "e_pp_v_min",
+                                       "e_pw_exponent", "e_pw_v_ref", "e_pw_v_min"),
+    "rolling_spring_dashpot": ("rolling_model", "rolling_damping_ratio"),
+    "size_distribution": ("segment_sizes",),
+}
+
 
 def describe(name: str, **settings) -> dict:
     """Provenance record of an extension: ``{"extension": name, **settings}``; an unknown name
@@ -71,6 +89,27 @@ def describe(name: str, **settings) -> dict:
     if name not in EXTENSIONS:
         raise InputError(f"unknown model extension {name!r}; valid: {', '.join(EXTENSIONS)}")
     return {"extension": name, **settings}
+
+
+def engine_hooks(params: DEMParameters) -> list[dict]:
+    """Provenance records (:func:`describe`) of the engine hooks ``params`` switches on, with
+    their settings; empty for the default model."""
+    out = []
+    if params.e_pp_exponent != 0.0 or params.e_pw_exponent != 0.0:
+        laws = {pair: {"e_ref": getattr(params, f"e_{pair}"), "v_ref": getattr(params, f"e_{pair}_v_ref"),
+                       "exponent": getattr(params, f"e_{pair}_exponent"),
+                       "v_min": getattr(params, f"e_{pair}_v_min")}
+                for pair in ("pp", "pw") if getattr(params, f"e_{pair}_exponent") != 0.0}
+        out.append(describe("velocity_dependent_restitution", mode="per contact (engine)", laws=laws))
+    if params.rolling_model == "epsd":
+        out.append(describe("rolling_spring_dashpot", rolling_model=params.rolling_model,
+                            damping_ratio=params.rolling_damping_ratio))
+    if params.segment_sizes is not None:
+        sizes = np.asarray(params.segment_sizes)
+        out.append(describe("size_distribution", mode="segments drawn per clump (engine)",
+                            n_sizes=int(sizes.shape[0]),
+                            length_mean=float(sizes[:, 0].mean()), diameter_mean=float(sizes[:, 1].mean())))
+    return out
 
 
 def restitution_parameter(pair: str) -> str:
@@ -118,9 +157,9 @@ class VelocityRestitution:
 
     Notes
     -----
-    Inside the contact model the law needs the normal approach speed at first touch of each
-    contact (a per-contact history slot) to set that contact's damping from e(v); until the
-    engine has it, :func:`parameters_for_impact` applies the law to single-impact twins.
+    :func:`with_velocity_restitution` puts the law into the contact model (each contact's
+    damping from e(v) at its first-touch approach speed); :func:`parameters_for_impact`
+    applies it to a single-impact twin as a constant e instead.
     """
 
     pair: str
@@ -200,6 +239,27 @@ def parameters_for_impact(params: DEMParameters, pair: str, law: VelocityRestitu
                           speed: float) -> DEMParameters:
     """Parameters of a single-impact twin with the pair's restitution e(speed) of ``law``."""
     return params.with_(**{restitution_parameter(pair): law(speed)})
+
+
+def with_velocity_restitution(params: DEMParameters, pair: str, law: VelocityRestitution, *,
+                              hold_below_fitted: bool = True) -> DEMParameters:
+    """``params`` with ``law`` as the engine's e(v) of ``pair`` (``particle-steel`` or
+    ``particle-particle``): e = e_ref at v_ref, exponent n, and (``hold_below_fitted``) e held
+    at its value at the slowest fitted impact below it (``v_min``), rather than extrapolated to
+    e = 1. An e_ref above 1 (possible from a fit) is refused, as it would be for a constant e."""
+    name = restitution_parameter(pair)
+    v_min = min(law.speeds) if hold_below_fitted and law.speeds else 0.0
+    return params.with_(**{name: law.e_ref, f"{name}_v_ref": law.v_ref, f"{name}_exponent": law.exponent,
+                           f"{name}_v_min": v_min})
+
+
+def with_spring_dashpot_rolling(params: DEMParameters, damping_ratio: float | None = None) -> DEMParameters:
+    """``params`` with the spring-dashpot (type C) rolling model, keeping ``mu_r`` (and the
+    damping ratio unless given)."""
+    changes = {"rolling_model": "epsd"}
+    if damping_ratio is not None:
+        changes["rolling_damping_ratio"] = damping_ratio
+    return params.with_(**changes)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -413,6 +473,13 @@ class SizeDistribution:
         return asdict(self)
 
 
+def with_size_distribution(params: DEMParameters, distribution: SizeDistribution) -> DEMParameters:
+    """``params`` whose heaps draw each segment from ``distribution``'s (length, diameter) pairs."""
+    if not isinstance(distribution, SizeDistribution):
+        raise InputError(f"distribution must be a SizeDistribution, got {type(distribution).__name__}")
+    return params.with_(segment_sizes=tuple(zip(distribution.lengths, distribution.diameters)))
+
+
 def segment_of_size(params: DEMParameters, length: float, diameter: float) -> ClumpTemplate:
     """The segment template of ``params`` with another length and diameter [m] (same number of
     spheres, density and mass model; a ``scaled`` mass model keeps its mass per volume)."""
@@ -460,70 +527,3 @@ def with_more_spheres(params: DEMParameters, n_spheres: int | None = None, *,
     if int(n_spheres) != n_spheres or n_spheres < 1:
         raise InputError(f"n_spheres must be a positive integer, got {n_spheres!r}")
     return params.with_(spheres_per_clump=int(n_spheres))
-
-
-# ----------------------------------------------------------------------------------------------
-# spring-dashpot rolling resistance (Ai et al. 2011, type C)
-
-
-def epsd_stiffness(normal_stiffness: float, mu_r: float, rolling_radius: float) -> float:
-    """Rolling stiffness k_r = 2.25 k_n mu_r^2 R_r^2 [N m/rad] (Ai et al. 2011, eq. 15, after
-    Iwashita & Oda 1998), from the normal stiffness k_n [N/m], the rolling friction mu_r [-]
-    and the rolling radius R_r [m]."""
-    return 2.25 * normal_stiffness * mu_r ** 2 * rolling_radius ** 2
-
-
-def epsd_damping(rolling_stiffness: float, inertia: float, damping_ratio: float = 0.3) -> float:
-    """Rolling viscous damping C_r = eta_r 2 sqrt(I_r k_r) [N m s/rad] (Ai et al. 2011, eq. 16;
-    eta_r = 0.3 recommended), I_r the moment of inertia about the contact point [kg m^2]."""
-    return damping_ratio * 2.0 * math.sqrt(inertia * rolling_stiffness)
-
-
-@evaluator
-def epsd_rolling_torque(mx, my, mz, wrx, wry, wrz, nx, ny, nz, k_r, c_r, m_max, dt):
-    """One step of the type C (elastic-plastic spring-dashpot) rolling torque of a contact.
-
-    Ai et al. (2011), eqs. (12)-(17): the spring torque M^k is advanced by -k_r dtheta_r with
-    dtheta_r = w_r dt the relative rolling rotation (w_r with its component along the contact
-    normal n removed), kept in the tangent plane, and capped at |M^k| <= M_m = mu_r R_r F_n
-    (full mobilisation: the contact then rolls at constant resistance); the damping torque
-    -c_r w_r acts only while the spring is below its cap (their f = 0 option).
-
-    Parameters
-    ----------
-    mx, my, mz : float
-        Spring torque of the contact at the previous step [N m] (the contact's history).
-    wrx, wry, wrz : float
-        Relative angular velocity w_i - w_j [rad/s].
-    nx, ny, nz : float
-        Unit contact normal.
-    k_r, c_r, m_max : float
-        Rolling stiffness [N m/rad], damping [N m s/rad] and limit torque M_m [N m].
-    dt : float
-        Time step [s].
-
-    Returns
-    -------
-    (mx, my, mz, tx, ty, tz)
-        New spring torque (to store) and the total rolling torque on body i [N m].
-    """
-    wn = wrx * nx + wry * ny + wrz * nz
-    rx = wrx - wn * nx
-    ry = wry - wn * ny
-    rz = wrz - wn * nz
-    # keep the stored torque in the current tangent plane
-    mn = mx * nx + my * ny + mz * nz
-    mx -= mn * nx
-    my -= mn * ny
-    mz -= mn * nz
-    mx -= k_r * rx * dt
-    my -= k_r * ry * dt
-    mz -= k_r * rz * dt
-    mag = math.sqrt(mx * mx + my * my + mz * mz)
-    if mag >= m_max:
-        scale = m_max / mag if mag > 0.0 else 0.0
-        mx *= scale
-        my *= scale
-        mz *= scale
-        return mx, my, mz, mx, my, mz
-    return mx, my, mz, mx - c_r * rx, my - c_r * ry, mz - c_r * rz

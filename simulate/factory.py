@@ -1,12 +1,20 @@
 """Particle factories: clumps inserted at random, non-overlapping positions and orientations.
 
-A ``ParticleFactory`` inserts ``n_total`` clumps of one template uniformly in time over
+A ``ParticleFactory`` inserts ``n_total`` clumps of one template (or of several, each clump's
+template drawn with the given weights: a size distribution) uniformly in time over
 ``[start_time, end_time]`` (EDEM's dynamic factory: e.g. 500 segments in the first second),
 each at a uniformly random position and uniformly random orientation (Shoemake 1992) such
 that every member sphere lies inside the box ``region_lo``-``region_hi`` and overlaps neither
 another sphere nor a wall. A clump that cannot be placed in ``max_attempts`` draws is retried
 at the next chunk (``failed_attempts`` counts the rejected draws); the simulation shortens its
 chunks so that each clump enters when it is due.
+
+Several templates. With ``template`` a sequence of template ids and ``weights`` (default
+equal), the template of each clump is drawn (``Generator.choice``) before its position and
+orientation, from the same generator, and kept until that clump is placed: a crowded region
+delays a large clump but never swaps it for a small one, so the inserted sizes follow the
+weights. With one template no draw is made, so a single-template factory gives the same clumps
+for a given seed as before.
 
 Randomness comes only from ``seed`` (an int or a ``numpy.random.Generator``).
 
@@ -37,8 +45,8 @@ class ParticleFactory:
 
     Parameters
     ----------
-    template : int
-        Template id in the simulation.
+    template : int or sequence of int
+        Template id in the simulation, or several ids to draw each clump's template from.
     n_total : int
         Clumps to insert.
     region_lo, region_hi : 3-sequence
@@ -51,19 +59,39 @@ class ParticleFactory:
         Initial velocity [m/s].
     max_attempts : int
         Random draws per clump per insertion attempt.
+    weights : sequence of float, optional
+        Relative frequency of each template (several templates only); default equal.
 
     Attributes
     ----------
+    templates : tuple of int
+        The template ids; ``template`` is the first.
+    probabilities : numpy.ndarray
+        Normalised ``weights``.
     bodies : list of int
         Body ids inserted so far.
+    body_templates : list of int
+        Template id of each inserted body.
     failed_attempts : int
         Rejected draws (overlap or outside the region).
     """
 
-    def __init__(self, template: int, n_total: int, region_lo, region_hi, *, seed,
+    def __init__(self, template, n_total: int, region_lo, region_hi, *, seed,
                  start_time: float = 0.0, end_time: float = 1.0, material: str = "particle",
-                 velocity=(0.0, 0.0, 0.0), max_attempts: int = 200):
-        self.template = int(template)
+                 velocity=(0.0, 0.0, 0.0), max_attempts: int = 200, weights=None):
+        ids = np.atleast_1d(np.asarray(template))
+        if ids.ndim != 1 or ids.size == 0 or not np.issubdtype(ids.dtype, np.integer) or np.any(ids < 0):
+            raise InputError(f"template must be a template id or a non-empty sequence of ids, got {template!r}")
+        self.templates = tuple(int(k) for k in ids)
+        self.template = self.templates[0]
+        if weights is None:
+            w = np.ones(len(self.templates))
+        else:
+            w = np.asarray(weights, dtype=float).reshape(-1)
+            if w.size != len(self.templates) or not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
+                raise InputError(f"weights must be {len(self.templates)} finite numbers >= 0, not all "
+                                 f"zero (one per template), got {weights!r}")
+        self.probabilities = w / w.sum()
         if int(n_total) != n_total or n_total < 0:
             raise InputError(f"n_total must be a non-negative integer, got {n_total!r}")
         self.n_total = int(n_total)
@@ -86,7 +114,9 @@ class ParticleFactory:
         self.velocity = np.asarray(velocity, dtype=float).reshape(3)
         self.max_attempts = int(max_attempts)
         self.bodies: list[int] = []
+        self.body_templates: list[int] = []
         self.failed_attempts = 0
+        self._pending = None  # template drawn for the next clump, kept until it is placed
 
     @property
     def inserted(self) -> int:
@@ -123,8 +153,17 @@ class ParticleFactory:
             placed += 1
         return placed
 
+    def _next_template(self) -> int:
+        """Template of the next clump: drawn once per clump, and only if there are several."""
+        if len(self.templates) == 1:
+            return self.template
+        if self._pending is None:
+            self._pending = self.templates[int(self.rng.choice(len(self.templates), p=self.probabilities))]
+        return self._pending
+
     def _insert_one(self, sim) -> bool:
-        tpl = sim.templates[self.template]
+        template = self._next_template()
+        tpl = sim.templates[template]
         packed = sim._w
         existing = sim.sphere_positions()
         ex_r = sim.sphere_radii()
@@ -152,13 +191,16 @@ class ParticleFactory:
                 if np.any(dw < tpl.radii[:, None]):
                     self.failed_attempts += 1
                     continue
-            body = sim.add_clump(self.template, pos, q, velocity=self.velocity, material=self.material)
+            body = sim.add_clump(template, pos, q, velocity=self.velocity, material=self.material)
             self.bodies.append(body)
+            self.body_templates.append(template)
+            self._pending = None
             return True
         return False
 
     def to_dict(self) -> dict:
-        return {"template": self.template, "n_total": self.n_total,
+        return {"template": self.template, "templates": list(self.templates),
+                "weights": self.probabilities.tolist(), "n_total": self.n_total,
                 "region_lo": self.region_lo.tolist(), "region_hi": self.region_hi.tolist(),
                 "start_time": self.start_time, "end_time": self.end_time, "material": self.material,
                 "velocity": self.velocity.tolist(), "inserted": self.inserted,

@@ -31,7 +31,7 @@ import math
 import numpy as np
 
 from simulate._jit import evaluator, kernel
-from simulate.contact.rolling import cap_rolling_impulse
+from simulate.contact.rolling import KICK_ELASTIC, KICK_RELATIVE, cap_rolling_impulse
 
 
 @evaluator
@@ -92,18 +92,21 @@ def rotate_quat(q0, q1, q2, q3, wx, wy, wz, dt):
 
 
 @evaluator
-def half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, relative):
+def half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, mode):
     """Kick of body ``b`` over ``h`` (dt/2, or dt for two merged half kicks): forces, torques,
     then the rolling torque (see ``simulate.contact.rolling``).
 
     ``brm[b]`` is the summed magnitude of the body's rolling torques. With the EDEM conventions
-    (``relative`` False) the torque is ``brm[b]`` against the unit angular velocity after the
-    other torques; with the LIGGGHTS convention (``relative`` True) it is the vector ``brv[b]``
-    summed over the contacts, and ``brm[b]`` counts its wall contacts only (a wall does not
-    turn, so there relative rolling is the body's own). If the resistance ``brm[b]`` over ``h``
-    could absorb the body's whole angular momentum, the rotation stops (the torque acts as a
-    static constraint up to its magnitude); otherwise the torque acts in full, scaled down only so that it never
-    reverses the spin about the current axis. Updates v, L and w of the body.
+    (``mode`` ``KICK_DIRECTIONAL``) the torque is ``brm[b]`` against the unit angular velocity
+    after the other torques; with the LIGGGHTS convention (``KICK_RELATIVE``) it is the vector
+    ``brv[b]`` summed over the contacts, and ``brm[b]`` counts its wall contacts only (a wall
+    does not turn, so there relative rolling is the body's own). If the resistance ``brm[b]``
+    over ``h`` could absorb the body's whole angular momentum, the rotation stops (the torque
+    acts as a static constraint up to its magnitude); otherwise the torque acts in full, scaled
+    down only so that it never reverses the spin about the current axis. With the spring-dashpot
+    model (``KICK_ELASTIC``) ``brv[b]`` is an ordinary torque, applied in full (a spring must be
+    free to turn the body back), and ``brm[b]`` (its limit) is not used. Updates v, L and w of
+    the body.
     """
     im = binvm[b]
     bv[b, 0] += (bf[b, 0] * im + gx) * h
@@ -112,6 +115,18 @@ def half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, 
     lx = bL[b, 0] + bt[b, 0] * h
     ly = bL[b, 1] + bt[b, 1] * h
     lz = bL[b, 2] + bt[b, 2] * h
+    if mode == KICK_ELASTIC:
+        lx += brv[b, 0] * h
+        ly += brv[b, 1] * h
+        lz += brv[b, 2] * h
+        wx, wy, wz = apply_inverse_inertia(bR, b, binvi, lx, ly, lz)
+        bL[b, 0] = lx
+        bL[b, 1] = ly
+        bL[b, 2] = lz
+        bw[b, 0] = wx
+        bw[b, 1] = wy
+        bw[b, 2] = wz
+        return
     m = brm[b]
     if m > 0.0 and lx * lx + ly * ly + lz * lz <= (m * h) ** 2:
         lx = 0.0
@@ -125,7 +140,7 @@ def half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, 
         tx = 0.0
         ty = 0.0
         tz = 0.0
-        if relative:
+        if mode == KICK_RELATIVE:
             tx = brv[b, 0]
             ty = brv[b, 1]
             tz = brv[b, 2]

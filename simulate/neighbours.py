@@ -12,8 +12,10 @@ Pairs are found over the 13 forward neighbour cells plus the own cell, then orde
 first sphere (compressed rows: ``start[i]:start[i+1]`` holds the partners of sphere i).
 Sphere-wall pairs are listed in rows by sphere the same way.
 
-Contact history (the tangential displacement of each contact) lives in a row per listed pair and
-is carried across rebuilds by looking each new pair up in the old rows.
+Contact history (the tangential displacement of each contact, and the slots of the optional
+engine hooks: impact speed, rolling spring torque; ``simulate.engine``) lives in a row per
+listed pair, as many columns as the old list has, and is carried across rebuilds by looking
+each new pair up in the old rows.
 
 References
 ----------
@@ -68,8 +70,8 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
         Row pointers.
     pi, pj : int64 (n_pairs,)
         First and second sphere of each pair (pi ascending, pi < pj).
-    hist : float64 (n_pairs, 3)
-        Tangential displacement carried over (zero for new pairs).
+    hist : float64 (n_pairs, w)
+        Contact history carried over (zero for new pairs), as wide as ``old_hist``.
     """
     nx = dims[0] + 2
     ny = dims[1] + 2
@@ -183,7 +185,8 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
         pj[pos[a]] = tb[k]
         pos[a] += 1
 
-    hist = np.zeros((n, 3))
+    width = old_hist.shape[1]
+    hist = np.zeros((n, width))
     n_old_rows = old_start.shape[0] - 1
     for k in range(n):
         a = pi[k]
@@ -192,9 +195,8 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
         b = pj[k]
         for q in range(old_start[a], old_start[a + 1]):
             if old_j[q] == b:
-                hist[k, 0] = old_hist[q, 0]
-                hist[k, 1] = old_hist[q, 1]
-                hist[k, 2] = old_hist[q, 2]
+                for c in range(width):
+                    hist[k, c] = old_hist[q, c]
                 break
     return start, pi, pj, hist
 
@@ -204,7 +206,8 @@ def build_wall_list(n_spheres, sx, srad, sbody, bactive, skin, kind, origin, nor
                     half, old_start, old_wall, old_hist):
     """Sphere-wall Verlet list (rows by sphere) with history carried over.
 
-    Returns ``start`` (n_spheres + 1,), ``ws`` (sphere of each pair), ``wk`` (wall), ``hist``.
+    Returns ``start`` (n_spheres + 1,), ``ws`` (sphere of each pair), ``wk`` (wall), ``hist``
+    (as wide as ``old_hist``).
     """
     n_walls = kind.shape[0]
     start = np.zeros(n_spheres + 1, np.int64)
@@ -233,7 +236,8 @@ def build_wall_list(n_spheres, sx, srad, sbody, bactive, skin, kind, origin, nor
         start[s + 1] = n
     ws = ts[:n].copy()
     wk = tk[:n].copy()
-    hist = np.zeros((n, 3))
+    width = old_hist.shape[1]
+    hist = np.zeros((n, width))
     n_old_rows = old_start.shape[0] - 1
     for m in range(n):
         s = ws[m]
@@ -241,8 +245,7 @@ def build_wall_list(n_spheres, sx, srad, sbody, bactive, skin, kind, origin, nor
             continue
         for q in range(old_start[s], old_start[s + 1]):
             if old_wall[q] == wk[m]:
-                hist[m, 0] = old_hist[q, 0]
-                hist[m, 1] = old_hist[q, 1]
-                hist[m, 2] = old_hist[q, 2]
+                for c in range(width):
+                    hist[m, c] = old_hist[q, c]
                 break
     return start, ws, wk, hist

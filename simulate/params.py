@@ -7,16 +7,22 @@ refused with the list of valid ones.
 Defaults (DESIGN.md, "Paper defaults"): the paper's measured means for the contact parameters,
 its segment geometry and densities; the particle shear modulus (1e7 Pa) is not in the paper and
 is demcal's stated default.
+
+Three engine extensions (``simulate.extensions.ENGINE_HOOKS``) are switched by fields here and
+so recorded with every run; all are off by default: a velocity-dependent restitution
+(``e_pp_exponent``, ``e_pw_exponent`` != 0), the spring-dashpot rolling model
+(``rolling_model="epsd"``) and segments drawn from a size distribution (``segment_sizes``).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, fields
 
 from demcal.errors import InputError
 from simulate.clump import MASS_MODELS
-from simulate.contact.rolling import ROLLING_LEVERS
+from simulate.contact.rolling import EPSD_DAMPING_RATIO, ROLLING_LEVERS, ROLLING_MODELS
 
 
 @dataclass(frozen=True)
@@ -52,7 +58,30 @@ class DEMParameters:
     rolling_lever : str
         Lever arm of the rolling-friction torque: ``"liggghts_reff"`` (default), ``"edem_com"``
         or ``"edem_sphere"``; see ``simulate.contact.rolling`` for the conventions and the
-        reason for the default.
+        reason for the default. Used by the ``constant_torque`` rolling model only.
+    e_pp_exponent, e_pw_exponent : float
+        Velocity-dependent restitution (engine hook): exponent n [-] of
+        e(v) = e_pp (max(v, e_pp_v_min) / e_pp_v_ref)^(-n) (and the same for ``pw``), v the
+        normal approach speed of a contact at first touch, e capped to [1e-6, 1]; 0 (default):
+        constant restitution. n > 0 when e falls with speed (1/4 for plastic impacts, Johnson
+        1985).
+    e_pp_v_ref, e_pw_v_ref : float
+        Impact speed at which the restitution is ``e_pp`` (``e_pw``) [m/s]; default 1.
+    e_pp_v_min, e_pw_v_min : float
+        Impacts slower than this take e(v_min) [m/s], e.g. the slowest measured drop; default
+        0: the law all the way down, so that impacts slower than v_ref e^(1/n) are elastic
+        (e = 1) and a body on a plate never stops bouncing.
+    rolling_model : str
+        Rolling resistance model: ``"constant_torque"`` (default; EDEM type A with the
+        ``rolling_lever`` conventions) or ``"epsd"`` (elastic-plastic spring-dashpot, Ai et al.
+        2011 type C); ``simulate.contact.rolling``.
+    rolling_damping_ratio : float
+        Rolling damping ratio eta_r of the ``"epsd"`` model [-] (default 0.3, Ai et al. 2011).
+    segment_sizes : tuple of (float, float) or None
+        (length, diameter) pairs [m] of a measured size distribution (callipers): when given,
+        the repose scene draws each segment from them (equal weight per pair, duplicates
+        counting twice; ``simulate.extensions.SizeDistribution``) instead of
+        ``segment_length_m`` x ``segment_diameter_m``. Default None (one size).
     """
 
     poisson_ratio: float = 0.25
@@ -73,6 +102,15 @@ class DEMParameters:
     mass_model: str = "union"
     mean_mass_kg: float | None = None
     rolling_lever: str = "liggghts_reff"
+    e_pp_exponent: float = 0.0
+    e_pp_v_ref: float = 1.0
+    e_pw_exponent: float = 0.0
+    e_pw_v_ref: float = 1.0
+    e_pp_v_min: float = 0.0
+    e_pw_v_min: float = 0.0
+    rolling_model: str = "constant_torque"
+    rolling_damping_ratio: float = EPSD_DAMPING_RATIO
+    segment_sizes: tuple | None = None
 
     def __post_init__(self):
         for name in ("e_pp", "e_pw"):
@@ -104,6 +142,26 @@ class DEMParameters:
         if self.rolling_lever not in ROLLING_LEVERS:
             raise InputError(f"rolling_lever must be one of {', '.join(ROLLING_LEVERS)}; "
                              f"got {self.rolling_lever!r}")
+        for name in ("e_pp_exponent", "e_pw_exponent"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value)):
+                raise InputError(f"{name} must be a finite number (0 for a constant restitution), got {value!r}")
+        for name in ("e_pp_v_ref", "e_pw_v_ref"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
+                raise InputError(f"{name} must be a speed > 0 [m/s], got {value!r}")
+        for name in ("e_pp_v_min", "e_pw_v_min"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
+                raise InputError(f"{name} must be a speed >= 0 [m/s] (0: no floor), got {value!r}")
+        if self.rolling_model not in ROLLING_MODELS:
+            raise InputError(f"rolling_model must be one of {', '.join(ROLLING_MODELS)}; "
+                             f"got {self.rolling_model!r}")
+        value = self.rolling_damping_ratio
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
+            raise InputError(f"rolling_damping_ratio must be a finite number >= 0, got {value!r}")
+        if self.segment_sizes is not None:
+            object.__setattr__(self, "segment_sizes", _size_pairs(self.segment_sizes))
 
     @classmethod
     def names(cls) -> tuple[str, ...]:
@@ -127,12 +185,37 @@ class DEMParameters:
         return dataclasses.asdict(self)
 
 
+def _size_pairs(value) -> tuple:
+    """``segment_sizes`` as a tuple of (length, diameter) float pairs [m], checked."""
+    try:
+        pairs = tuple((float(length), float(dia)) for length, dia in value)
+    except (TypeError, ValueError):
+        raise InputError(f"segment_sizes must be a list of (length, diameter) pairs [m], "
+                         f"got {value!r}") from None
+    if not pairs:
+        raise InputError("segment_sizes must hold at least one (length, diameter) pair, or be None")
+    for length, dia in pairs:
+        if not (math.isfinite(length) and math.isfinite(dia) and 0.0 < dia <= length):
+            raise InputError(f"segment_sizes: each pair needs 0 < diameter <= length [m], got "
+                             f"length {length!r}, diameter {dia!r}")
+    return pairs
+
+
 def _coerce(name: str, value):
     """Convert a ``--set`` string to the field's type; name the field on failure."""
     default = next(f.default for f in fields(DEMParameters) if f.name == name)
     if not isinstance(value, str):
         return value
     text = value.strip()
+    if name == "segment_sizes":
+        if text.lower() in ("", "none"):
+            return None
+        # "LxD,LxD,..." in metres, e.g. 0.025x0.011,0.024x0.0105
+        try:
+            return tuple(tuple(float(v) for v in item.lower().split("x")) for item in text.split(","))
+        except ValueError:
+            raise InputError(f"DEM parameter segment_sizes needs 'LxD,LxD,...' in metres, "
+                             f"got {value!r}") from None
     if isinstance(default, str):
         return text
     if name == "mean_mass_kg" and text.lower() in ("", "none"):

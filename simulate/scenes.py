@@ -8,11 +8,19 @@ region x 10-190, y 10-90, z 100-240 mm during the first second; the end plate li
 0.1 m/s from t = 4 s, so that the segments flow out under it onto the floor outside the carton
 (the carton side walls stop at x = 200 mm). Carton, plate and floor are all the wall material
 of ``params`` (steel). The run length (10 s in the paper) is the caller's ``sim.run(duration)``.
+
+Segments are all ``params``' segment by default; with a size distribution (the
+``size_distribution`` argument, or ``params.segment_sizes``) each segment is drawn from the
+measured (length, diameter) pairs: one template per distinct pair
+(``simulate.extensions.segment_of_size``), drawn with the pair's count as weight.
 """
 
 from __future__ import annotations
 
 import math
+from collections import Counter
+
+import numpy as np
 
 from simulate.clump import segment_from_parameters
 from simulate.engine import Simulation
@@ -35,7 +43,7 @@ def build_paper_repose_case(params: DEMParameters, seed, n_clumps: int = 500, *,
                             fill_top: float = 0.240, dt: float = PAPER_TIME_STEP,
                             outside_length: float = 0.45, outside_width: float = 0.25,
                             force: bool = False,
-                            chunk_steps: int = 200) -> Simulation:
+                            chunk_steps: int = 200, size_distribution=None) -> Simulation:
     """The paper's plate-withdrawal repose case, ready to ``run``.
 
     Parameters
@@ -66,6 +74,9 @@ def build_paper_repose_case(params: DEMParameters, seed, n_clumps: int = 500, *,
         Allow a time step above half the Rayleigh time.
     chunk_steps : int
         Steps between returns to Python.
+    size_distribution : simulate.extensions.SizeDistribution, optional
+        Draw each segment from these measured (length, diameter) pairs; default
+        ``params.segment_sizes`` if set, else every segment is ``params``' segment.
 
     Returns
     -------
@@ -79,7 +90,7 @@ def build_paper_repose_case(params: DEMParameters, seed, n_clumps: int = 500, *,
                      domain_lo=(-0.05, -outside_width, -0.02),
                      domain_hi=(L + outside_length, W + outside_width, H + 0.05),
                      dt=dt, rolling_lever=params.rolling_lever, force=force, chunk_steps=chunk_steps)
-    template = sim.add_template(segment_from_parameters(params))
+    templates, weights = _segment_templates(sim, params, size_distribution)
     sim.add_wall(Plane((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), material="steel", name="floor"))
     x_axis, y_axis, z_axis = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
     sim.add_wall(Rectangle((0.0, W / 2, H / 2), y_axis, z_axis, W / 2, H / 2, "steel", name="carton x-"))
@@ -88,9 +99,29 @@ def build_paper_repose_case(params: DEMParameters, seed, n_clumps: int = 500, *,
     sim.add_wall(Rectangle((L, W / 2, H / 2), y_axis, z_axis, W / 2, H / 2, "steel",
                            velocity=(0.0, 0.0, lift_speed), move_start=lift_time, move_stop=math.inf,
                            name="end plate"))
-    sim.add_factory(ParticleFactory(template, n_clumps,
+    sim.add_factory(ParticleFactory(templates, n_clumps,
                                     (fill_margin, fill_margin, fill_bottom),
                                     (L - fill_margin, W - fill_margin, fill_top),
                                     seed=seed, start_time=0.0, end_time=fill_time,
-                                    material="particle"))
+                                    material="particle", weights=weights))
     return sim
+
+
+def segment_sizes(params: DEMParameters, size_distribution=None):
+    """The (length, diameter) pairs [m] to draw segments from: ``size_distribution``'s, else
+    ``params.segment_sizes`` (None when neither is given)."""
+    if size_distribution is not None:
+        return tuple(zip(size_distribution.lengths, size_distribution.diameters))
+    return params.segment_sizes
+
+
+def _segment_templates(sim: Simulation, params: DEMParameters, size_distribution):
+    """Add the segment template(s) to ``sim``; returns their ids and weights (None for one)."""
+    sizes = segment_sizes(params, size_distribution)
+    if sizes is None:
+        return sim.add_template(segment_from_parameters(params)), None
+    from simulate.extensions import segment_of_size   # scipy only when a distribution is used
+
+    counts = Counter((float(length), float(dia)) for length, dia in sizes)
+    ids = [sim.add_template(segment_of_size(params, length, dia)) for length, dia in counts]
+    return ids, np.array(list(counts.values()), dtype=float)

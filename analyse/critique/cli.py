@@ -74,7 +74,7 @@ def critique_command(args) -> int:
     written = []
     if args.json:
         written.append(write_json(args.json, doc))
-    if campaign:
+    if campaign and not (args.json and Path(args.json).resolve() == (source / "critique.json").resolve()):
         written.append(write_json(source / "critique.json", doc))
     for line in result.summary:
         print(line)

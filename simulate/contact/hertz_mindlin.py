@@ -24,6 +24,15 @@ current tangent plane each step keeping its length (as LIGGGHTS' ``tangential_mo
 when the spring alone exceeds the cap the contact slides: the displacement is shortened to
 mu_s |F_n| / S_t and the dashpot is dropped.
 
+Velocity-dependent restitution (optional, per material pair). With an exponent n != 0 the
+restitution of a contact follows the power law e(v) = e_ref (max(v, v_min) / v_ref)^(-n),
+capped to [1e-6, 1] (as ``simulate.extensions.VelocityRestitution``), v the normal approach
+speed at the contact's first touch, kept in its history for the whole contact; beta, and so
+both dashpots, use that e (``impact_damping``). n = 0 is the constant e above. With n > 0 and
+v_min = 0 the law reaches e = 1 at v_y = v_ref e_ref^(1/n) (Johnson's yield speed): slower
+impacts are elastic, so a body bouncing on a plate keeps bouncing at about v_y; v_min (e.g.
+the slowest measured impact) holds e at e(v_min) below it instead.
+
 References
 ----------
 Johnson, K. L. (1985). Contact Mechanics. Cambridge University Press.
@@ -40,6 +49,13 @@ import math
 from simulate._jit import evaluator
 
 SQRT_5_6 = math.sqrt(5.0 / 6.0)
+
+
+#: Bounds of ln e for the velocity-dependent restitution: e in [1e-6, 1].
+LOG_E_MIN = math.log(1e-6)
+#: Approach speed recorded at first touch when the bodies are not approaching then [m/s] (a
+#: stored 0 means "no contact yet").
+V_FIRST_TOUCH_MIN = 1e-9
 
 
 def effective_modulus(e_i: float, nu_i: float, e_j: float, nu_j: float) -> float:
@@ -64,6 +80,35 @@ def contact_duration_elastic(m_star: float, r_star: float, e_star: float, v_impa
     Johnson (1985), sec. 11.4 (impact of elastic spheres), with E* as defined in this module.
     """
     return 2.868 * (m_star ** 2 / (r_star * e_star ** 2 * v_impact)) ** 0.2
+
+
+@evaluator
+def impact_damping(hist, k, slot, v_approach, log_e_ref, exponent, log_v_ref, v_min, store):
+    """Dashpot factor 2 sqrt(5/6) |beta| [-] of a contact whose restitution depends on its
+    impact speed: e(v) = e_ref (max(v, v_min) / v_ref)^(-n), capped to [1e-6, 1].
+
+    Parameters
+    ----------
+    hist : ndarray (n, w)
+        Contact history; ``hist[k, slot]`` holds the approach speed at first touch [m/s] (0
+        until the contact has been met).
+    v_approach : float
+        Normal approach speed now [m/s], recorded if the contact is new.
+    log_e_ref, exponent, log_v_ref : float
+        ln e_ref, n [-] and ln v_ref (v_ref in [m/s]) of the pair.
+    v_min : float
+        Slower impacts take e(v_min) [m/s] (0: the law down to e = 1).
+    store : bool
+        Record the first-touch speed (False for an evaluation that must not advance history).
+    """
+    v = hist[k, slot]
+    if v == 0.0:
+        v = max(v_approach, V_FIRST_TOUCH_MIN)
+        if store:
+            hist[k, slot] = v
+    log_e = log_e_ref - exponent * (math.log(max(v, v_min)) - log_v_ref)
+    log_e = min(max(log_e, LOG_E_MIN), 0.0)
+    return 2.0 * SQRT_5_6 * abs(log_e) / math.sqrt(log_e * log_e + math.pi * math.pi)
 
 
 @evaluator

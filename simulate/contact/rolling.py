@@ -1,5 +1,10 @@
-"""Rolling friction: the constant directional torque model (EDEM "type A", LIGGGHTS ``cdt``).
+"""Rolling resistance: the constant directional torque model (EDEM "type A", LIGGGHTS ``cdt``)
+and the elastic-plastic spring-dashpot model (Ai et al. 2011 "type C", LIGGGHTS ``epsd2``).
 
+The model is chosen by name (``ROLLING_MODELS``): ``"constant_torque"`` (default) or ``"epsd"``.
+
+Constant directional torque
+---------------------------
 Each contact adds to body i a torque of magnitude mu_r F_n R_lever against its rotation:
 
     T_i = -mu_r F_n R_lever w_i / |w_i|,
@@ -47,10 +52,41 @@ other torques, in each half step of the integrator (``simulate.integrate.half_ki
 Without step 1 a pile of clumps creeps: each body's spin is driven to a nearby axis instead of
 to zero every step, and the contacts slip a little each time.
 
+Elastic-plastic spring-dashpot (type C)
+---------------------------------------
+Each contact carries a rolling spring torque M^k (three components of its history, kept across
+neighbour-list rebuilds like the tangential spring). Per step (Ai et al. 2011, eqs. 12-17):
+
+    dtheta_r = (w_i - w_j) dt with its component along the contact normal removed,
+    M^k <- M^k - k_r dtheta_r,  |M^k| <= M_m = mu_r F_n R_r  (full mobilisation: held at M_m),
+    M   = M^k - C_r w_r        while |M^k| < M_m, M = M^k at full mobilisation,
+
+on body i, -M on body j (an equal and opposite pair), with
+
+    R_r = R_i R_j / (R_i + R_j) (the sphere radius R_i against a wall; the ``rolling_lever``
+          conventions belong to the constant torque model and are not used),
+    k_r = 2.25 k_n mu_r^2 R_r^2, k_n = 2 E* sqrt(R* d_n) the Hertz normal stiffness (eq. 15,
+          after Iwashita & Oda 1998),
+    C_r = eta_r 2 sqrt(I_r k_r), eta_r the rolling damping ratio (0.3 recommended, eq. 16),
+          1/I_r = 1/I_i + 1/I_j with I_i = 7/5 m_i R_i^2 the moment of inertia about the
+          contact point of a sphere of the clump's mass m_i and the touching sphere's radius,
+    F_n the elastic (Hertz) part of the normal force, as for the constant torque.
+
+Below M_m the spring holds a body still at a small rolling angle M/k_r and lets it rock back
+and settle (the constant torque needs the static stop of its cap above for that); at full
+mobilisation it rolls against the same constant torque as type A. The torque is an ordinary
+torque (``KICK_ELASTIC``): no cap is applied. I_r only sets the damping; for a clump the
+sphere-of-clump-mass value is an approximation (its true inertia about the contact depends on
+the axis). The rolling spring is stiff: k_r / I about a body's own axis is up to about
+5 mu_r^2 k_n / m, so for mu_r near 1 a time step chosen for the normal contact alone has less
+margin than with the constant torque.
+
 References
 ----------
 Ai, J., Chen, J.-F., Rotter, J. M., Ooi, J. Y. (2011). Assessment of rolling resistance models
-in discrete element simulations. Powder Technol. 206, 269-282 (model type A).
+in discrete element simulations. Powder Technol. 206, 269-282 (model types A and C).
+Iwashita, K., Oda, M. (1998). Rolling resistance at contacts in simulation of shear band
+development by DEM. J. Eng. Mech. 124(3), 285-292.
 DEM Solutions (2018). EDEM 2018 Theory Reference Guide, "Rolling friction".
 LIGGGHTS-PUBLIC 3.8 documentation, ``gran rolling_friction cdt``.
 """
@@ -65,6 +101,18 @@ from simulate._jit import evaluator
 ROLLING_LEVERS = ("edem_com", "edem_sphere", "liggghts_reff")
 EDEM_COM, EDEM_SPHERE, LIGGGHTS_REFF = 0, 1, 2
 
+#: Rolling resistance models by name; the index is what the kernels receive.
+ROLLING_MODELS = ("constant_torque", "epsd")
+CONSTANT_TORQUE, EPSD = 0, 1
+
+#: How ``simulate.integrate.half_kick`` applies a body's rolling terms: the summed magnitude
+#: against the body's own spin (EDEM levers), the summed vector with the static stop and the
+#: no-reversal cap (LIGGGHTS lever), or the summed vector as a plain torque (spring-dashpot).
+KICK_DIRECTIONAL, KICK_RELATIVE, KICK_ELASTIC = 0, 1, 2
+
+#: Rolling damping ratio eta_r of the spring-dashpot model recommended by Ai et al. (2011) [-].
+EPSD_DAMPING_RATIO = 0.3
+
 
 def lever_index(name: str) -> int:
     """Kernel index of the lever convention ``name``; an unknown name lists the valid ones."""
@@ -72,6 +120,22 @@ def lever_index(name: str) -> int:
     if name not in ROLLING_LEVERS:
         raise InputError(f"unknown rolling_lever {name!r}; valid: {', '.join(ROLLING_LEVERS)}")
     return ROLLING_LEVERS.index(name)
+
+
+def rolling_model_index(name: str) -> int:
+    """Kernel index of the rolling model ``name``; an unknown name lists the valid ones."""
+    from demcal.errors import InputError
+    if name not in ROLLING_MODELS:
+        raise InputError(f"unknown rolling_model {name!r}; valid: {', '.join(ROLLING_MODELS)}")
+    return ROLLING_MODELS.index(name)
+
+
+@evaluator
+def kick_mode(lever, model):
+    """The ``half_kick`` mode of a lever convention and a rolling model (kernel indices)."""
+    if model == EPSD:
+        return KICK_ELASTIC
+    return KICK_RELATIVE if lever == LIGGGHTS_REFF else KICK_DIRECTIONAL
 
 
 @evaluator
@@ -106,3 +170,70 @@ def cap_rolling_impulse(wx, wy, wz, dwx, dwy, dwz):
     w2 = wx * wx + wy * wy + wz * wz
     s = -w2 / c
     return s if s < 1.0 else 1.0
+
+
+# ----------------------------------------------------------------------------------------------
+# elastic-plastic spring-dashpot (Ai et al. 2011, type C)
+
+
+def epsd_stiffness(normal_stiffness: float, mu_r: float, rolling_radius: float) -> float:
+    """Rolling stiffness k_r = 2.25 k_n mu_r^2 R_r^2 [N m/rad] (Ai et al. 2011, eq. 15, after
+    Iwashita & Oda 1998), from the normal stiffness k_n [N/m], the rolling friction mu_r [-]
+    and the rolling radius R_r [m]."""
+    return 2.25 * normal_stiffness * mu_r ** 2 * rolling_radius ** 2
+
+
+def epsd_damping(rolling_stiffness: float, inertia: float, damping_ratio: float = EPSD_DAMPING_RATIO) -> float:
+    """Rolling viscous damping C_r = eta_r 2 sqrt(I_r k_r) [N m s/rad] (Ai et al. 2011, eq. 16;
+    eta_r = 0.3 recommended), I_r the moment of inertia about the contact point [kg m^2]."""
+    return damping_ratio * 2.0 * math.sqrt(inertia * rolling_stiffness)
+
+
+@evaluator
+def epsd_rolling_torque(mx, my, mz, wrx, wry, wrz, nx, ny, nz, k_r, c_r, m_max, dt):
+    """One step of the type C (elastic-plastic spring-dashpot) rolling torque of a contact.
+
+    Ai et al. (2011), eqs. (12)-(17): the spring torque M^k is advanced by -k_r dtheta_r with
+    dtheta_r = w_r dt the relative rolling rotation (w_r with its component along the contact
+    normal n removed), kept in the tangent plane, and capped at |M^k| <= M_m = mu_r R_r F_n
+    (full mobilisation: the contact then rolls at constant resistance); the damping torque
+    -c_r w_r acts only while the spring is below its cap (their f = 0 option).
+
+    Parameters
+    ----------
+    mx, my, mz : float
+        Spring torque of the contact at the previous step [N m] (the contact's history).
+    wrx, wry, wrz : float
+        Relative angular velocity w_i - w_j [rad/s].
+    nx, ny, nz : float
+        Unit contact normal.
+    k_r, c_r, m_max : float
+        Rolling stiffness [N m/rad], damping [N m s/rad] and limit torque M_m [N m].
+    dt : float
+        Time step [s] (0: evaluate without advancing the spring).
+
+    Returns
+    -------
+    (mx, my, mz, tx, ty, tz)
+        New spring torque (to store) and the total rolling torque on body i [N m].
+    """
+    wn = wrx * nx + wry * ny + wrz * nz
+    rx = wrx - wn * nx
+    ry = wry - wn * ny
+    rz = wrz - wn * nz
+    # keep the stored torque in the current tangent plane
+    mn = mx * nx + my * ny + mz * nz
+    mx -= mn * nx
+    my -= mn * ny
+    mz -= mn * nz
+    mx -= k_r * rx * dt
+    my -= k_r * ry * dt
+    mz -= k_r * rz * dt
+    mag = math.sqrt(mx * mx + my * my + mz * mz)
+    if mag >= m_max:
+        scale = m_max / mag if mag > 0.0 else 0.0
+        mx *= scale
+        my *= scale
+        mz *= scale
+        return mx, my, mz, mx, my, mz
+    return mx, my, mz, mx - c_r * rx, my - c_r * ry, mz - c_r * rz

@@ -40,6 +40,11 @@ Profiles (``PROFILES``):
     the plate rises, exactly as in the paper case, so the angles agree within the seed
     scatter and respond to the contact parameters in the same directions.
 
+Size distribution. With ``size_distribution`` (or ``params.segment_sizes``) each segment is
+drawn from the measured (length, diameter) pairs (``simulate.extensions``, engine hook
+``size_distribution``); the engine hooks in use are named in the provenance options
+(``extensions``).
+
 Observable keys: ``angle_deg``, ``angle_profile_deg``, ``angle_outside_deg`` [deg],
 ``escaped`` (bodies that left the simulation domain), ``outside_fraction`` (share of the
 bodies whose centre is beyond the end plate) [-].
@@ -334,7 +339,7 @@ def heap_angles(centres, radii, box_length: float, *, px_per_m: float = PX_PER_M
 
 def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
                geometry: ReposeGeometry | None = None, annotate_to=None, force: bool = False,
-               callback=None) -> RigResult:
+               callback=None, size_distribution=None) -> RigResult:
     """Run the plate-withdrawal repose test and measure the heap.
 
     Parameters
@@ -353,6 +358,10 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
         Allow a time step above half the Rayleigh time.
     callback : callable, optional
         ``callback(sim, t_end, final)`` after each chunk (see ``simulate.rigs``).
+    size_distribution : simulate.extensions.SizeDistribution, optional
+        Draw each segment from these measured (length, diameter) pairs; they are set as
+        ``params.segment_sizes``, so the result's ``params`` record them. Default: as
+        ``params`` says (one segment size unless ``segment_sizes`` is set).
 
     Returns
     -------
@@ -363,9 +372,13 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
         [m], ``geometry`` (the carton simulated), ``t_lift``, ``t_clear``, ``t_end`` [s], and
         the kinetic-energy history ``ke_t`` [s], ``ke`` [J].
     """
+    from simulate.extensions import engine_hooks, with_size_distribution  # scipy: only when running
+
     seed = check_seed(seed)
     if not isinstance(params, DEMParameters):
         raise InputError(f"params must be a DEMParameters, got {type(params).__name__}")
+    if size_distribution is not None:
+        params = with_size_distribution(params, size_distribution)
     if isinstance(profile, ReposeProfile):
         prof = profile
     elif profile in PROFILES:
@@ -420,7 +433,8 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
         advance_to(min(t_lift, prof.duration))
     # the plate is clear once its lower edge is a segment diameter above the highest sphere
     z_top = float((sim.sphere_positions()[:, 2] + sim.sphere_radii()).max()) if sim.n_spheres else 0.0
-    t_clear = t_lift + (z_top + params.segment_diameter_m) / geo.lift_speed
+    dia = max(d for _, d in params.segment_sizes) if params.segment_sizes else params.segment_diameter_m
+    t_clear = t_lift + (z_top + dia) / geo.lift_speed
     if prof.early_end:
         sim.set_wall_motion(plate, (0.0, 0.0, geo.lift_speed), t_lift, t_clear)
     else:
@@ -457,6 +471,9 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
            "t_end": sim.time, "ke_t": np.array(ke_t), "ke": np.array(ke),
            "escapes": [e.to_dict() for e in sim.escaped]}
     options = {"profile": prof.name, "geometry": base.to_dict(), "force": force}
+    hooks = engine_hooks(params)
+    if hooks:
+        options["extensions"] = hooks
     meta = run_meta(seed, prof.dt, tally, sim.n_spheres, sim.time, profile=prof.name, notes=notes,
                     profile_settings=prof.to_dict(), bodies=sim.n_bodies,
                     inserted=inserted)

@@ -8,7 +8,8 @@ surface (incline sheet, ``surface``: ``steel``). The twins build it the same way
     the particle-wall contact parameters ``e_pw``, ``mu_s_pw``, ``mu_r_pw``.
 ``particle`` (``particle-particle``)
     A flat plate of the particle material (in the lab: segments glued side by side) with the
-    particle-particle parameters ``e_pp``, ``mu_s_pp``, ``mu_r_pp``. A plane has an infinite
+    particle-particle parameters ``e_pp``, ``mu_s_pp``, ``mu_r_pp`` (and the velocity
+    dependence ``e_pp_exponent``, ``e_pp_v_ref``). A plane has an infinite
     radius, so the contact radius R* is the sphere's own radius, twice the R* of two equal
     spheres; a clump lying on glued clumps also touches them at ridges and grooves, which a
     flat plate does not model.
@@ -23,7 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from demcal.errors import InputError
-from simulate.materials import MaterialTable
+from simulate.materials import MaterialTable, pair_contact
 from simulate.params import DEMParameters
 
 #: Material name of the bodies in every rig.
@@ -103,8 +104,7 @@ def make_surface(params: DEMParameters, surface: str = "steel", *, surface_mater
         plate = "particle plate"
         table.add_material(plate, density=params.particle_density_kg_m3,
                            poisson_ratio=params.poisson_ratio, shear_modulus=params.shear_modulus_pa)
-        table.set_pair(PARTICLE, plate, restitution=params.e_pp, static_friction=params.mu_s_pp,
-                       rolling_friction=params.mu_r_pp)
+        table.set_pair(PARTICLE, plate, **pair_contact(params, "pp"))
         return Surface(name, plate, table)
     material = _checked(surface_material, MATERIAL_KEYS, f"surface_material of {name!r}")
     contact = _checked(surface_contact, CONTACT_KEYS, f"surface_contact of particle-{name}")

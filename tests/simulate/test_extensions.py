@@ -216,3 +216,71 @@ def test_extension_names_are_checked():
     assert describe("more_spheres", n=9) == {"extension": "more_spheres", "n": 9}
     with pytest.raises(InputError, match="valid: " + ", ".join(EXTENSIONS)):
         describe("wet_contacts")
+
+
+# ---------------------------------------------------------------------------------------------
+# engine hooks: switched by DEMParameters, recorded with every run
+
+def test_engine_hooks_are_named_from_the_parameters():
+    from simulate.extensions import (ENGINE_HOOKS, engine_hooks, with_size_distribution,
+                                     with_spring_dashpot_rolling, with_velocity_restitution)
+
+    assert set(ENGINE_HOOKS) <= set(EXTENSIONS)
+    for fields in ENGINE_HOOKS.values():
+        assert set(fields) <= set(DEMParameters.names())
+    assert engine_hooks(DEMParameters()) == []                      # all off by default
+    law = fit_velocity_restitution([0.1, 0.1, 0.4, 0.4], [0.5, 0.52, 0.42, 0.43])
+    p = with_velocity_restitution(DEMParameters(), "particle-steel", law)
+    assert (p.e_pw, p.e_pw_v_ref, p.e_pw_exponent) == (law.e_ref, law.v_ref, law.exponent)
+    assert p.e_pw_v_min == pytest.approx(math.sqrt(2 * 9.81 * 0.1))  # held below the slowest drop
+    p = with_spring_dashpot_rolling(p, damping_ratio=0.2)
+    p = with_size_distribution(p, SizeDistribution((0.025, 0.03), (0.011, 0.012)))
+    hooks = engine_hooks(p)
+    assert [h["extension"] for h in hooks] == ["velocity_dependent_restitution", "rolling_spring_dashpot",
+                                               "size_distribution"]
+    assert hooks[0]["laws"]["pw"]["exponent"] == law.exponent and "pp" not in hooks[0]["laws"]
+    assert hooks[1]["damping_ratio"] == 0.2 and hooks[2]["n_sizes"] == 2
+    # the switches travel with the parameters (run records) and back
+    again = DEMParameters(**p.to_dict())
+    assert again == p and again.segment_sizes == ((0.025, 0.011), (0.03, 0.012))
+    assert DEMParameters.from_names({"segment_sizes": "0.025x0.011,0.03x0.012"}).segment_sizes == p.segment_sizes
+
+
+def test_engine_velocity_law_equals_the_per_impact_twin():
+    """The drop twin with the law inside the contact model rebounds as the twin given the
+    constant e(v) of its impact speed (parameters_for_impact)."""
+    from simulate.clump import segment_template
+    from simulate.extensions import with_velocity_restitution
+    from simulate.rigs import run_rig
+
+    h, e = pingpong_method2()
+    law = fit_velocity_restitution(h, e)
+    params = DEMParameters(segment_length_m=0.011, segment_diameter_m=0.011, spheres_per_clump=1)
+    sphere = segment_template(0.011, 0.011, 1, params.particle_density_kg_m3)
+    engine = with_velocity_restitution(params, "particle-steel", law)
+    for height in (h[0], h[-1]):
+        per_impact = parameters_for_impact(params, "particle-steel", law, impact_speed(height))
+        a = run_rig("drop", engine, 0, height=float(height), orientation_deg=90.0, template=sphere)
+        b = run_rig("drop", per_impact, 0, height=float(height), orientation_deg=90.0, template=sphere)
+        assert a.observable["apparent_restitution"] == pytest.approx(b.observable["apparent_restitution"],
+                                                                     rel=1e-4)
+        assert a.params["e_pw_exponent"] == law.exponent
+
+
+def test_repose_rig_records_the_hooks_it_runs():
+    from simulate.rigs import run_rig
+    from simulate.rigs.repose import PROFILES, ReposeGeometry, ReposeProfile
+
+    tiny = ReposeProfile(name="tiny", scale=1.0, dt=PROFILES["quick"].dt, fill_time=0.1, fill_bottom=0.1,
+                         fill_top=0.9, lift_time=None, duration=0.4, early_end=True)
+    geo = ReposeGeometry(box_length=0.08, box_width=0.06, box_height=0.08, fill_count=20)
+    dist = SizeDistribution((0.022, 0.025, 0.028), (0.010, 0.011, 0.012))
+    params = DEMParameters(rolling_model="epsd", e_pp_exponent=0.1, e_pw_exponent=0.1)
+    res = run_rig("repose", params, seed=1, profile=tiny, geometry=geo, size_distribution=dist)
+    assert res.params["segment_sizes"] == ((0.022, 0.010), (0.025, 0.011), (0.028, 0.012))
+    assert res.params["rolling_model"] == "epsd" and res.params["e_pw_exponent"] == 0.1
+    names = [h["extension"] for h in res.provenance.options["extensions"]]
+    assert names == ["velocity_dependent_restitution", "rolling_spring_dashpot", "size_distribution"]
+    assert set(np.round(2 * np.unique(res.record["sphere_radii"]), 6)) <= {0.010, 0.011, 0.012}
+    plain = run_rig("repose", DEMParameters(), seed=1, profile=tiny, geometry=geo)
+    assert "extensions" not in plain.provenance.options and plain.params["segment_sizes"] is None

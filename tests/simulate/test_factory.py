@@ -75,3 +75,108 @@ def test_bad_factory_arguments():
         ParticleFactory(0, 5, LO, HI, seed=1.5)
     with pytest.raises(InputError, match="region_hi"):
         ParticleFactory(0, 5, HI, LO, seed=1)
+
+
+# ---------------------------------------------------------------- several templates (sizes)
+# A calliper size distribution: (length, diameter) pairs [m], some measured twice. Reference:
+# the factory resamples the measured pairs, so the drawn sizes are a sample of the pairs'
+# empirical distribution (mean and sd, weighted by the pair counts).
+SIZES = ((0.021, 0.0095), (0.023, 0.0100), (0.025, 0.0110), (0.025, 0.0110), (0.027, 0.0115),
+         (0.029, 0.0120), (0.029, 0.0120), (0.029, 0.0120), (0.031, 0.0125))
+
+
+def _sized_sim(n, seed, sizes=SIZES, dt=7.43678e-5):
+    from collections import Counter
+
+    from simulate.extensions import segment_of_size
+
+    params = DEMParameters()
+    sim = simulation(params, dt=dt, lo=(-0.3, -0.3, -0.3), hi=(0.3, 0.3, 0.3))
+    counts = Counter(sizes)
+    ids = [sim.add_template(segment_of_size(params, length, dia)) for length, dia in counts]
+    factory = ParticleFactory(ids, n, (-0.25, -0.25, -0.25), (0.25, 0.25, 0.25), seed=seed,
+                              end_time=0.0, weights=list(counts.values()))
+    sim.add_factory(factory)
+    return sim, factory, list(counts)
+
+
+def test_several_templates_follow_the_size_distribution():
+    n = 400
+    sim, factory, pairs = _sized_sim(n, seed=11)
+    sim.run(n_steps=0)
+    assert factory.inserted == n
+    drawn = np.array([pairs[factory.templates.index(k)] for k in factory.body_templates])
+    ref = np.array(SIZES)
+    for col in (0, 1):
+        mu, sd = ref[:, col].mean(), ref[:, col].std()
+        # the sample mean within 4 standard errors, the sample sd within 15 % (n = 400)
+        assert abs(drawn[:, col].mean() - mu) < 4 * sd / np.sqrt(n)
+        assert drawn[:, col].std() == pytest.approx(sd, rel=0.15)
+    # each pair's share against its weight (binomial, 4 sigma)
+    counts = np.array([np.sum(np.asarray(factory.body_templates) == k) for k in factory.templates])
+    p = factory.probabilities
+    assert np.all(np.abs(counts - n * p) < 4 * np.sqrt(n * p * (1 - p)))
+    # every body is its template: mass, and spheres of radius D/2
+    masses = sim.masses()
+    radii, body = sim.sphere_radii(), sim.sphere_body()
+    for b, k in zip(factory.bodies, factory.body_templates):
+        tpl = sim.templates[k]
+        assert masses[b] == tpl.mass
+        np.testing.assert_array_equal(radii[body == b], tpl.radii)
+        assert tpl.radii[0] == pytest.approx(pairs[factory.templates.index(k)][1] / 2, rel=1e-12)
+    # no overlaps between bodies of different sizes
+    x = sim.sphere_positions()
+    d = np.linalg.norm(x[:, None] - x[None], axis=2)
+    other = body[:, None] != body[None]
+    assert np.all(d[other] >= (radii[:, None] + radii[None])[other])
+
+
+def test_several_templates_same_seed_same_draws():
+    a, fa, _ = _sized_sim(60, seed=3)
+    b, fb, _ = _sized_sim(60, seed=3)
+    c, fc, _ = _sized_sim(60, seed=4)
+    for s in (a, b, c):
+        s.run(n_steps=0)
+    assert fa.body_templates == fb.body_templates != fc.body_templates
+    np.testing.assert_array_equal(a.positions(), b.positions())
+    np.testing.assert_array_equal(a.orientations(), b.orientations())
+
+
+def test_single_template_in_a_list_is_the_single_template_factory():
+    # one template, however given, draws no template: the same clumps for the same seed
+    runs = []
+    for template, weights in ((0, None), ([0], None), ((0,), [2.0])):
+        sim = simulation(DEMParameters(), dt=7.43678e-5, lo=(-0.05, -0.05, -0.02), hi=(0.25, 0.15, 0.3))
+        sim.add_template(segment_from_parameters(DEMParameters()))
+        sim.add_factory(ParticleFactory(template, 50, LO, HI, seed=8, end_time=0.0, weights=weights))
+        sim.run(n_steps=0)
+        runs.append((sim.positions(), sim.orientations()))
+    for pos, quat in runs[1:]:
+        np.testing.assert_array_equal(pos, runs[0][0])
+        np.testing.assert_array_equal(quat, runs[0][1])
+
+
+def test_time_step_check_uses_the_smallest_sphere_of_all_templates():
+    from demcal.errors import UnsafeTimeStepError
+    from simulate import rayleigh_time
+
+    t_small = rayleigh_time(0.0095 / 2, 912.0, 1e7, 0.25)
+    t_large = rayleigh_time(0.0125 / 2, 912.0, 1e7, 0.25)
+    sim, _, _ = _sized_sim(10, seed=1)
+    assert sim.rayleigh_time() == pytest.approx(t_small, rel=1e-12)     # before any insertion
+    # a step safe for the largest segment but not for the smallest is refused up front
+    dt = 0.55 * t_small
+    assert dt < 0.5 * t_large
+    sim, factory, _ = _sized_sim(10, seed=1, dt=dt)
+    with pytest.raises(UnsafeTimeStepError):
+        sim.run(n_steps=1)
+    assert factory.inserted == 0
+
+
+def test_bad_template_weights_are_named():
+    with pytest.raises(InputError, match="weights must be 2 finite numbers"):
+        ParticleFactory([0, 1], 5, LO, HI, seed=1, weights=[1.0])
+    with pytest.raises(InputError, match="weights must be 2 finite numbers"):
+        ParticleFactory([0, 1], 5, LO, HI, seed=1, weights=[0.0, 0.0])
+    with pytest.raises(InputError, match="template must be a template id"):
+        ParticleFactory([], 5, LO, HI, seed=1)

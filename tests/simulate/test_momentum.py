@@ -3,8 +3,9 @@
 Every contact force acts on both bodies at the same contact point with opposite signs, and the
 kick-drift-kick integrator applies forces and torques in the same half steps, so linear momentum
 and angular momentum about a fixed point (orbital plus spin) are conserved to round-off. The
-LIGGGHTS rolling torque is an equal and opposite pair and conserves them too; the EDEM
-rolling torques (against each body's own rotation) are not a pair and are left out here.
+LIGGGHTS rolling torque and the spring-dashpot (type C) rolling torque are equal and opposite
+pairs and conserve them too; the EDEM rolling torques (against each body's own rotation) are not
+a pair and are left out here.
 """
 
 from __future__ import annotations
@@ -26,10 +27,12 @@ def _momenta(sim):
     return p, ang
 
 
-@pytest.mark.parametrize("lever,mu_r", [("edem_com", 0.0), ("liggghts_reff", 0.53)])
-def test_momentum_conserved_in_clump_impacts(lever, mu_r):
+@pytest.mark.parametrize("lever,mu_r,model", [("edem_com", 0.0, "constant_torque"),
+                                               ("liggghts_reff", 0.53, "constant_torque"),
+                                               ("liggghts_reff", 0.53, "epsd")])
+def test_momentum_conserved_in_clump_impacts(lever, mu_r, model):
     rng = np.random.default_rng(7)
-    params = DEMParameters(e_pp=0.3, mu_s_pp=0.65, mu_r_pp=mu_r)
+    params = DEMParameters(e_pp=0.3, mu_s_pp=0.65, mu_r_pp=mu_r, rolling_model=model)
     sim = simulation(params, dt=5e-6, rolling_lever=lever, lo=(-0.3, -0.3, -0.3), hi=(0.3, 0.3, 0.3))
     tpl = sim.add_template(segment_template(0.025, 0.011, 5, 912.0))
     # two small groups of segments thrown at each other, spinning, at random orientations
