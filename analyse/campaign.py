@@ -11,9 +11,9 @@ Steps (``calibrate``):
 3. seed-to-seed noise of the DEM: the screening centre run repeated with different seeds;
    each effect is compared with it;
 4. steepest climb of the significant factors toward the measured angle, others at their
-   measured means; the best level becomes the Box-Behnken centre, its neighbours -1/+1 (when
-   the best level is an end of the climb the window moves inward: no level leaves the
-   measured range);
+   measured means; the best level (closest to the target on the monotone fit of the climb's
+   responses) becomes the Box-Behnken centre, its neighbours -1/+1 (when the best level is an
+   end of the climb the window moves inward: no level leaves the measured range);
 5. Box-Behnken (12 edge runs + 5 centre points with different seeds), full quadratic,
    Design-Expert ANOVA, canonical analysis;
 6. optimisation to the measured angle: several solutions, the one closest to the measured
@@ -468,7 +468,9 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
                                n_levels=config.climb_levels, fixed=means)
     y_climb, y_climb_all, climb_records = run_points(
         "steepest climb", [(settings(dict(zip(letters, row))), config.seed) for row in plan.levels])
-    climb = steepest_climb_analysis(plan, y_climb, target, extrapolate=False)
+    # the climb is planned to move the angle monotonically toward the target: choosing the
+    # level on the monotone fit keeps one noisy level from moving the window
+    climb = steepest_climb_analysis(plan, y_climb, target, extrapolate=False, monotone=increase)
 
     # 5. Box-Behnken --------------------------------------------------------------------------
     k = len(chosen)

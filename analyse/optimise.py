@@ -210,6 +210,9 @@ class SteepestClimbResult:
     centre_level : int
         1-based number of the level at the Box-Behnken centre: the best level, or its inner
         neighbour when the best level is at an end and the window is kept inside the climb.
+    smoothed : numpy.ndarray or None
+        (n_levels,) the monotone (isotonic) fit of the responses the best level was chosen on,
+        when the analysis was asked to smooth; None otherwise [response units].
     """
 
     responses: np.ndarray
@@ -222,17 +225,34 @@ class SteepestClimbResult:
     at_edge: bool
     note: str
     centre_level: int = 0
+    smoothed: np.ndarray | None = None
 
     def to_dict(self) -> dict:
         return {"responses": self.responses.tolist(),
+                "smoothed": None if self.smoothed is None else self.smoothed.tolist(),
                 "relative_error_pct": self.relative_error_pct.tolist(), "target": self.target,
                 "best_level": self.best_level, "centre": dict(self.centre),
                 "low": dict(self.low), "high": dict(self.high), "at_edge": self.at_edge,
                 "note": self.note, "centre_level": self.centre_level or self.best_level}
 
 
+def isotonic(y, increasing: bool = True) -> np.ndarray:
+    """Least-squares monotone fit of the sequence ``y`` (pool adjacent violators)."""
+    v = np.asarray(y, dtype=float).ravel()
+    sign = 1.0 if increasing else -1.0
+    blocks = []  # [mean, weight] of pooled runs, nondecreasing in sign * mean
+    for value in sign * v:
+        blocks.append([value, 1.0])
+        while len(blocks) > 1 and blocks[-2][0] > blocks[-1][0]:
+            m2, w2 = blocks.pop()
+            m1, w1 = blocks.pop()
+            blocks.append([(m1 * w1 + m2 * w2) / (w1 + w2), w1 + w2])
+    return sign * np.concatenate([np.full(int(w), m) for m, w in blocks])
+
+
 def steepest_climb_analysis(plan: SteepestClimbPlan, responses, target: float, *,
-                            extrapolate: bool = True) -> SteepestClimbResult:
+                            extrapolate: bool = True,
+                            monotone: bool | None = None) -> SteepestClimbResult:
     """Relative error per level, the best level, and the Box-Behnken levels around it.
 
     The best level (smallest |response - target|) becomes the Box-Behnken centre and the levels
@@ -241,6 +261,11 @@ def steepest_climb_analysis(plan: SteepestClimbPlan, responses, target: float, *
     neighbour is extrapolated by one step (``extrapolate``, the paper's rule carried to the
     edge), or, with ``extrapolate=False``, the window moves one level inward so that every
     Box-Behnken level stays inside the climbed (measured) range.
+
+    ``monotone`` (True: the response should rise along the climb, False: fall) chooses the best
+    level on the isotonic fit of the responses instead of the raw ones, so that one noisy level
+    cannot pull the window away from where the climb crosses the target; ties go to the earlier
+    level. None (default) is the paper's rule on the raw responses.
     """
     y = np.asarray(responses, dtype=float).ravel()
     n = plan.levels.shape[0]
@@ -251,7 +276,8 @@ def steepest_climb_analysis(plan: SteepestClimbPlan, responses, target: float, *
     if target == 0:
         raise InputError("target must be non-zero for a relative error")
     rel = 100.0 * np.abs(y - target) / abs(target)
-    best = int(np.argmin(rel))
+    smoothed = None if monotone is None else isotonic(y, increasing=monotone)
+    best = int(np.argmin(rel if smoothed is None else np.abs(smoothed - target)))
     at_edge = best in (0, n - 1)
     mid = best if extrapolate or not at_edge else (1 if best == 0 else n - 2)
     centre, lo, hi = {}, {}, {}
@@ -264,6 +290,9 @@ def steepest_climb_analysis(plan: SteepestClimbPlan, responses, target: float, *
         after = col[mid + 1] if mid < n - 1 else c + step
         centre[f], lo[f], hi[f] = float(c), float(min(before, after)), float(max(before, after))
     note = f"level {best + 1} of {n} has the smallest relative error ({rel[best]:.3g} %)"
+    if smoothed is not None:
+        note = (f"level {best + 1} of {n} is closest to the target on the monotone fit of the "
+                f"responses ({smoothed[best]:.4g}; raw {y[best]:.4g}, relative error {rel[best]:.3g} %)")
     if mid == best:
         note += "; it is the Box-Behnken centre and its neighbours are -1/+1"
     if at_edge and extrapolate:
@@ -274,7 +303,7 @@ def steepest_climb_analysis(plan: SteepestClimbPlan, responses, target: float, *
                  f"{min(mid, best)}-{max(mid, best) + 1} (centre level {mid + 1}) to stay inside "
                  f"the measured range: the target may lie beyond it")
     return SteepestClimbResult(y, rel, float(target), best + 1, centre, lo, hi, at_edge, note,
-                               mid + 1)
+                               mid + 1, smoothed)
 
 
 # --------------------------------------------------------------------------------------------

@@ -599,6 +599,7 @@ def table_climb(c: Campaign) -> Table:
     best = int(res["best_level"])
     mid = int(res.get("centre_level") or best)
     k, point_runs, angles = _replicates(r, "steepest_climb")
+    smoothed = res.get("smoothed")
     rows = []
     for i, (lv, y, err, ys) in enumerate(zip(plan["levels"], sc["response"], res["relative_error_pct"],
                                              angles), 1):
@@ -606,7 +607,8 @@ def table_climb(c: Campaign) -> Table:
         role = {mid: "centre (0)", mid - 1: "-1/+1", mid + 1: "-1/+1"}.get(i, "")
         if i == best != mid:
             role = "best, outside the window"
-        rows.append((i, *[lv[f] for f in stepped], y, " / ".join(f"{a:.4g}" for a in ys), err, role))
+        fit = (smoothed[i - 1],) if smoothed is not None else ()
+        rows.append((i, *[lv[f] for f in stepped], y, " / ".join(f"{a:.4g}" for a in ys), *fit, err, role))
     wall = _wall(c.measurement)
     names = [parameter_label(r["factors"][f]["parameter"], wall)[1] for f in stepped]
     fixed = [f for f in plan["factors"] if f not in stepped]
@@ -624,14 +626,19 @@ def table_climb(c: Campaign) -> Table:
         notes.append("The best level is at the edge of the climb: the optimum may lie beyond it.")
     if k > 1:
         notes.append(_replicate_note(k))
+    if smoothed is not None:
+        notes.append("Monotone fit: the least-squares non-decreasing (or non-increasing) sequence "
+                     "through the angles; the best level is the one closest to the target on it, "
+                     "so one noisy level cannot move the window (the paper takes the raw angles).")
+    fit_col = ("Monotone fit",) if smoothed is not None else ()
     return Table("6", "Design and results of the steepest climb test",
                  ("Level", *[f"{f} ({n})" for f, n in zip(stepped, names)], "Angle of repose",
-                  "Replicates", "Relative error", "Box-Behnken"),
-                 ("", *[""] * len(stepped), "deg", "deg", "%", ""), tuple(rows),
+                  "Replicates", *fit_col, "Relative error", "Box-Behnken"),
+                 ("", *[""] * len(stepped), "deg", "deg", *["deg"] * len(fit_col), "%", ""), tuple(rows),
                  notes=tuple(n for n in notes if n),
                  sources=(_runs_source(r, "steepest_climb"), _results_source("steepest_climb"))
                  + tuple(_reference_source(c, "screening.steepest_climb")),
-                 formats=("d", *[".4g"] * len(stepped), ".4g", "", ".3g", ""))
+                 formats=("d", *[".4g"] * len(stepped), ".4g", "", *[".4g"] * len(fit_col), ".3g", ""))
 
 
 # ----------------------------------------------------------------------------------------------

@@ -184,3 +184,28 @@ def test_steepest_climb_by_hand():
         steepest_climb_analysis(plan, [1, 2, 3], 35.79)
     with pytest.raises(InputError, match="not in the level table: rho"):
         steepest_climb_plan(low, high, effects, ["rho"], increase=True)
+
+
+def test_isotonic_fit_by_hand():
+    from analyse.optimise import isotonic
+
+    # pool adjacent violators: (44.0, 37.5) pool to 40.75; a falling sequence mirrors it
+    assert isotonic([15.1, 32.3, 34.4, 40.0, 44.0, 37.5]).tolist() == pytest.approx(
+        [15.1, 32.3, 34.4, 40.0, 40.75, 40.75])
+    assert isotonic([3.0, 1.0, 2.0], increasing=False).tolist() == pytest.approx([3.0, 1.5, 1.5])
+    assert isotonic([1.0, 3.0, 2.0, 2.0]).tolist() == pytest.approx([1.0, 7 / 3, 7 / 3, 7 / 3])
+
+
+def test_climb_on_the_monotone_fit_ignores_one_noisy_level():
+    """A climb crossing 36.1 between levels 3 and 4, with a noisy last level at 37.5: the raw
+    rule picks level 6, the monotone fit level 3 (34.4, 1.7 deg short; level 4 is 3.9 over)."""
+    low = {"mu": 0.05}
+    high = {"mu": 0.45}
+    plan = steepest_climb_plan(low, high, {"mu": 1.0}, ["mu"], increase=True, n_levels=6)
+    y = [15.1, 32.3, 34.4, 40.0, 44.0, 37.5]
+    raw = steepest_climb_analysis(plan, y, 36.1, extrapolate=False)
+    assert raw.best_level == 6 and raw.centre_level == 5
+    mono = steepest_climb_analysis(plan, y, 36.1, extrapolate=False, monotone=True)
+    assert mono.best_level == 3 and mono.centre_level == 3 and not mono.at_edge
+    assert mono.centre == pytest.approx({"mu": 0.21}) and mono.low == pytest.approx({"mu": 0.13})
+    assert mono.smoothed.tolist() == pytest.approx([15.1, 32.3, 34.4, 40.0, 40.75, 40.75])
