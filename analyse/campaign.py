@@ -25,8 +25,9 @@ angle scatters by several degrees from seed to seed (about 4 deg sd on the examp
 the effects being screened. Each design point (screening, noise repeat, climb level,
 Box-Behnken run) is therefore run with ``replicates`` seeds and its response is their median,
 which a single jammed heap does not drag (default 3 with the quick profile; 1 with the paper
-profile, which follows the paper's procedure). Validation runs stay single, three seeds, as in
-the paper; their interval uses the single-run noise.
+profile, which follows the paper's procedure). The validation's three seeds (the paper's) are
+design points too; the interval of their mean uses the noise of a design point pooled over the
+screening centre and the Box-Behnken centre points.
 
 Every DEM run goes through the run store (``analyse.runs``): a rerun of a killed campaign
 redoes nothing that had finished. Screening runs share their seeds (common random numbers make
@@ -504,10 +505,14 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
 
     # 7. validation ------------------------------------------------------------------------------
     val_settings = settings({**fixed, **best_actual})
-    val_records = execute("validation", [inputs(val_settings, s) for s in config.validation_seeds])
-    y_val = _responses(val_records, fallbacks)
-    # the interval uses the single-run noise measured at the screening centre (more runs)
-    validation = validate_repeats(y_val, target, noise_sd=sigma_run, noise_df=y_noise_all.size - 1)
+    y_val, y_val_all, val_records = run_points("validation",
+                                               [(val_settings, s) for s in config.validation_seeds])
+    # the interval uses the noise of a design point's response pooled over the screening centre
+    # and the Box-Behnken centre points (more degrees of freedom than the three repeats)
+    centre_y = y_bbd[~np.any(bbd.coded, axis=1)]
+    df_pool = (y_noise.size - 1) + (centre_y.size - 1)
+    sd_pool = math.sqrt(((y_noise.size - 1) * sigma ** 2 + (centre_y.size - 1) * centre_sd ** 2) / df_pool)
+    validation = validate_repeats(y_val, target, noise_sd=sd_pool, noise_df=df_pool)
 
     calibrated = base.with_(**{param_of[f]: means[f] for f in letters}).with_(**val_settings)
     results = {
@@ -547,7 +552,8 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
                         "terms_vs_noise": term_vs_noise},
         "optimisation": optimum.to_dict(),
         "validation": {"settings": val_settings, "seeds": list(config.validation_seeds),
-                       "responses": y_val.tolist(), "runs": _run_refs(val_records),
+                       "responses": y_val.tolist(), "replicate_responses": y_val_all.tolist(),
+                       "noise_sd": sd_pool, "noise_df": df_pool, "runs": _run_refs(val_records),
                        "result": validation.to_dict()},
         "calibrated_parameters": calibrated.to_dict(),
         "stages": list(execute.log),

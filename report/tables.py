@@ -19,6 +19,7 @@ text, or None for "not available"; the ``formats`` only say how to print them.
 from __future__ import annotations
 
 import json
+import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -860,39 +861,45 @@ def table_validation(c: Campaign) -> Table:
     extra = [k for k in _observable_columns(records) if k != "angle_deg"]
     paper = _get(c.paper, "validation", default={})
     paper_runs = list(paper.get("runs_deg", []))
+    k, point_runs, angles = _replicates(r, "validation")
     rows = []
-    for i, (run, y, rec) in enumerate(zip(v["runs"], v["responses"], records)):
-        obs = _get(rec, "result", "observable", default={}) or {}
-        rows.append((f"run {i + 1}", run["seed"], y, *[obs.get(k) for k in extra],
-                     paper_runs[i] if i < len(paper_runs) else None))
+    for i, (runs, y, ys) in enumerate(zip(point_runs, v["responses"], angles)):
+        obs = [[_get(c.runs.get(run["key"], {}), "result", "observable", name) for run in runs]
+               for name in extra]
+        # other angles: the median over the replicates too, as the compared one
+        med = [float(statistics.median([x for x in o if x is not None])) if any(x is not None for x in o) else None
+               for o in obs]
+        seeds, reps = _replicate_cells(runs, ys)[1], _replicate_cells(runs, ys)[0]
+        rows.append((f"run {i + 1}", seeds, y, reps, *med, paper_runs[i] if i < len(paper_runs) else None))
     blank = [None] * len(extra)
-    rows.append(("mean", None, res["mean"], *blank, paper.get("mean_deg")))
-    rows.append(("SD (n - 1)", None, res["std"], *blank, None))
-    rows.append(("measured angle (target)", None, res["target"], *blank, paper.get("target_deg")))
-    rows.append(("relative error of the mean [%]", None, res["relative_error_pct"], *blank,
+    rows.append(("mean", None, res["mean"], None, *blank, paper.get("mean_deg")))
+    rows.append(("SD (n - 1)", None, res["std"], None, *blank, None))
+    rows.append(("measured angle (target)", None, res["target"], None, *blank, paper.get("target_deg")))
+    rows.append(("relative error of the mean [%]", None, res["relative_error_pct"], None, *blank,
                  paper.get("relative_error_pct")))
     ci = res.get("ci95") or [None, None]
     if ci[0] is not None:
-        rows.append(("95 % CI of the mean, low", None, ci[0], *blank, None))
-        rows.append(("95 % CI of the mean, high", None, ci[1], *blank, None))
+        rows.append(("95 % CI of the mean, low", None, ci[0], None, *blank, None))
+        rows.append(("95 % CI of the mean, high", None, ci[1], None, *blank, None))
     notes = ["'Angle compared' is the observable the campaign compares with the photos (the "
              "response of every design); other angles the rig reports are shown beside it. The "
              "relative error is in %."]
+    if k > 1:
+        notes.append(_replicate_note(k))
     if ci[0] is not None:
-        noise = r.get("noise", {})
-        notes.append(f"The interval is t-based with the single-run seed-to-seed sd measured at the "
-                     f"screening centre ({_number(noise.get('sd_single_run'))} deg, "
-                     f"{len(sum(noise.get('replicate_responses', []), []))} runs). The target "
+        notes.append(f"The interval is t-based with the seed-to-seed sd of a design point's angle "
+                     f"pooled over the screening centre and the Box-Behnken centre points "
+                     f"({_number(v.get('noise_sd'))} deg, {v.get('noise_df')} degrees of freedom). The target "
                      + ("lies inside it: these runs cannot tell the calibrated heap from the measured one."
                         if res.get("target_in_ci") else "lies outside it: the calibrated heap differs "
                         "from the measured one by more than the DEM's seed noise."))
     return Table("12", "Validation: angle of repose simulated with the calibrated parameters",
-                 ("Run", "Seed", "Angle compared (angle_deg)", *extra, "Paper"),
-                 ("", "", "deg", *["deg"] * len(extra), "deg"), tuple(rows),
+                 ("Run", "Seeds", "Angle compared (angle_deg)", "Replicates", *extra, "Paper"),
+                 ("", "", "deg", "deg", *["deg"] * len(extra), "deg"), tuple(rows),
                  notes=tuple(notes),
                  sources=(_runs_source(r, "validation"), _results_source("validation"))
                  + tuple(_reference_source(c, "validation")),
-                 formats=("", "d", ".4g", *[".4g"] * len(extra), ".4g"))
+                 formats=("", "", ".4g", "", *[".4g"] * len(extra), ".4g"))
 
 
 # ----------------------------------------------------------------------------------------------

@@ -86,8 +86,10 @@ def test_campaign_ill_conditioned_parameter_and_repose_twin(campaign):
     assert {f.covariate for f in ill if f.verdict == "found"} == set(param.values()) - {"mu_s_pw", "mu_r_pp"}
     assert all(f.ci95[0] < 0 < f.ci95[1] for f in ill if f.verdict == "found")
     repose = [d for d in c.discrepancies if d.observable.startswith("repose_angle_deg")][0]
-    assert repose.n_simulated == 3                      # the campaign's validation runs
-    assert repose.simulated == pytest.approx(np.mean(results["validation"]["responses"]))
+    # every single validation run (3 seeds x replicates), each one heap as each photo is
+    runs = np.array(results["validation"]["replicate_responses"])
+    assert repose.n_simulated == runs.size == 3 * results["config"]["replicates"]
+    assert repose.simulated == pytest.approx(runs.mean())
 
 
 def test_cli_writes_critique_json_and_the_report_renders_it(campaign, tmp_path):
