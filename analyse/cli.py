@@ -277,8 +277,12 @@ def _run_calibrate(args) -> int:
     print(f"target angle {results['target_angle_deg']:.2f} deg; calibrated "
           + ", ".join(f"{k} = {v:.4g}" for k, v in opt["settings"].items()))
     val = opt["result"]
-    print(f"validation: mean {val['mean']:.2f} deg over {len(opt['responses'])} seeds, "
-          f"relative error {val['relative_error_pct']:.2f} %")
+    k = results["config"]["replicates"]
+    ci = val.get("ci95") or [float("nan")] * 2
+    print(f"validation: mean {val['mean']:.2f} deg over {len(opt['responses'])} seeds"
+          + (f" (median of {k} runs each)" if k > 1 else "")
+          + f", relative error {val['relative_error_pct']:.2f} %, 95 % CI [{ci[0]:.2f}, {ci[1]:.2f}] deg: "
+          + ("the target lies inside" if val.get("target_in_ci") else "the target lies outside"))
     print(f"results: {args.out / 'results.json'}")
     if not args.no_report:
         try:

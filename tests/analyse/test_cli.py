@@ -122,3 +122,30 @@ def test_errors_name_file_row_and_column(tmp_path, capsys):
                 "--levels", "actual", "--low", "1"]) == 2
     assert "--low and --high" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_calibrate_passes_its_options_and_prints_the_validation(tmp_path, capsys, monkeypatch):
+    """``demcal calibrate``: the options reach the campaign's settings, and the verdict printed
+    is the stored validation's (the campaign itself is tested in test_campaign*.py)."""
+    import analyse.campaign as campaign
+    from pathlib import Path
+
+    seen = {}
+
+    def fake_calibrate(workbook, out, config):
+        seen.update(workbook=Path(workbook), config=config)
+        return {"target_angle_deg": 36.1, "config": {"replicates": config.replicates},
+                "validation": {"settings": {"mu_s_pw": 0.19}, "responses": [36.0, 36.9, 36.6],
+                               "result": {"mean": 36.5, "relative_error_pct": 1.14,
+                                          "ci95": [33.02, 39.99], "target_in_ci": True}}}
+
+    monkeypatch.setattr(campaign, "calibrate", fake_calibrate)
+    root = Path(__file__).resolve().parents[2] / "data" / "astragalus"
+    rc = main(["calibrate", str(root), "--out", str(tmp_path), "--profile", "paper",
+               "--replicates", "2", "--workers", "1", "--no-report"])
+    assert rc == 0
+    assert seen["workbook"].name == "workbook.xlsx"
+    assert (seen["config"].profile, seen["config"].replicates, seen["config"].workers) == ("paper", 2, 1)
+    out = capsys.readouterr().out
+    assert "mu_s_pw = 0.19" in out and "median of 2 runs each" in out
+    assert "95 % CI [33.02, 39.99] deg: the target lies inside" in out
