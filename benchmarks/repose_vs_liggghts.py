@@ -272,8 +272,15 @@ def main(argv=None) -> int:
         md.write_text("# Benchmark results\n\nOne row per run of `benchmarks/run` "
                       "(`benchmarks/repose_vs_liggghts.py`); the JSON beside each run in "
                       "`benchmarks/results/` has every number.\n\n" + RESULTS_MD_HEADER)
-    with md.open("a") as f:
-        f.write(results_row(doc))
+    # the repose table comes first in the file (other benchmarks' tables follow it): the row
+    # goes after its last row
+    lines = md.read_text().splitlines(keepends=True)
+    ends = [i for i, line in enumerate(lines) if line.startswith("|")]
+    first_gap = next((i for i in range(ends[0], len(lines)) if not lines[i].startswith("|")), len(lines)) \
+        if ends else len(lines)
+    row = results_row(doc)
+    lines.insert(first_gap, row if row.endswith("\n") else row + "\n")
+    md.write_text("".join(lines))
     d = summary["demcal"]
     print(f"demcal:   {d['sphere_steps_per_s']:.3g} sphere-steps/s, angle {_pm(d['angle_deg'])} deg")
     if lig:
