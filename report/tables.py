@@ -567,8 +567,9 @@ def table_noise(c: Campaign) -> Table:
     r = c.results
     n = r["noise"]
     k, point_runs, angles = _replicates(r, "noise")
-    rows = [(f"centre point {i}, seeds {_replicate_cells(runs, ys)[1]}", y, _replicate_cells(runs, ys)[0])
-            for i, (runs, ys, y) in enumerate(zip(point_runs, angles, n["responses"]), 1)]
+    cells = [_replicate_cells(runs, ys) for runs, ys in zip(point_runs, angles)]
+    rows = [(f"centre point {i}, seeds {seeds}", y, reps)
+            for i, ((reps, seeds), y) in enumerate(zip(cells, n["responses"]), 1)]
     rows.append(("SD between centre points (n - 1)", n["sd"], ""))
     if k > 1 and n.get("sd_single_run") is not None:
         rows.append(("SD of a single run (all replicates)", n["sd_single_run"], ""))
@@ -869,7 +870,7 @@ def table_validation(c: Campaign) -> Table:
         # other angles: the median over the replicates too, as the compared one
         med = [float(statistics.median([x for x in o if x is not None])) if any(x is not None for x in o) else None
                for o in obs]
-        seeds, reps = _replicate_cells(runs, ys)[1], _replicate_cells(runs, ys)[0]
+        reps, seeds = _replicate_cells(runs, ys)
         rows.append((f"run {i + 1}", seeds, y, reps, *med, paper_runs[i] if i < len(paper_runs) else None))
     blank = [None] * len(extra)
     rows.append(("mean", None, res["mean"], None, *blank, paper.get("mean_deg")))

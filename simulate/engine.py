@@ -59,9 +59,8 @@ a pair restitution that depends on the impact speed (``set_pair(restitution_expo
 restitution_v_ref=v)``: the dashpots of a contact use e(v) at its first-touch approach speed,
 kept in its history), and the spring-dashpot rolling model (``MaterialTable(rolling_model=
 "epsd")``, its spring torque kept in the history). The history rows are as wide as the hooks
-need, and carried across list rebuilds whole. A run with no hook on uses the default contact
-kernel, unchanged (the same trajectories, to the bit, as before the hooks existed); any hook
-switches to the extended one. Several clump templates per factory (a size distribution) are a
+need, and carried across list rebuilds whole; with every hook off a contact behaves as the
+plain Hertz-Mindlin law with constant restitution and constant-torque rolling. Several clump templates per factory (a size distribution) are a
 ``ParticleFactory`` option.
 
 Stability. ``run`` refuses a time step above ``max_dt_fraction`` (default 0.5) of the Rayleigh
@@ -143,190 +142,11 @@ def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw):
 
 
 @kernel
-def _contact_forces(hist_dt, lever_mode, n_bodies, bx, bv, bw, bf, bt, brm, brv, binvm, bmat,
-                    sbody, sx, srad, ppi, pj, ph, ws, wk, wh,
-                    wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
-                    e_star, g_star, damp, mu_s, mu_r):
-    """Contact forces, torques and rolling torques on every body from the Verlet lists: the
-    default contact law (constant restitution, constant torque rolling).
-
-    ``hist_dt`` is the time step used to accumulate tangential displacement (0 for a force
-    evaluation that must not advance the contact history). ``_contact_forces_extended`` is the
-    same law with the engine hooks; this one is kept apart, unchanged, because with the
-    reassociating fast-math flags any code merged into its loop changes the rounding of the
-    default path (and so, the contacts being chaotic, its trajectories).
-    """
-    for b in range(n_bodies):
-        bf[b, 0] = 0.0
-        bf[b, 1] = 0.0
-        bf[b, 2] = 0.0
-        bt[b, 0] = 0.0
-        bt[b, 1] = 0.0
-        bt[b, 2] = 0.0
-        brm[b] = 0.0
-        brv[b, 0] = 0.0
-        brv[b, 1] = 0.0
-        brv[b, 2] = 0.0
-    # ---- sphere-sphere
-    for k in range(ppi.shape[0]):
-        i = ppi[k]
-        j = pj[k]
-        xi = sx[i, 0]
-        yi = sx[i, 1]
-        zi = sx[i, 2]
-        dx = sx[j, 0] - xi
-        dy = sx[j, 1] - yi
-        dz = sx[j, 2] - zi
-        ri = srad[i]
-        rj = srad[j]
-        rsum = ri + rj
-        d2 = dx * dx + dy * dy + dz * dz
-        if d2 >= rsum * rsum:
-            ph[k, 0] = 0.0
-            ph[k, 1] = 0.0
-            ph[k, 2] = 0.0
-            continue
-        d = math.sqrt(d2)
-        inv = 1.0 / d
-        nx = dx * inv
-        ny = dy * inv
-        nz = dz * inv
-        overlap = rsum - d
-        a = ri - 0.5 * overlap  # contact point: middle of the overlap, along n from i
-        px = xi + nx * a
-        py = yi + ny * a
-        pz = zi + nz * a
-        bi = sbody[i]
-        bj = sbody[j]
-        aix = px - bx[bi, 0]
-        aiy = py - bx[bi, 1]
-        aiz = pz - bx[bi, 2]
-        ajx = px - bx[bj, 0]
-        ajy = py - bx[bj, 1]
-        ajz = pz - bx[bj, 2]
-        wxi = bw[bi, 0]
-        wyi = bw[bi, 1]
-        wzi = bw[bi, 2]
-        wxj = bw[bj, 0]
-        wyj = bw[bj, 1]
-        wzj = bw[bj, 2]
-        # velocity of i relative to j at the contact point
-        vrx = bv[bi, 0] + wyi * aiz - wzi * aiy - (bv[bj, 0] + wyj * ajz - wzj * ajy)
-        vry = bv[bi, 1] + wzi * aix - wxi * aiz - (bv[bj, 1] + wzj * ajx - wxj * ajz)
-        vrz = bv[bi, 2] + wxi * aiy - wyi * aix - (bv[bj, 2] + wxj * ajy - wyj * ajx)
-        vn = vrx * nx + vry * ny + vrz * nz
-        vtx = vrx - vn * nx
-        vty = vry - vn * ny
-        vtz = vrz - vn * nz
-        mi = bmat[bi]
-        mj = bmat[bj]
-        r_star = ri * rj / rsum
-        m_star = 1.0 / (binvm[bi] + binvm[bj])
-        cd = damp[mi, mj]
-        f_n, f_el, sqrt_rd = normal_force(e_star[mi, mj], r_star, m_star, cd, overlap, vn)
-        ftx, fty, ftz = tangential_force(ph, k, nx, ny, nz, vtx, vty, vtz, g_star[mi, mj],
-                                         m_star, cd, mu_s[mi, mj], sqrt_rd, f_n, hist_dt)
-        fx = ftx - f_n * nx
-        fy = fty - f_n * ny
-        fz = ftz - f_n * nz
-        bf[bi, 0] += fx
-        bf[bi, 1] += fy
-        bf[bi, 2] += fz
-        bf[bj, 0] -= fx
-        bf[bj, 1] -= fy
-        bf[bj, 2] -= fz
-        bt[bi, 0] += aiy * fz - aiz * fy
-        bt[bi, 1] += aiz * fx - aix * fz
-        bt[bi, 2] += aix * fy - aiy * fx
-        bt[bj, 0] -= ajy * fz - ajz * fy
-        bt[bj, 1] -= ajz * fx - ajx * fz
-        bt[bj, 2] -= ajx * fy - ajy * fx
-        mr = mu_r[mi, mj]
-        if mr > 0.0:
-            if lever_mode == EDEM_COM:
-                brm[bi] += mr * f_el * math.sqrt(aix * aix + aiy * aiy + aiz * aiz)
-                brm[bj] += mr * f_el * math.sqrt(ajx * ajx + ajy * ajy + ajz * ajz)
-            elif lever_mode == EDEM_SPHERE:
-                brm[bi] += mr * f_el * a
-                brm[bj] += mr * f_el * (rj - 0.5 * overlap)
-            else:
-                # no static stop from particle contacts: this torque resists only the rolling
-                # relative to the neighbour, and a body turning with its neighbours keeps turning
-                tx, ty, tz = relative_rolling_torque(mr, f_el, r_star, wxi - wxj, wyi - wyj,
-                                                     wzi - wzj, nx, ny, nz)
-                brv[bi, 0] -= tx
-                brv[bi, 1] -= ty
-                brv[bi, 2] -= tz
-                brv[bj, 0] += tx
-                brv[bj, 1] += ty
-                brv[bj, 2] += tz
-    # ---- sphere-wall
-    for q in range(ws.shape[0]):
-        i = ws[q]
-        k = wk[q]
-        xi = sx[i, 0]
-        yi = sx[i, 1]
-        zi = sx[i, 2]
-        ri = srad[i]
-        d, nx, ny, nz = wall_distance(wkind, worig, wnorm, wu, wv, whalf, k, xi, yi, zi)
-        overlap = ri - d
-        if overlap <= 0.0:
-            wh[q, 0] = 0.0
-            wh[q, 1] = 0.0
-            wh[q, 2] = 0.0
-            continue
-        a = ri - 0.5 * overlap
-        bi = sbody[i]
-        aix = xi - nx * a - bx[bi, 0]
-        aiy = yi - ny * a - bx[bi, 1]
-        aiz = zi - nz * a - bx[bi, 2]
-        wxi = bw[bi, 0]
-        wyi = bw[bi, 1]
-        wzi = bw[bi, 2]
-        # velocity of the sphere relative to the wall at the contact point
-        vrx = bv[bi, 0] + wyi * aiz - wzi * aiy - wvel_now[k, 0]
-        vry = bv[bi, 1] + wzi * aix - wxi * aiz - wvel_now[k, 1]
-        vrz = bv[bi, 2] + wxi * aiy - wyi * aix - wvel_now[k, 2]
-        vn = vrx * nx + vry * ny + vrz * nz
-        vtx = vrx - vn * nx
-        vty = vry - vn * ny
-        vtz = vrz - vn * nz
-        mi = bmat[bi]
-        mk = wmat[k]
-        m_star = 1.0 / binvm[bi]
-        cd = damp[mi, mk]
-        f_n, f_el, sqrt_rd = normal_force(e_star[mi, mk], ri, m_star, cd, overlap, -vn)
-        ftx, fty, ftz = tangential_force(wh, q, nx, ny, nz, vtx, vty, vtz, g_star[mi, mk],
-                                         m_star, cd, mu_s[mi, mk], sqrt_rd, f_n, hist_dt)
-        fx = ftx + f_n * nx
-        fy = fty + f_n * ny
-        fz = ftz + f_n * nz
-        bf[bi, 0] += fx
-        bf[bi, 1] += fy
-        bf[bi, 2] += fz
-        bt[bi, 0] += aiy * fz - aiz * fy
-        bt[bi, 1] += aiz * fx - aix * fz
-        bt[bi, 2] += aix * fy - aiy * fx
-        mr = mu_r[mi, mk]
-        if mr > 0.0:
-            if lever_mode == EDEM_COM:
-                brm[bi] += mr * f_el * math.sqrt(aix * aix + aiy * aiy + aiz * aiz)
-            elif lever_mode == EDEM_SPHERE:
-                brm[bi] += mr * f_el * a
-            else:
-                brm[bi] += mr * f_el * ri
-                tx, ty, tz = relative_rolling_torque(mr, f_el, ri, wxi, wyi, wzi, nx, ny, nz)
-                brv[bi, 0] -= tx
-                brv[bi, 1] -= ty
-                brv[bi, 2] -= tz
-
-
-@kernel
-def _contact_forces_extended(hist_dt, lever_mode, rolling_model, eta_r, n_bodies, bx, bv, bw, bf, bt, brm,
+def _contact_forces(hist_dt, lever_mode, rolling_model, eta_r, n_bodies, bx, bv, bw, bf, bt, brm,
                     brv, binvm, bmat, sbody, sx, srad, ppi, pj, ph, ws, wk, wh,
                     wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
                     e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min):
-    """``_contact_forces`` with the engine hooks (used when any is switched on).
+    """Contact forces, torques and rolling torques on every body from the Verlet lists.
 
     ``hist_dt`` is the time step used to accumulate tangential displacement (0 for a force
     evaluation that must not advance the contact history). A pair with ``e_exp`` != 0 takes
@@ -560,7 +380,7 @@ def _wall_velocities(t, wvel, wwin, wvel_now):
 
 
 @kernel
-def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, extended, rolling_model, eta_r,
+def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
              need_rebuild, need_forces,
              n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, bmat, bactive,
              n_spheres, sbody, soff, srad, sx, sx0, sxw,
@@ -616,16 +436,10 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, extended, rolling_mod
         need_rebuild = False
         # the first evaluation of a fresh state must not advance the contact history
         hist_dt = dt if step >= 0 else 0.0
-        if extended:
-            _contact_forces_extended(hist_dt, lever_mode, rolling_model, eta_r, n_bodies, bx, bv, bw,
-                                     bf, bt, brm, brv, binvm, bmat, sbody, sx, srad, ppi, pj, ph, ws,
-                                     wk, wh, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
-                                     e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min)
-        else:
-            _contact_forces(hist_dt, lever_mode, n_bodies, bx, bv, bw, bf, bt, brm,
-                            brv, binvm, bmat, sbody, sx, srad, ppi, pj, ph, ws, wk, wh, wkind,
-                            worig, wnorm, wu, wv, whalf, wvel_now, wmat, e_star, g_star, damp, mu_s,
-                            mu_r)
+        _contact_forces(hist_dt, lever_mode, rolling_model, eta_r, n_bodies, bx, bv, bw,
+                        bf, bt, brm, brv, binvm, bmat, sbody, sx, srad, ppi, pj, ph, ws,
+                        wk, wh, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
+                        e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min)
     if n_steps > 0:
         for b in range(n_bodies):
             if bactive[b]:
@@ -1077,7 +891,7 @@ class Simulation:
         g = self._gravity
         out = _advance(
             n_steps, self.time, self.dt, g[0], g[1], g[2], self.skin, self._lever,
-            width > HIST_IMPACT_SPEED, pt.rolling_model, pt.rolling_damping_ratio, self._need_rebuild,
+            pt.rolling_model, pt.rolling_damping_ratio, self._need_rebuild,
             self._need_forces,
             self.n_bodies, B["bx"], B["bv"], B["bq"], B["bL"], B["bw"], B["bR"], B["bf"], B["bt"],
             B["brm"], B["brv"], B["binvm"], B["binvi"], B["bmat"], B["bactive"],

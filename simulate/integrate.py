@@ -115,20 +115,13 @@ def half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, 
     lx = bL[b, 0] + bt[b, 0] * h
     ly = bL[b, 1] + bt[b, 1] * h
     lz = bL[b, 2] + bt[b, 2] * h
+    m = brm[b]
     if mode == KICK_ELASTIC:
         lx += brv[b, 0] * h
         ly += brv[b, 1] * h
         lz += brv[b, 2] * h
         wx, wy, wz = apply_inverse_inertia(bR, b, binvi, lx, ly, lz)
-        bL[b, 0] = lx
-        bL[b, 1] = ly
-        bL[b, 2] = lz
-        bw[b, 0] = wx
-        bw[b, 1] = wy
-        bw[b, 2] = wz
-        return
-    m = brm[b]
-    if m > 0.0 and lx * lx + ly * ly + lz * lz <= (m * h) ** 2:
+    elif m > 0.0 and lx * lx + ly * ly + lz * lz <= (m * h) ** 2:
         lx = 0.0
         ly = 0.0
         lz = 0.0

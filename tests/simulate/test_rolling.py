@@ -21,9 +21,11 @@ MU_R = 0.15
 THRESHOLD_DEG = math.degrees(math.atan(MU_R))  # 8.53 deg
 
 
-def _slope_run(deg, lever):
+def slope_run(deg, lever=None, **changes):
+    """A sphere settled on a plate tilted by ``deg``, then watched for 0.3 s: the simulation,
+    its travel down the slope [m], its speeds before and after [m/s] and its acceleration."""
     theta = math.radians(deg)
-    sim = simulation(DEMParameters(mu_r_pw=MU_R, mu_s_pw=0.5), dt=2e-5, rolling_lever=lever,
+    sim = simulation(DEMParameters(mu_r_pw=MU_R, mu_s_pw=0.5, **changes), dt=2e-5, rolling_lever=lever,
                      gravity=(9.81 * math.sin(theta), 0.0, -9.81 * math.cos(theta)),
                      lo=(-0.5, -0.1, -0.05), hi=(1.0, 0.1, 0.1))
     tpl = sphere_template(sim)
@@ -33,13 +35,13 @@ def _slope_run(deg, lever):
     x0, v0 = sim.positions()[0, 0], sim.velocities()[0, 0]
     sim.run(duration=0.3)
     x1, v1 = sim.positions()[0, 0], sim.velocities()[0, 0]
-    return x1 - x0, v0, v1, (v1 - v0) / 0.3
+    return sim, x1 - x0, v0, v1, (v1 - v0) / 0.3
 
 
 @pytest.mark.parametrize("lever", ["edem_com", "edem_sphere", "liggghts_reff"])
 def test_constant_torque_ai2011_sphere_stays_below_atan_mu_r(lever):
     for deg in (THRESHOLD_DEG - 1.0, THRESHOLD_DEG - 0.2):
-        dx, v0, v1, _ = _slope_run(deg, lever)
+        _, dx, v0, v1, _ = slope_run(deg, lever)
         assert abs(dx) < 1e-9 and abs(v1) < 1e-9
 
 
@@ -47,7 +49,7 @@ def test_constant_torque_ai2011_sphere_stays_below_atan_mu_r(lever):
 def test_constant_torque_ai2011_sphere_rolls_above_atan_mu_r(lever):
     for deg in (THRESHOLD_DEG + 0.5, THRESHOLD_DEG + 3.0):
         theta = math.radians(deg)
-        dx, v0, v1, accel = _slope_run(deg, lever)
+        _, dx, v0, v1, accel = slope_run(deg, lever)
         expected = 5.0 / 7.0 * 9.81 * (math.sin(theta) - MU_R * math.cos(theta))
         assert dx > 0 and v1 > v0
         assert accel == pytest.approx(expected, rel=0.01)

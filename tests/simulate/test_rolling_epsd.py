@@ -18,8 +18,8 @@ import pytest
 from demcal.errors import InputError
 from simulate import DEMParameters, MaterialTable
 from tests.simulate.helpers import R, floor, simulation, sphere_template
+from tests.simulate.test_rolling import MU_R, slope_run
 
-MU_R = 0.15
 THRESHOLD_DEG = math.degrees(math.atan(MU_R))  # 8.53 deg
 G = 9.81
 E_P, E_S = 2 * 1e7 * 1.25, 2 * 8e10 * 1.3
@@ -33,18 +33,7 @@ def _limit_on_floor(sim):
 
 
 def _slope_run(deg):
-    theta = math.radians(deg)
-    sim = simulation(DEMParameters(mu_r_pw=MU_R, mu_s_pw=0.5, rolling_model="epsd"), dt=2e-5,
-                     gravity=(G * math.sin(theta), 0.0, -G * math.cos(theta)),
-                     lo=(-0.5, -0.1, -0.05), hi=(1.0, 0.1, 0.1))
-    tpl = sphere_template(sim)
-    floor(sim)
-    sim.add_clump(tpl, (0.0, 0.0, R))
-    sim.run(duration=0.2)                      # settle onto the plate
-    x0, v0 = sim.positions()[0, 0], sim.velocities()[0, 0]
-    sim.run(duration=0.3)
-    x1, v1 = sim.positions()[0, 0], sim.velocities()[0, 0]
-    return sim, x1 - x0, v0, v1, (v1 - v0) / 0.3
+    return slope_run(deg, rolling_model="epsd")
 
 
 def test_spring_dashpot_ai2011_sphere_held_below_atan_mu_r():

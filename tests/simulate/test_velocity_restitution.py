@@ -79,9 +79,8 @@ def test_constant_restitution_when_the_exponent_is_zero():
 
 
 def test_zero_exponent_is_bit_identical_to_the_default_path():
-    # a law on the particle-particle pair switches the engine to its extended contact kernel and
-    # widens every contact's history; the drop on steel (exponent 0) must not change by a bit.
-    # (With every exponent 0 the engine runs its default kernel, unchanged.)
+    # a law on the particle-particle pair widens every contact's history; the drop on steel
+    # (exponent 0) must not change by a bit.
     default = _drop(DEMParameters(e_pw=E_REF), 0.2)[2]
     hooked = _drop(DEMParameters(e_pw=E_REF, e_pp_exponent=0.3, e_pw_exponent=0.0), 0.2)[2]
     for read in ("positions", "velocities", "angular_momenta", "orientations"):
