@@ -270,6 +270,9 @@ def measure_workbook(wb, *, photo_estimator=None, outliers="none", annotate_dir=
     options = {"outliers": rule if limit is None else f"{rule}:{limit:g}", "r2_min": r2_min, "g": g,
                "photo_estimator": None if estimator is None else
                f"{getattr(estimator, '__module__', '?')}.{getattr(estimator, '__qualname__', repr(estimator))}"}
+    if estimator is not None and photo_estimator is None:
+        from measure.repose import FLANK_BAND
+        options["flank_band"] = list(FLANK_BAND)  # the twins' angles must be read the same way
     return Measurement(material=str(wb.meta["material"]), quantities=quantities, workbook=info,
                        meta=dict(wb.meta), provenance=Provenance(inputs=dict(wb.files), options=options),
                        notes=notes)

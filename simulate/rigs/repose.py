@@ -268,7 +268,7 @@ def top_profile(centres, radii, x_min: float, x_max: float, step: float = PROFIL
 
 
 def heap_angles(centres, radii, box_length: float, *, px_per_m: float = PX_PER_M,
-                annotate_to=None) -> HeapAngles:
+                annotate_to=None, band=None, photo: bool = True) -> HeapAngles:
     """Measure the heap of a plate-withdrawal run from its spheres (demcal's or another code's).
 
     Parameters
@@ -284,6 +284,11 @@ def heap_angles(centres, radii, box_length: float, *, px_per_m: float = PX_PER_M
         Scale of the rendered side view [px/m].
     annotate_to : path, optional
         Write the annotated side view (photo method) there.
+    band : (float, float), optional
+        Fitting band of the flank for every method (default ``measure.repose.FLANK_BAND``, as
+        for the lab's photos).
+    photo : bool
+        Also render the side view and run the photo method (else ``angle_deg`` is NaN).
 
     Returns
     -------
@@ -307,7 +312,7 @@ def heap_angles(centres, radii, box_length: float, *, px_per_m: float = PX_PER_M
 
     def fit(xs, zs, label):
         try:
-            res = angle_from_profile(xs, zs, side="right")
+            res = angle_from_profile(xs, zs, side="right", band=band)
         except InputError as exc:
             notes.append(f"{label}: {exc}")
             return math.nan, math.nan
@@ -317,15 +322,17 @@ def heap_angles(centres, radii, box_length: float, *, px_per_m: float = PX_PER_M
     outside = x > box_length
     angle_outside, _ = fit(x[outside], z[outside], "outside heap")
 
+    if not photo:
+        return HeapAngles(math.nan, float(angle_profile), float(angle_outside), x, z, float(crest),
+                          tuple(notes))
     # side view: the floor fills the bottom 15 % of the image, a margin above the crest
     top = float(z.max())
     z_lo = -0.15 / 0.85 * (top + 2.0 * r_max)
     img = silhouette(c[:, [0, 2]], r, px_per_m=px_per_m, extent=(x_lo, x_hi, z_lo, top + 2.0 * r_max),
                      floor_z_m=0.0)
     try:
-        photo = angle_from_photo(img, side="right", annotate_to=annotate_to,
-                                 scale_mm_per_px=1e3 / px_per_m)
-        angle_photo = photo.angle_deg
+        angle_photo = angle_from_photo(img, side="right", annotate_to=annotate_to, band=band,
+                                       scale_mm_per_px=1e3 / px_per_m).angle_deg
     except InputError as exc:
         notes.append(f"photo method: {exc}")
         angle_photo = math.nan
@@ -470,7 +477,9 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
            "body_positions": body[act], "geometry": geo.to_dict(), "t_lift": t_lift, "t_clear": t_clear,
            "t_end": sim.time, "ke_t": np.array(ke_t), "ke": np.array(ke),
            "escapes": [e.to_dict() for e in sim.escaped]}
-    options = {"profile": prof.name, "geometry": base.to_dict(), "force": force}
+    from measure.repose import FLANK_BAND
+    options = {"profile": prof.name, "geometry": base.to_dict(), "force": force,
+               "flank_band": list(FLANK_BAND)}
     hooks = engine_hooks(params)
     if hooks:
         options["extensions"] = hooks
