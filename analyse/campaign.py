@@ -1,37 +1,39 @@
-"""The calibration campaign: from a lab workbook to calibrated DEM parameters, as the source
-paper did in Design-Expert and EDEM, with every DEM run driven by demcal itself.
+"""The calibration campaign: from a lab workbook to calibrated DEM parameters, every DEM run
+driven by demcal itself. Two workflows share the measurement, the run store and the results file:
 
-Steps (``calibrate``):
+``plausible`` (the default with the quick profile; ``analyse.plausible``)
+    For a noisy simulator: the noise measured first, replicates sized by it, a surrogate that
+    models it, sequential runs where the answer is uncertain, the set of parameters consistent
+    with the lab (per parameter a 95 % interval and what the heap identifies), and a
+    validation by equivalence that can fail.
 
-1. measure the workbook (``measure.pipeline.measure_workbook``);
-2. Plackett-Burman screening of the seven measured contact parameters (A Poisson's ratio,
-   B e p-p, C mu_s p-p, D mu_r p-p, E e p-wall, F mu_s p-wall, G mu_r p-wall), -1/+1 = the
-   measured min/max (``levels="minmax"``, as the paper) or mean -+ sd (``levels="sd"``),
-   12 runs, the four unused columns as dummies;
-3. seed-to-seed noise of the DEM: the screening centre run repeated with different seeds;
-   each effect is compared with it;
-4. steepest climb of the significant factors toward the measured angle, others at their
-   measured means; the best level (closest to the target on the monotone fit of the climb's
-   responses) becomes the Box-Behnken centre, its neighbours -1/+1 (when the best level is an
-   end of the climb the window moves inward: no level leaves the measured range);
-5. Box-Behnken (12 edge runs + 5 centre points with different seeds), full quadratic,
-   Design-Expert ANOVA, canonical analysis;
-6. optimisation to the measured angle: several solutions, the one closest to the measured
-   means preferred;
-7. validation: the preferred solution simulated with three fresh seeds.
+``design-expert`` (the default with the paper profile): the source paper's procedure
+    1. measure the workbook (``measure.pipeline.measure_workbook``);
+    2. Plackett-Burman screening of the seven measured contact parameters (A Poisson's ratio,
+       B e p-p, C mu_s p-p, D mu_r p-p, E e p-wall, F mu_s p-wall, G mu_r p-wall), -1/+1 = the
+       measured min/max (``levels="minmax"``, as the paper) or mean -+ sd (``levels="sd"``),
+       12 runs, the four unused columns as dummies;
+    3. seed-to-seed noise of the DEM: the screening centre run repeated with different seeds;
+       each effect is compared with it;
+    4. steepest climb of the significant factors toward the measured angle, others at their
+       measured means; the best level (closest to the target on the monotone fit of the
+       climb's responses) becomes the Box-Behnken centre, its neighbours -1/+1 (when the best
+       level is an end of the climb the window moves inward: no level leaves the measured
+       range);
+    5. Box-Behnken (12 edge runs + 5 centre points with different seeds), full quadratic,
+       Design-Expert ANOVA, canonical analysis;
+    6. optimisation to the measured angle: several solutions, the one closest to the measured
+       means preferred;
+    7. validation: the preferred solution simulated with three fresh seeds, with
+       Design-Expert's confirmation check (the 95 % prediction interval of their mean, the
+       model's own variance at the point included) and the equivalence test.
 
-Replicates. A heap of 500 segments either flows out or stands as a cliff, so one DEM run's
-angle scatters by several degrees from seed to seed (about 4 deg sd on the example), as much as
-the effects being screened. Each design point (screening, noise repeat, climb level,
-Box-Behnken run) is therefore run with ``replicates`` seeds and its response is their median,
-which a single jammed heap does not drag (default 3 with the quick profile; 1 with the paper
-profile, which follows the paper's procedure). The validation's three seeds (the paper's) are
-design points too; the interval of their mean uses the noise of a design point pooled over the
-screening centre and the Box-Behnken centre points.
+    Replicates: each design point is run ``replicates`` times (default 1 with the paper profile,
+    the paper's procedure) and its response is their median. Screening runs share their seeds;
+    repeated centre points and validation runs use their own seeds.
 
 Every DEM run goes through the run store (``analyse.runs``): a rerun of a killed campaign
-redoes nothing that had finished. Screening runs share their seeds (common random numbers make
-effects sharper); repeated centre points and validation runs use their own seeds.
+redoes nothing that had finished.
 """
 
 from __future__ import annotations
@@ -45,8 +47,9 @@ from pathlib import Path
 import numpy as np
 
 from analyse.designs import box_behnken, plackett_burman, to_actual
-from analyse.optimise import (canonical_analysis, optimise_to_target, steepest_climb_analysis,
-                              steepest_climb_plan, validate_repeats)
+from analyse.equivalence import default_tolerance, equivalence_test
+from analyse.optimise import (canonical_analysis, confirmation_interval, optimise_to_target,
+                              steepest_climb_analysis, steepest_climb_plan, validate_repeats)
 from analyse.regression import fit_response_surface
 from analyse.runs import RunStore, run_all, run_key
 from analyse.screening import plackett_burman_screening
@@ -68,9 +71,9 @@ SCREENING_FACTORS = (
 
 #: Seed offset between the replicates of one design point.
 REPLICATE_SEED_STRIDE = 10_000
-#: Default replicates per design point by repose profile: the paper profile follows the paper's
-#: procedure (one run per point); the quick profile takes the median of three.
-DEFAULT_REPLICATES = {"quick": 3, "paper": 1}
+#: Default workflow by repose profile.
+DEFAULT_WORKFLOW = {"quick": "plausible", "paper": "design-expert"}
+WORKFLOWS = ("plausible", "design-expert")
 
 #: Admissible range of each DEM parameter; design levels are clipped into it.
 PARAMETER_BOUNDS = {"poisson_ratio": (0.0, 0.49), "e_pp": (0.01, 1.0), "e_pw": (0.01, 1.0),
@@ -88,6 +91,9 @@ class CampaignConfig:
     ----------
     profile : str
         Repose-rig profile, ``quick`` or ``paper`` (see ``simulate.rigs.repose``).
+    workflow : str or None
+        ``plausible`` or ``design-expert`` (module docstring); None: ``DEFAULT_WORKFLOW`` of the
+        profile.
     levels : str
         ``minmax``: screening levels -1/+1 = measured min/max of the rows used (the paper);
         ``sd``: mean -+ one standard deviation.
@@ -96,16 +102,29 @@ class CampaignConfig:
     scheduler : str or None
         Dask scheduler address; runs go to that cluster instead of local processes.
     seed : int
-        Seed of every screening, climb and Box-Behnken edge run (of their first replicate).
+        The campaign's seed: every run seed of every stage derives from it.
     replicates : int or None
-        DEM runs per design point, with seeds ``seed + REPLICATE_SEED_STRIDE * r``; the
-        point's response is their median. None: ``DEFAULT_REPLICATES`` of the profile.
+        DEM runs per design point. ``plausible``: None chooses it from the measured noise
+        (``analyse.noise.replicates_for``), the point's response is their mean.
+        ``design-expert``: seeds ``seed + REPLICATE_SEED_STRIDE * r``, the response is their
+        median; None: one run.
     noise_repeats : int
-        Extra seeds of the screening centre run, for the seed-to-seed noise.
+        Seeds of the noise measurement (``plausible``: per point of the pair;
+        ``design-expert``: extra seeds of the screening centre run).
+    initial_points, batch, budget_runs : int
+        ``plausible``: points of the space-filling design, points per sequential round, and
+        the most runs of design and sequential rounds together.
+    validation_first, validation_step, validation_cap : int
+        ``plausible``: validation runs before the first look, between looks, and at most.
+    tolerance : float or None
+        Equivalence tolerance of the validation [deg]; None: the larger of 1 deg and the lab's
+        heap-to-heap sd.
+    discrepancy_sd : float
+        sd allowed for what the model cannot represent, added to the target's [deg].
     climb_levels : int
         Levels of the steepest climb.
     validation_seeds : tuple of int
-        Seeds of the validation runs.
+        ``design-expert``: seeds of the validation runs.
     alpha : float
         Significance level.
     n_significant : tuple of int
@@ -114,12 +133,21 @@ class CampaignConfig:
     """
 
     profile: str = "quick"
+    workflow: str | None = None
     levels: str = "minmax"
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)
     scheduler: str | None = None
     seed: int = 1
     replicates: int | None = None
-    noise_repeats: int = 4
+    noise_repeats: int = 6
+    initial_points: int = 18
+    batch: int = 4
+    budget_runs: int = 72
+    validation_first: int = 10
+    validation_step: int = 10
+    validation_cap: int = 40
+    tolerance: float | None = None
+    discrepancy_sd: float = 0.0
     climb_levels: int = 6
     validation_seeds: tuple = (101, 102, 103)
     alpha: float = 0.05
@@ -129,12 +157,29 @@ class CampaignConfig:
     def __post_init__(self):
         if self.levels not in ("minmax", "sd"):
             raise InputError(f"levels must be 'minmax' or 'sd', got {self.levels!r}")
-        if self.noise_repeats < 2:
-            raise InputError(f"noise_repeats must be >= 2, got {self.noise_repeats}")
-        if self.replicates is None:
-            object.__setattr__(self, "replicates", DEFAULT_REPLICATES.get(self.profile, 1))
-        if int(self.replicates) != self.replicates or self.replicates < 1:
+        if self.workflow is None:
+            object.__setattr__(self, "workflow", DEFAULT_WORKFLOW.get(self.profile, "plausible"))
+        if self.workflow not in WORKFLOWS:
+            raise InputError(f"workflow must be one of {', '.join(WORKFLOWS)}, got {self.workflow!r}")
+        if self.noise_repeats < (4 if self.workflow == "plausible" else 2):
+            raise InputError(f"noise_repeats must be >= {4 if self.workflow == 'plausible' else 2} "
+                             f"with the {self.workflow} workflow, got {self.noise_repeats}")
+        if self.replicates is None and self.workflow == "design-expert":
+            object.__setattr__(self, "replicates", 1)
+        if self.replicates is not None and (int(self.replicates) != self.replicates or self.replicates < 1):
             raise InputError(f"replicates must be a positive integer, got {self.replicates!r}")
+        for name in ("initial_points", "batch", "budget_runs", "validation_first", "validation_step",
+                     "validation_cap"):
+            value = getattr(self, name)
+            if int(value) != value or value < 1:
+                raise InputError(f"{name} must be a positive integer, got {value!r}")
+        if self.validation_first < 2 or self.validation_cap < self.validation_first:
+            raise InputError("validation needs validation_first >= 2 and validation_cap >= validation_first, "
+                             f"got {self.validation_first} and {self.validation_cap}")
+        if self.tolerance is not None and not self.tolerance > 0:
+            raise InputError(f"tolerance must be positive, got {self.tolerance!r}")
+        if not self.discrepancy_sd >= 0:
+            raise InputError(f"discrepancy_sd must be >= 0, got {self.discrepancy_sd!r}")
 
     @classmethod
     def from_dict(cls, d: dict) -> "CampaignConfig":
@@ -386,21 +431,53 @@ def derive_results(measurement, config: CampaignConfig, store_dir) -> dict:
 
 
 def _derive(measurement, config: CampaignConfig, execute) -> dict:
-    """Steps 2-7 of the campaign; ``execute(stage, tasks) -> records`` supplies the DEM runs."""
+    """The campaign after the measurement; ``execute(stage, tasks) -> records`` supplies the DEM
+    runs. The workflow's results plus what every campaign records."""
     if "repose_angle_deg" not in measurement.quantities:
         raise InputError("the campaign needs a target angle of repose: the workbook has no "
                          "'repose' photos and no meta 'target_repose_deg'")
-    target = float(measurement.quantities["repose_angle_deg"].value)
-
     factors = factor_levels(measurement, config.levels)
+    base = base_parameters(measurement)
+    geometry = repose_geometry(measurement.meta)
+    if config.workflow == "plausible":
+        from analyse.plausible import derive_plausible
+
+        results = derive_plausible(measurement, config, execute, factors=factors, base=base,
+                                   geometry=geometry, responses=_responses, run_refs=_run_refs)
+        fallbacks = results.pop("fallback_runs")
+    else:
+        results = _derive_design_expert(measurement, config, execute, factors, base, geometry)
+        fallbacks = results.pop("fallback_runs")
+    return {
+        "workflow": config.workflow,
+        "response": {"name": RESPONSE, "fallbacks": list(FALLBACK_RESPONSES),
+                     "fallback_runs": fallbacks,
+                     "note": (f"{len(fallbacks)} run(s) left no slope for the photo method (e.g. the "
+                              f"heap spread flat); their response is the fallback named per run"
+                              if fallbacks else "")},
+        "material": measurement.material,
+        "target_angle_deg": float(measurement.quantities["repose_angle_deg"].value),
+        "config": {k_: (list(v) if isinstance(v, tuple) else v) for k_, v in config.__dict__.items()},
+        "measurement": measurement.to_dict(),
+        "factors": factors,
+        "base_parameters": base.to_dict(),
+        "geometry": geometry,
+        **results,
+        "stages": list(execute.log),
+        "provenance": Provenance(inputs=dict(measurement.provenance.inputs), seed=config.seed,
+                                 options={"profile": config.profile, "levels": config.levels,
+                                          "workflow": config.workflow}).to_dict(),
+    }
+
+
+def _derive_design_expert(measurement, config: CampaignConfig, execute, factors, base, geometry) -> dict:
+    """Steps 2-7 of the source paper's procedure (module docstring)."""
+    target = float(measurement.quantities["repose_angle_deg"].value)
     letters = list(factors)
     low = np.array([factors[f]["low"] for f in letters])
     high = np.array([factors[f]["high"] for f in letters])
     means = {f: factors[f]["mean"] for f in letters}
     param_of = {f: factors[f]["parameter"] for f in letters}
-
-    base = base_parameters(measurement)
-    geometry = repose_geometry(measurement.meta)
 
     def inputs(settings: dict, seed: int) -> dict:
         params = base.with_(**settings)
@@ -513,21 +590,17 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
     df_pool = (y_noise.size - 1) + (centre_y.size - 1)
     sd_pool = math.sqrt(((y_noise.size - 1) * sigma ** 2 + (centre_y.size - 1) * centre_sd ** 2) / df_pool)
     validation = validate_repeats(y_val, target, noise_sd=sd_pool, noise_df=df_pool)
+    confirmation = confirmation_interval(fit, list(best["coded"].values()), y_val.size)
+    confirmation["target_inside"] = bool(confirmation["pi95"][0] <= target <= confirmation["pi95"][1])
+    est = measurement.quantities["repose_angle_deg"]
+    lab_sd = float(est.sd) if est.n >= 2 and math.isfinite(est.sd) else None
+    tolerance = float(config.tolerance) if config.tolerance else default_tolerance(lab_sd)
+    equivalence = equivalence_test(y_val_all.ravel(), target, lab_sd, est.n if lab_sd else None,
+                                   tolerance, alpha=config.alpha).to_dict() if y_val_all.size >= 2 else None
 
     calibrated = base.with_(**{param_of[f]: means[f] for f in letters}).with_(**val_settings)
     results = {
-        "response": {"name": RESPONSE, "fallbacks": list(FALLBACK_RESPONSES),
-                     "fallback_runs": fallbacks,
-                     "note": (f"{len(fallbacks)} run(s) left no slope for the photo method (e.g. the "
-                              f"heap spread flat); their response is the fallback named per run"
-                              if fallbacks else "")},
-        "material": measurement.material,
-        "target_angle_deg": target,
-        "config": {k_: (list(v) if isinstance(v, tuple) else v) for k_, v in config.__dict__.items()},
-        "measurement": measurement.to_dict(),
-        "factors": factors,
-        "base_parameters": base.to_dict(),
-        "geometry": geometry,
+        "fallback_runs": fallbacks,
         "plackett_burman": {
             "design_coded": pb.coded.tolist(), "columns": list(pb.columns),
             "design_actual": pb_actual.tolist(), "response": y_pb.tolist(),
@@ -554,11 +627,13 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
         "validation": {"settings": val_settings, "seeds": list(config.validation_seeds),
                        "responses": y_val.tolist(), "replicate_responses": y_val_all.tolist(),
                        "noise_sd": sd_pool, "noise_df": df_pool, "runs": _run_refs(val_records),
-                       "result": validation.to_dict()},
+                       "result": validation.to_dict(), "confirmation": confirmation,
+                       "test": equivalence,
+                       "verdict": equivalence["verdict"] if equivalence else "undecided",
+                       "mean_deg": float(np.mean(y_val_all)), "ci95": list(validation.ci95),
+                       "tolerance_deg": tolerance, "target_deg": target, "n_runs": int(y_val_all.size),
+                       "detectable_bias_deg": equivalence["detectable_bias_deg"] if equivalence else math.nan},
         "calibrated_parameters": calibrated.to_dict(),
-        "stages": list(execute.log),
-        "provenance": Provenance(inputs=dict(measurement.provenance.inputs), seed=config.seed,
-                                 options={"profile": config.profile, "levels": config.levels}).to_dict(),
     }
     return results
 

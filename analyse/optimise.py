@@ -668,3 +668,31 @@ def validate_repeats(values, target: float, *, noise_sd: float | None = None,
     return ValidationResult(v, int(v.size), mean, std, float(target),
                             100.0 * abs(mean - target) / abs(target), ci,
                             bool(ci[0] <= target <= ci[1]))
+
+
+def confirmation_interval(fit, coded_point, n_runs: int, alpha: float = 0.05) -> dict:
+    """Design-Expert's confirmation check: the 100 (1 - alpha) % prediction interval of the mean
+    of ``n_runs`` new runs at ``coded_point``,
+
+        yhat(x0) -+ t_{1 - alpha/2, df_res} sqrt(MSE (1/n + x0' (X'X)^-1 x0)),
+
+    the model's own variance at the point included (Montgomery, *Design and Analysis of
+    Experiments*, 8th ed., Wiley 2013, section 10.6). Blocks are averaged out.
+
+    Returns ``{"predicted", "pi95": [lo, hi], "se", "df", "leverage"}``.
+    """
+    from analyse.regression import term_columns
+
+    if n_runs < 1:
+        raise InputError(f"n_runs must be >= 1, got {n_runs}")
+    x = term_columns(np.asarray(fit.coded, dtype=float), ((),) + tuple(fit.term_powers))
+    x0 = term_columns(np.atleast_2d(np.asarray(coded_point, dtype=float)), ((),) + tuple(fit.term_powers))[0]
+    lev = float(x0 @ np.linalg.pinv(x.T @ x) @ x0)
+    df = int(fit.fit.df_residual)
+    mse = float(fit.fit.std_dev) ** 2
+    pred = float(fit.predict(np.asarray(coded_point, dtype=float)))
+    if df < 1 or not math.isfinite(mse):
+        return {"predicted": pred, "pi95": [math.nan, math.nan], "se": math.nan, "df": df, "leverage": lev}
+    se = math.sqrt(mse * (1.0 / n_runs + lev))
+    half = float(stats.t.ppf(1 - alpha / 2, df)) * se
+    return {"predicted": pred, "pi95": [pred - half, pred + half], "se": se, "df": df, "leverage": lev}

@@ -304,6 +304,104 @@ def validation_heaps(results: dict, runs: dict, measurement: dict, path: Path) -
     return _save(fig, path)
 
 
+def noise_panels(results: dict, path: Path) -> Path | None:
+    """Plausible workflow: the same-seed pairs of the noise measurement, and every design
+    point's runs around its mean against the pooled noise."""
+    n = results.get("noise", {})
+    pairs = n.get("pairs")
+    if not pairs:
+        return None
+    fig = _new(6.4, 2.5)
+    ax1, ax2 = fig.subplots(1, 2)
+    a, b = np.asarray(pairs["a_responses"]), np.asarray(pairs["b_responses"])
+    ax1.plot(a, b, "o", color=_BLUE, ms=4)
+    lo, hi = float(min(a.min(), b.min())) - 1, float(max(a.max(), b.max())) + 1
+    ax1.plot([lo, hi], [lo, hi], ":", color=_GREY, lw=0.8)
+    sc = n["seed_correlation"]
+    ax1.set_title(f"same seed at two nearby points: r = {sc['r']:.2f}", fontsize=7)
+    ax1.set_xlabel("angle at the prior mean [deg]", fontsize=7)
+    ax1.set_ylabel("angle half a prior SD higher [deg]", fontsize=7)
+    resid = np.concatenate([np.asarray(p["responses"]) - p["mean"] for p in results["design"]["points"]
+                            if len(p["responses"]) > 1])
+    sd = n["all_points"]["sd"]
+    ax2.hist(resid, bins=15, density=True, color=_BLUE, alpha=0.5)
+    x = np.linspace(-4 * sd, 4 * sd, 200)
+    # a run's deviation from its point's mean has variance sd^2 (1 - 1/k)
+    k = n["replicates"]
+    s_dev = sd * math.sqrt(1 - 1 / k) if k > 1 else sd
+    ax2.plot(x, np.exp(-0.5 * (x / s_dev) ** 2) / (s_dev * math.sqrt(2 * math.pi)), color=_RED, lw=1)
+    ax2.set_title(f"runs about their point's mean; pooled run SD {sd:.2f}°", fontsize=7)
+    ax2.set_xlabel("deviation [deg]", fontsize=7)
+    for ax in (ax1, ax2):
+        ax.tick_params(labelsize=6)
+    return _save(fig, path)
+
+
+def plausible_set(results: dict, path: Path, labels: dict, panels: int = 4) -> Path | None:
+    """Plausible workflow: pairwise panels of the ``panels`` parameters the heap narrows most:
+    prior samples (grey), the plausible ones (light blue, implausibility < 3), posterior draws
+    (blue), the prior mean (+) and the recommended point (red star)."""
+    cal = results.get("calibration")
+    if not cal:
+        return None
+    smp = cal["samples"]
+    names = smp["names"]
+    order = sorted(names, key=lambda n: cal["parameters"][n]["sd_ratio"])[:panels]
+    idx = [names.index(n) for n in order]
+    prior = np.asarray(smp["prior"])
+    imp = np.asarray(smp["prior_implausibility"])
+    post = np.asarray(smp["posterior"])
+    rec = cal["recommended"]["values"]
+    pairs = list(combinations(range(len(order)), 2))
+    cols = 3 if len(pairs) > 3 else len(pairs)
+    rows = math.ceil(len(pairs) / cols)
+    fig = _new(6.8, 2.2 * rows)
+    axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
+    for ax, (i, j) in zip(axes, pairs):
+        a, b = idx[i], idx[j]
+        ax.plot(prior[:, a], prior[:, b], ".", color=_GREY, ms=1.5, alpha=0.4)
+        keep = imp < cal["plausible"]["cut"]
+        ax.plot(prior[keep, a], prior[keep, b], ".", color="#9ecae1", ms=1.5)
+        ax.plot(post[:, a], post[:, b], ".", color=_BLUE, ms=1.2, alpha=0.5)
+        ax.plot(cal["parameters"][order[i]]["prior_mean"], cal["parameters"][order[j]]["prior_mean"], "+",
+                color="k", ms=8)
+        ax.plot(rec[order[i]], rec[order[j]], "*", color=_RED, ms=9)
+        ax.set_xlabel(labels.get(order[i], order[i]), fontsize=7)
+        ax.set_ylabel(labels.get(order[j], order[j]), fontsize=7)
+        ax.tick_params(labelsize=6)
+    for ax in axes[len(pairs):]:
+        ax.set_axis_off()
+    return _save(fig, path)
+
+
+def validation_runs(results: dict, path: Path) -> Path | None:
+    """Plausible workflow: every validation run, the running mean with the interval of each
+    look, the target and the tolerance band."""
+    v = results.get("validation")
+    if not v or "test" not in v or not v.get("responses"):
+        return None
+    ys = np.asarray(v["responses"], float)
+    target, tol = v["target_deg"], v["tolerance_deg"]
+    fig = _new(6.0, 2.4)
+    ax = fig.subplots()
+    ax.plot(np.arange(1, ys.size + 1), ys, "o", color=_BLUE, ms=3, alpha=0.6, label="runs")
+    ax.plot(np.arange(1, ys.size + 1), np.cumsum(ys) / np.arange(1, ys.size + 1), "-", color=_BLUE, lw=1,
+            label="running mean")
+    ax.axhline(target, color="k", lw=0.9, label=f"lab {target:.2f}°")
+    ax.axhspan(target - tol, target + tol, color=_GREEN, alpha=0.12, lw=0, label=f"± tolerance {tol:.2g}°")
+    for look in v["test"]["looks"]:
+        lo, hi = look["difference_ci90"]
+        ax.errorbar(look["n_runs"], target + 0.5 * (lo + hi), yerr=0.5 * (hi - lo), fmt="s", color=_RED,
+                    ms=3, capsize=2, lw=0.9)
+    ax.plot([], [], "s", color=_RED, ms=3, label="look: interval of the difference")
+    ax.set_xlabel("validation run", fontsize=7)
+    ax.set_ylabel("angle of repose [deg]", fontsize=7)
+    ax.set_title(f"verdict: {v['verdict']}", fontsize=7)
+    ax.tick_params(labelsize=6)
+    ax.legend(fontsize=6, frameon=False, ncol=3)
+    return _save(fig, path)
+
+
 def make_figures(campaign, fig_dir) -> list[Figure]:
     """Draw every figure the stored results allow into ``fig_dir``; return them in order."""
     fig_dir = Path(fig_dir)
@@ -318,14 +416,27 @@ def make_figures(campaign, fig_dir) -> list[Figure]:
     add("photos", heap_photos(m, fig_dir / "heap_photos.png"),
         "Image processing of the heap photos: heap boundary, floor line and the straight line fitted "
         "to each measured flank (measure stage, annotated images).")
-    if r:
+    wall = str(m.get("meta", {}).get("contact_material", "steel")).lower()
+    if r.get("workflow") == "plausible":
+        labels = {n: parameter_label(n, wall)[1] for n in r.get("prior", {})}
+        add("noise", noise_panels(r, fig_dir / "noise.png"),
+            "Seed-to-seed noise: runs with the same seed at two nearby points (dotted: equal angles), "
+            "and every design point's runs about their mean with the pooled noise (red).")
+        add("plausible", plausible_set(r, fig_dir / "plausible_set.png", labels),
+            "The plausible set for the parameters the heap narrows most: prior samples (grey), those "
+            "not ruled out by the measured angle (light blue, implausibility < 3), posterior draws "
+            "(blue), the measured means (+) and the recommended point (red star).")
+        add("validation", validation_runs(r, fig_dir / "validation.png"),
+            "Validation: every run at the recommended point, their running mean, and at each look the "
+            "interval of the difference from the lab (red), against the lab's angle and the "
+            "equivalence tolerance (green).")
+    elif r:
         add("pareto", pareto_chart(r, fig_dir / "pareto.png"),
             "Pareto chart of the Plackett-Burman effects (|t| of each factor; dashed: t limit at "
             "p = 0.05, dotted: Bonferroni limit).")
         add("climb", climb_curve(r, fig_dir / "steepest_climb.png"),
             "Steepest climb: relative error between simulated and measured angle at each level "
             "(circle: the Box-Behnken centre, dotted: its -1/+1 neighbours).")
-        wall = str(m.get("meta", {}).get("contact_material", "steel")).lower()
         labels = {f: parameter_label(v["parameter"], wall)[1] for f, v in r.get("factors", {}).items()}
         add("surfaces", response_surfaces(r, fig_dir / "response_surfaces.png", target, labels),
             "Response surfaces of the fitted quadratic model for each factor pair, the remaining "

@@ -200,6 +200,8 @@ def _runner_text(r: dict) -> tuple[str, bool]:
 
 def differences(c: Campaign) -> list[str]:
     """Where this campaign's procedure differs from the paper's, from the stored settings."""
+    if c.results.get("workflow") == "plausible":
+        return differences_plausible(c)
     r, m, p = c.results, c.measurement, c.paper
     cfg = r.get("config", {})
     q = m["quantities"]
@@ -269,6 +271,8 @@ def differences(c: Campaign) -> list[str]:
 
 def abstract(c: Campaign) -> dict:
     """Key numbers for the abstract and the conclusions (stored values, formatted)."""
+    if c.results.get("workflow") == "plausible":
+        return abstract_plausible(c)
     r, m, p = c.results, c.measurement, c.paper
     q = m["quantities"]
     wall = str(m.get("meta", {}).get("contact_material", "steel")).lower()
@@ -300,6 +304,59 @@ def abstract(c: Campaign) -> dict:
                  f"C.V. {pf.get('cv_pct')} %, calibrated e_pp 0.32, e_pw 0.36, μs_pw 0.22, and "
                  f"{pv.get('mean_deg')}° in validation ({pv.get('relative_error_pct')} %).")
     return {"text": text, "paper": paper}
+
+
+def abstract_plausible(c: Campaign) -> dict:
+    """The abstract of a plausible-workflow campaign (stored values, formatted)."""
+    r, m = c.results, c.measurement
+    q = m["quantities"]
+    wall = str(m.get("meta", {}).get("contact_material", "steel")).lower()
+    rep = q.get("repose_angle_deg", {})
+    cal, v, noise = r["calibration"], r["validation"], r["noise"]
+
+    def names(kind):
+        return [parameter_label(n, wall)[0].lower() for n, p in cal["parameters"].items()
+                if p["identifiability"] == kind]
+
+    ident, partly, not_ident = names("identified"), names("partly identified"), names("not identified")
+    runs = sum(len(p["runs"]) for p in r["design"]["points"])
+    text = (f"The physical and contact parameters of {m.get('material')} were measured "
+            f"({q.get('length_mm', {}).get('n', 0)} segments measured with callipers: "
+            f"{_f(q.get('length_mm', {}).get('value'))} mm × {_f(q.get('diameter_mm', {}).get('value'))} mm). "
+            f"The angle of repose of the heap, {_f(rep.get('value'), '.4g')}° (n = {rep.get('n')}), is the "
+            f"calibration target. One simulated heap scatters by {noise['all_points']['sd']:.2g}° (SD) from "
+            f"seed to seed, so the calibration ran {runs} independent heaps over the measured range of the "
+            f"seven contact parameters, modelled their mean angle with a Gaussian process that carries the "
+            f"noise, and reports the parameters consistent with the measured angle. "
+            + (f"The heap identifies {', '.join(ident)}; " if ident else "The heap identifies no parameter alone; ")
+            + (f"it narrows {', '.join(partly)}; " if partly else "")
+            + (f"it does not identify {', '.join(not_ident)}, whose values rest on their own "
+               "measurements. " if not_ident else "")
+            + f"At the recommended point the mean angle is predicted at {cal['recommended']['predicted']:.4g} ± "
+            f"{cal['recommended']['predicted_sd']:.2g}°. Validated with {v['n_runs']} fresh heaps, the mean is "
+            f"{v['mean_deg']:.4g}° against the measured {v['target_deg']:.4g}°: {v['verdict']} at a tolerance "
+            f"of {v['tolerance_deg']:.3g}° (the validation would detect a bias of {v['detectable_bias_deg']:.2g}°).")
+    return {"text": text, "paper": ""}
+
+
+def differences_plausible(c: Campaign) -> list[str]:
+    """Where the plausible workflow differs from the paper's procedure."""
+    r = c.results
+    out = [_runner_text(r)[0]]
+    cfg = r.get("config", {})
+    if cfg.get("profile") != "paper":
+        out.append(f"Repose rig profile '{cfg.get('profile')}', not the paper-fidelity case.")
+    out.append("No Plackett-Burman screening, steepest climb or Box-Behnken design: with a simulated "
+               f"angle that scatters by {r['noise']['all_points']['sd']:.2g}° from seed to seed, effects of the "
+               "size being screened are not distinguishable run by run. All runs feed one surrogate "
+               "instead (--profile paper keeps the paper's procedure and its Tables 3-9).")
+    out.append("Every run has its own seed; a design point's angle is the mean of "
+               f"{r['noise']['replicates']} runs; the paper ran each point once.")
+    out.append("The answer is a set of parameters with intervals, not one optimum; the recommended point "
+               "is the posterior mode.")
+    out.append("Validation by an equivalence test at a stated tolerance, with runs added until decided, "
+               "instead of the relative error of three runs.")
+    return out
 
 
 def rig_text(c: Campaign) -> str:
@@ -454,7 +511,8 @@ def render_html(c: Campaign, tables: list[dict], figures: list) -> str:
     runner_text, runner_warn = _runner_text(r)
     context = {
         "material": c.measurement.get("material", ""), "css": css, "t": by_id, "fig": figs,
-        "tables": tables, "abstract": abstract(c), "equations": equations(c),
+        "tables": tables, "abstract": abstract(c),
+        "equations": equations(c) if r.get("workflow") != "plausible" else {},
         "differences": differences(c), "rig": rig_text(c), "runner_text": runner_text,
         "runner_warn": runner_warn,
         "synthetic": c.measurement.get("meta", {}).get("synthetic"),

@@ -170,12 +170,19 @@ def load_paper() -> tuple[dict, dict]:
     return read_json(PAPER_FILE), {"file": str(PAPER_FILE), "sha256": sha256_file(PAPER_FILE)}
 
 
+def run_stages(results: dict) -> list[tuple[str, list]]:
+    """(stage, run references) of every stage of the campaign, in campaign order."""
+    if results.get("workflow") == "plausible":
+        stages: dict = {}
+        for p in results["design"]["points"]:
+            stages.setdefault(p["stage"], []).extend(p["runs"])
+        return list(stages.items()) + [("validation", results["validation"]["runs"])]
+    return [(stage, results.get(part, {}).get(name, [])) for stage, (part, name) in _RUN_STAGES]
+
+
 def run_keys(results: dict) -> list[str]:
     """Every run key the results name, in campaign order (first occurrence)."""
-    keys = []
-    for _, (part, name) in _RUN_STAGES:
-        keys += [r["key"] for r in results.get(part, {}).get(name, [])]
-    return list(dict.fromkeys(keys))
+    return list(dict.fromkeys(r["key"] for _, runs in run_stages(results) for r in runs))
 
 
 def load_campaign(out_dir) -> Campaign:
@@ -1060,8 +1067,8 @@ def table_runs(c: Campaign) -> Table:
     """Table A2: every DEM run with its key, seed and wall time (from the run store)."""
     r = c.results
     rows, keys = [], []
-    for stage, (part, name) in _RUN_STAGES:
-        for i, run in enumerate(_get(r, part, name, default=[]), 1):
+    for stage, runs in run_stages(r):
+        for i, run in enumerate(runs, 1):
             rec = c.runs.get(run["key"], {})
             rows.append((stage, i, run["key"], _get(rec, "inputs", "seed", default=run.get("seed")),
                          rec.get("wall_s"), rec.get("status"), rec.get("attempts")))
@@ -1083,7 +1090,8 @@ RESULT_TABLES = (table_pb_levels, table_pb_design, table_pb_anova, table_noise, 
                  table_coefficients, table_solutions, table_calibrated, table_validation)
 
 #: Ids of the tables :data:`RESULT_TABLES` build, in order.
-RESULT_TABLE_IDS = ("3", "4", "5", "5a", "6", "7", "8", "9", "9a", "9b", "10", "11", "12", "A2")
+RESULT_TABLE_IDS = ("3", "4", "5", "5a", "6", "7", "8", "9", "9a", "9b", "10", "11", "12", "A2",
+                    "P1", "P2", "P3", "P4", "P5", "P6")
 
 
 def build_tables(c: Campaign) -> list[Table]:
@@ -1093,7 +1101,11 @@ def build_tables(c: Campaign) -> list[Table]:
     are built.
     """
     tables = [table_dimensions(c), table_physical(c), table_methods(c)]
-    if c.results is not None:
+    if c.results is not None and c.results.get("workflow") == "plausible":
+        from report.calibration_tables import PLAUSIBLE_TABLES
+
+        tables += [f(c) for f in PLAUSIBLE_TABLES]
+    elif c.results is not None:
         tables += [f(c) for f in RESULT_TABLES]
     tables += critique_tables(c)
     tables.append(table_inputs(c))

@@ -280,6 +280,36 @@ def _missing_reason(mech: str) -> str:
 # ill-conditioned parameters (from a campaign)
 
 
+def _ill_conditioned_from_posterior(results: dict) -> list:
+    """Plausible workflow: a parameter is ill-conditioned when the heap leaves its posterior
+    as wide as its prior (posterior sd / prior sd above ``NOT_IDENTIFIED_ABOVE``). The effect
+    reported is that ratio, with the parameter's 95 % interval in the evidence."""
+    from analyse.surrogate import NOT_IDENTIFIED_ABOVE
+
+    mech = "ill_conditioned_parameter"
+    params = (results.get("calibration") or {}).get("parameters") or {}
+    if not params:
+        return [Finding(mech, "not_testable", evidence="the campaign has no posterior of its parameters")]
+    out = []
+    for name, p in params.items():
+        if p["sd_ratio"] > NOT_IDENTIFIED_ABOVE:
+            lo, hi = p["ci95"]
+            out.append(Finding(mech, "found", sheet="campaign", covariate=name, quantity="angle_deg",
+                               source="campaign", effect=float(p["sd_ratio"]), ci95=[float(lo), float(hi)],
+                               effect_unit="posterior sd / prior sd",
+                               evidence=f"{name}: posterior sd {_fmt(p['posterior_sd'])} is "
+                               f"{_fmt(p['sd_ratio'])} of its prior sd {_fmt(p['prior_sd'])}; 95 % interval "
+                               f"[{_fmt(lo)}, {_fmt(hi)}]: the repose angle cannot identify it"))
+    if out:
+        return out
+    name, p = min(params.items(), key=lambda kv: -kv[1]["sd_ratio"])
+    return [Finding(mech, "ruled_out", sheet="campaign", covariate=name, quantity="angle_deg",
+                    source="campaign", effect=float(p["sd_ratio"]), ci95=list(p["ci95"]),
+                    effect_unit="posterior sd / prior sd",
+                    evidence=f"the heap narrows every parameter; least: {name}, posterior/prior sd "
+                    f"{_fmt(p['sd_ratio'])}")]
+
+
 def ill_conditioned(results: dict | None) -> list:
     """Verdict on ``ill_conditioned_parameter`` from a campaign's ``results.json``.
 
@@ -295,6 +325,8 @@ def ill_conditioned(results: dict | None) -> list:
     if not results:
         return [Finding(mech, "not_testable", evidence="no calibration campaign given (pass the "
                         "campaign folder holding results.json)")]
+    if results.get("workflow") == "plausible":
+        return _ill_conditioned_from_posterior(results)
     factors = results.get("factors", {})
     bbd = results.get("box_behnken", {})
     carried = list(bbd.get("factors") or results.get("significant", {}).get("carried_forward", []))

@@ -29,3 +29,28 @@ def standin_runner(inputs: dict) -> dict:
             "record": {"profile": {"x": x, "z": z}},
             "wall_s": 0.0, "steps": 0, "spheres": 0, "sphere_steps_per_s": 0.0,
             "seed": inputs["seed"]}
+
+
+#: Seed-to-seed sd of the noisy stand-in, about the DEM heap's [deg].
+HEAP_NOISE_SD = 2.5
+
+
+def heap_standin_angle(p: dict) -> float:
+    """Mean angle of the noisy stand-in: steep in mu_s_pw and mu_r_pp, mild in mu_s_pp and e_pp,
+    flat in the rest (the heap cannot identify those)."""
+    return (36.0 + 25.0 * (p["mu_s_pw"] - 0.2) - 60.0 * (p["mu_s_pw"] - 0.2) ** 2
+            + 30.0 * (p["mu_r_pp"] - 0.53) + 20.0 * (p["mu_s_pp"] - 0.65) - 4.0 * (p["e_pp"] - 0.3))
+
+
+def heap_standin_runner(inputs: dict) -> dict:
+    """A heap whose noise is a fresh draw for every (parameters, seed), as the chaotic DEM's
+    is: runs sharing a seed at different points are independent."""
+    import hashlib
+    import json
+
+    key = json.dumps({"params": inputs["params"], "seed": inputs["seed"]}, sort_keys=True)
+    rng = np.random.default_rng(int.from_bytes(hashlib.sha256(key.encode()).digest()[:8], "little"))
+    angle = heap_standin_angle(inputs["params"]) + rng.normal(0.0, HEAP_NOISE_SD)
+    return {"rig": "repose", "observable": {"angle_deg": angle, "angle_profile_deg": angle},
+            "record": {}, "wall_s": 0.0, "steps": 0, "spheres": 0, "sphere_steps_per_s": 0.0,
+            "seed": inputs["seed"]}

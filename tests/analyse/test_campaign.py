@@ -33,7 +33,7 @@ def test_levels_are_the_measured_extremes(measurement):
 
 
 def test_campaign_finds_the_active_factors_and_the_target(measurement, tmp_path):
-    config = CampaignConfig(workers=1, progress=False)
+    config = CampaignConfig(workers=1, progress=False, workflow="design-expert")
     res = calibrate(EXAMPLE, tmp_path, config, runner=standin_runner, measurement=measurement)
     assert set(res["significant"]["carried_forward"]) == {"B", "E", "F"}
     assert set(res["plackett_burman"]["screening"]["significant"]) == {"B", "E", "F"}
@@ -48,6 +48,10 @@ def test_campaign_finds_the_active_factors_and_the_target(measurement, tmp_path)
     base = res["calibrated_parameters"]
     assert standin_angle({**base, **settings}) == pytest.approx(res["target_angle_deg"], abs=0.5)
     assert res["validation"]["result"]["relative_error_pct"] < 2.0
+    # Design-Expert's confirmation: the prediction interval of the mean of the validation runs
+    conf = res["validation"]["confirmation"]
+    assert conf["pi95"][0] < conf["predicted"] < conf["pi95"][1]
+    assert res["validation"]["verdict"] in ("equivalent", "different", "undecided")
     # every run is in the store and the rerun reuses them all
     again = calibrate(EXAMPLE, tmp_path, config, runner=standin_runner, measurement=measurement)
     assert all(stage["ran"] == 0 for stage in again["stages"])
@@ -71,9 +75,13 @@ def test_response_falls_back_to_the_profile_fit_when_the_photo_method_finds_no_s
         _responses(records)
 
 
-def test_replicates_default_by_profile_and_survive_the_stored_config():
-    assert CampaignConfig(progress=False).replicates == 3
-    assert CampaignConfig(profile="paper", progress=False).replicates == 1
+def test_workflow_and_replicates_default_by_profile_and_survive_the_stored_config():
+    quick = CampaignConfig(progress=False)
+    assert (quick.workflow, quick.replicates) == ("plausible", None)   # replicates from the noise
+    paper = CampaignConfig(profile="paper", progress=False)
+    assert (paper.workflow, paper.replicates) == ("design-expert", 1)
+    with pytest.raises(Exception, match="workflow must be one of"):
+        CampaignConfig(workflow="best-guess")
     stored = {k: v for k, v in CampaignConfig(profile="paper", replicates=2).__dict__.items()}
     assert CampaignConfig.from_dict(stored).replicates == 2
     with pytest.raises(Exception, match="replicates must be a positive integer"):

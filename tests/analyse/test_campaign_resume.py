@@ -18,7 +18,8 @@ import openpyxl
 ROOT = Path(__file__).resolve().parents[2]
 TINY_CARTON = {"box_length_mm": 80, "box_width_mm": 50, "box_height_mm": 100, "fill_count": 25}
 #: replicates 1, 2 noise repeats and 3 climb levels: 12 + 2 + 3 + 17 + 3 = 37 DEM runs
-CONFIG = "CampaignConfig(workers=1, progress=False, replicates=1, noise_repeats=2, climb_levels=3)"
+CONFIG = ("CampaignConfig(workers=1, progress=False, workflow='design-expert', replicates=1, "
+          "noise_repeats=2, climb_levels=3)")
 KILL_AFTER = 6
 
 

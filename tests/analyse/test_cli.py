@@ -134,18 +134,34 @@ def test_calibrate_passes_its_options_and_prints_the_validation(tmp_path, capsys
 
     def fake_calibrate(workbook, out, config):
         seen.update(workbook=Path(workbook), config=config)
-        return {"target_angle_deg": 36.1, "config": {"replicates": config.replicates},
-                "validation": {"settings": {"mu_s_pw": 0.19}, "responses": [36.0, 36.9, 36.6],
-                               "result": {"mean": 36.5, "relative_error_pct": 1.14,
-                                          "ci95": [33.02, 39.99], "target_in_ci": True}}}
+        return {"target_angle_deg": 36.1, "workflow": config.workflow,
+                "config": {"replicates": config.replicates},
+                "validation": {"settings": {"mu_s_pw": 0.19}, "verdict": "undecided",
+                               "tolerance_deg": 1.0, "mean_deg": 36.5, "n_runs": 3,
+                               "ci95": [33.02, 39.99], "target_deg": 36.1,
+                               "detectable_bias_deg": 4.2,
+                               "confirmation": {"predicted": 36.2, "pi95": [33.1, 39.3],
+                                                "target_inside": True}}}
 
     monkeypatch.setattr(campaign, "calibrate", fake_calibrate)
     root = Path(__file__).resolve().parents[2] / "data" / "astragalus"
     rc = main(["calibrate", str(root), "--out", str(tmp_path), "--profile", "paper",
-               "--replicates", "2", "--workers", "1", "--no-report"])
+               "--replicates", "2", "--workers", "1", "--seed", "7", "--tolerance", "1.5",
+               "--no-report"])
     assert rc == 0
     assert seen["workbook"].name == "workbook.xlsx"
-    assert (seen["config"].profile, seen["config"].replicates, seen["config"].workers) == ("paper", 2, 1)
+    cfg = seen["config"]
+    assert (cfg.profile, cfg.workflow, cfg.replicates, cfg.workers, cfg.seed, cfg.tolerance) == \
+        ("paper", "design-expert", 2, 1, 7, 1.5)
     out = capsys.readouterr().out
-    assert "mu_s_pw = 0.19" in out and "median of 2 runs each" in out
-    assert "95 % CI [33.02, 39.99] deg: the target lies inside" in out
+    assert "mu_s_pw = 0.19" in out and "design-expert workflow" in out
+    assert "validation: undecided (tolerance 1.00 deg)" in out
+    assert "95 % CI [33.02, 39.99]" in out and "smallest bias it would detect 4.20 deg" in out
+    assert "95 % PI of the mean of 3 runs [33.10, 39.30]: the target lies inside" in out
+
+    rc = main(["calibrate", str(root), "--out", str(tmp_path), "--budget", "40",
+               "--validation-cap", "20", "--no-report"])
+    assert rc == 0
+    cfg = seen["config"]
+    assert (cfg.profile, cfg.workflow, cfg.budget_runs, cfg.validation_cap, cfg.seed) == \
+        ("quick", "plausible", 40, 20, 1)

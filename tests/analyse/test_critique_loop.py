@@ -71,7 +71,8 @@ def campaign(tmp_path_factory):
     root = tmp_path_factory.mktemp("critique_campaign")
     vw = write_virtual_workbook(Truth(), root / "lab", rng=5, n_photos=3, n_drop=4)
     out = root / "campaign"
-    calibrate(vw.path, out, CampaignConfig(workers=1, progress=False, noise_repeats=4),
+    calibrate(vw.path, out, CampaignConfig(workers=1, progress=False, noise_repeats=4,
+                                           workflow="design-expert"),
               runner=friction_only_runner, measurement=measure_workbook(vw.path))
     return out
 

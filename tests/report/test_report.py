@@ -21,7 +21,7 @@ from tests.analyse.standin import standin_runner
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "data" / "astragalus"
-CONFIG = CampaignConfig(workers=1, progress=False)
+CONFIG = CampaignConfig(workers=1, progress=False, workflow="design-expert")
 
 
 def _campaign(tmp_root: Path, name: str) -> tuple[Path, Path]:

@@ -1,0 +1,279 @@
+"""The default calibration workflow: a plausible set from a noisy simulated heap.
+
+Every DEM run is an independent draw (the heap is chaotic: a 1e-6 change of one parameter
+redraws it), so this workflow spends its runs on knowing the *mean* angle where it matters and
+says what the lab data pin down, instead of picking one optimum of one noisy surface:
+
+1. **Noise.** Two nearby points (the prior mean, and half a prior sd above it in every
+   parameter) are run with the same ``noise_repeats`` seeds: their replicate variance is the
+   noise at the centre, and the correlation of the pairs says whether common random numbers
+   would help (``analyse.noise``). Replicates per design point ``k`` follow from that noise.
+2. **Design.** ``initial_points`` points (at most half of ``budget_runs``) of a
+   space-filling design over the prior (Latin hypercube through the prior's quantiles), each
+   run ``k`` times with its own seeds; the noise is pooled over all points and tested for
+   constancy.
+3. **Surrogate.** A Gaussian process of the mean angle with each point's noise over ``k`` on its
+   diagonal (stochastic kriging, ``analyse.surrogate``); leave-one-out residuals check it.
+4. **Sequential runs.** Batches of ``batch`` points where it is least certain whether the mean
+   angle equals the target, until that is settled everywhere (U >= 2) or ``budget_runs`` runs
+   of design and sequence are spent.
+5. **Posterior and plausible set.** Measured means and sds of the seven contact parameters as
+   the prior, the lab target with its own uncertainty as the datum; per parameter a 95 %
+   interval and posterior sd / prior sd; the recommended point is the posterior mode.
+6. **Validation that can fail.** Fresh runs at the recommended point, ``validation_first`` and
+   then ``validation_step`` more at a time up to ``validation_cap``, tested for equivalence
+   with the lab (two one-sided tests, tolerance the larger of 1 deg and the lab's
+   heap-to-heap sd, the lab mean's uncertainty included): equivalent, different or undecided.
+
+All seeds come from ``config.seed`` through ``numpy.random.SeedSequence``, one stream per stage,
+so ``--seed`` redraws every run of every stage and a replay of the same campaign asks the run
+store for exactly the same runs.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from analyse.equivalence import default_tolerance, sequential_equivalence
+from analyse.noise import pooled_noise, replicates_for, seed_correlation
+from analyse.surrogate import (IMPLAUSIBILITY_CUT, U_STOP, NoisySurrogate, Prior, next_points,
+                               posterior, recommend, space_filling)
+from demcal.errors import AnalysisError, InputError
+
+#: Stage numbers of the seed streams (never reorder: they define which seeds a campaign uses).
+SEED_STREAMS = {"noise": 1, "design": 2, "sequential": 3, "validation": 4, "surrogate": 5}
+#: Prior samples kept in results.json for the plausible-set plots.
+KEPT_SAMPLES = 1500
+#: A design point's own replicate variance is shrunk toward the pooled one with this weight
+#: (degrees of freedom) when the noise is not constant across points.
+NOISE_PRIOR_DF = 4
+
+
+class SeedStream:
+    """Distinct run seeds per stage from one campaign seed."""
+
+    def __init__(self, seed: int):
+        self.seed = int(seed)
+        self.used: dict = {}
+
+    def take(self, stage: str, n: int) -> list[int]:
+        start = self.used.get(stage, 0)
+        state = np.random.SeedSequence([self.seed, SEED_STREAMS[stage]]).generate_state(start + n, dtype=np.uint64)
+        self.used[stage] = start + n
+        return [int(s % (2 ** 31 - 1)) for s in state[start:]]
+
+
+def measured_prior(measurement, factors) -> Prior:
+    """The prior of the seven contact parameters: each one's measured mean and sd."""
+    from analyse.campaign import PARAMETER_BOUNDS
+
+    names, mean, sd, bounds, sources = [], [], [], [], []
+    for f in factors.values():
+        est = measurement.quantities[f["quantity"]]
+        names.append(f["parameter"])
+        mean.append(float(est.value))
+        sd.append(float(est.sd))
+        bounds.append(PARAMETER_BOUNDS[f["parameter"]])
+        sources.append(f["quantity"])
+    return Prior.from_measured(names, mean, sd, bounds, sources)
+
+
+def _noise_variances(groups, pooled) -> np.ndarray:
+    """Variance of each design point's mean: the pooled noise when it is constant, else each
+    point's own replicate variance shrunk toward the pooled one."""
+    out = []
+    for g in groups:
+        g = np.asarray(g, dtype=float)
+        s2 = pooled.sd ** 2
+        if not pooled.constant and g.size >= 2:
+            df = g.size - 1
+            s2 = (df * float(np.var(g, ddof=1)) + NOISE_PRIOR_DF * s2) / (df + NOISE_PRIOR_DF)
+        out.append(max(s2, 1e-6) / g.size)
+    return np.array(out)
+
+
+def derive_plausible(measurement, config, execute, *, factors, base, geometry, responses, run_refs) -> dict:
+    """The workflow of the module docstring; ``execute(stage, tasks) -> records`` supplies the
+    DEM runs (the run store, or a replay from it). Returns what ``results.json`` holds."""
+    est = measurement.quantities["repose_angle_deg"]
+    target = float(est.value)
+    lab_sd = float(est.sd) if est.n >= 2 and math.isfinite(est.sd) else None
+    lab_n = int(est.n) if lab_sd is not None else None
+    target_var = lab_sd ** 2 / lab_n if lab_sd is not None else 0.0
+    tolerance = float(config.tolerance) if config.tolerance else default_tolerance(lab_sd)
+    flank_band = measurement.provenance.options.get("flank_band")
+    prior = measured_prior(measurement, factors)
+    names = prior.names
+    seeds = SeedStream(config.seed)
+    fallbacks: list = []
+
+    def task(x, seed):
+        return {"rig": "repose", "profile": config.profile,
+                "params": base.with_(**{n: float(v) for n, v in zip(names, x)}).to_dict(),
+                "geometry": geometry, "seed": int(seed)}
+
+    def run(stage, points, seed_lists):
+        tasks = [task(x, s) for x, ss in zip(points, seed_lists) for s in ss]
+        records = execute(stage, tasks)
+        y = responses(records, fallbacks)
+        _check_band(records, flank_band)
+        out, i = [], 0
+        for ss in seed_lists:
+            out.append(y[i:i + len(ss)])
+            i += len(ss)
+        return out, records
+
+    design = []                                  # every design point: x, runs, stage, seeds, refs
+
+    def add(stage, points, seed_lists, ys, records):
+        i = 0
+        for x, ss, y in zip(points, seed_lists, ys):
+            design.append({"stage": stage, "x": np.asarray(x, dtype=float), "seeds": list(ss),
+                           "responses": np.asarray(y, dtype=float),
+                           "runs": run_refs(records[i:i + len(ss)])})
+            i += len(ss)
+
+    # 1. noise at the centre, and the seed correlation --------------------------------------
+    a = prior.truncated_mean_sd()[0]
+    b = np.minimum(a + 0.5 * prior.sd, prior.high - 1e-9 * (prior.high - prior.low))
+    pair_seeds = seeds.take("noise", config.noise_repeats)
+    (ya, yb), noise_records = run("noise", [a, b], [pair_seeds, pair_seeds])
+    add("noise", [a, b], [pair_seeds, pair_seeds], [ya, yb], noise_records)
+    centre_noise = pooled_noise([ya, yb])
+    correlation = seed_correlation(ya, yb)
+    k = int(config.replicates) if config.replicates else replicates_for(centre_noise.sd, tolerance)
+
+    # 2. space-filling design (at most half the budget: the rest goes where it informs) --------
+    n0 = max(min(config.initial_points, config.budget_runs // (2 * k)), 3)
+    x0 = space_filling(prior, n0, np.random.SeedSequence([config.seed, SEED_STREAMS["design"], 0]))
+    s0 = seeds.take("design", len(x0) * k)
+    seed_lists = [s0[i * k:(i + 1) * k] for i in range(len(x0))]
+    ys, records = run("design", list(x0), seed_lists)
+    add("design", list(x0), seed_lists, ys, records)
+
+    surrogate_seed = int(np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"]]).generate_state(1)[0] % (2 ** 31))
+
+    def fit():
+        groups = [p["responses"] for p in design]
+        pooled = pooled_noise(groups)
+        x = np.array([p["x"] for p in design])
+        y = np.array([p["responses"].mean() for p in design])
+        model = NoisySurrogate(prior.low, prior.high, seed=surrogate_seed).fit(x, y, _noise_variances(groups, pooled))
+        return model, pooled
+
+    model, pooled = fit()
+
+    # 3. sequential runs where the sign of mean - target is least certain -------------------
+    rounds = []
+    spent = len(x0) * k
+    stopped = "budget"
+    r = 0
+    while spent + config.batch * k <= config.budget_runs:
+        r += 1
+        pts, u_min = next_points(model, prior, target, config.batch, noise_var=pooled.sd ** 2 / k,
+                                 seed=np.random.SeedSequence([config.seed, SEED_STREAMS["sequential"], r]))
+        if u_min >= U_STOP:
+            rounds.append({"round": r, "u_min": u_min, "points": 0})
+            stopped = f"settled: every candidate has |m - target| / s >= {U_STOP:g}"
+            break
+        ss = seeds.take("sequential", len(pts) * k)
+        seed_lists = [ss[i * k:(i + 1) * k] for i in range(len(pts))]
+        ys, records = run(f"sequential {r}", list(pts), seed_lists)
+        add(f"sequential {r}", list(pts), seed_lists, ys, records)
+        spent += len(pts) * k
+        rounds.append({"round": r, "u_min": u_min, "points": len(pts)})
+        model, pooled = fit()
+
+    # 4. posterior, plausible set, recommended point --------------------------------------------
+    post = posterior(model, prior, target, target_var,
+                     discrepancy_var=config.discrepancy_sd ** 2,
+                     seed=np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 1]))
+    best = recommend(post, model)
+    summary = post.summary()
+    parameters = {n: {"value": best["values"][n], "ci95": summary[n]["ci95"],
+                      "prior_mean": summary[n]["prior_mean"], "prior_sd": summary[n]["prior_sd"],
+                      "sd_ratio": summary[n]["sd_ratio"], "posterior_mean": summary[n]["mean"],
+                      "posterior_sd": summary[n]["sd"], "identifiability": summary[n]["identifiability"],
+                      "source": summary[n]["source"]} for n in names}
+    inside = {n: bool(parameters[n]["ci95"][0] <= best["values"][n] <= parameters[n]["ci95"][1]) for n in names}
+
+    # 5. validation by equivalence ---------------------------------------------------------------
+    x_best = np.array([best["values"][n] for n in names])
+    val = {"responses": [], "seeds": [], "runs": []}
+
+    def draw(n):
+        ss = seeds.take("validation", n)
+        (y,), records = run(f"validation {len(val['seeds']) + n}", [x_best], [ss])
+        val["responses"] += y.tolist()
+        val["seeds"] += ss
+        val["runs"] += run_refs(records)
+        return y
+
+    seq = sequential_equivalence(draw, target, lab_sd, lab_n, tolerance, first=config.validation_first,
+                                 step=config.validation_step, cap=config.validation_cap, alpha=config.alpha)
+    vdict = seq.to_dict()
+    validation = {"verdict": vdict["verdict"], "mean_deg": vdict["mean_deg"], "ci95": vdict["ci95"],
+                  "tolerance_deg": tolerance, "target_deg": target, "n_runs": vdict["n_runs"],
+                  "detectable_bias_deg": vdict["detectable_bias_deg"], "settings": best["values"],
+                  "test": vdict, **val}
+
+    # what is kept for plots and the audit
+    keep = np.random.default_rng(np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 2]))
+    draws = keep.choice(post.weights.size, size=KEPT_SAMPLES, p=post.weights)
+    groups = [p["responses"] for p in design]
+    design_pooled = pooled_noise([p["responses"] for p in design if p["stage"] != "noise"]) \
+        if sum(p["stage"] != "noise" for p in design) else None
+    noise = {"centre": centre_noise.to_dict(), "design": design_pooled.to_dict() if design_pooled else None,
+             "all_points": pooled.to_dict(), "seed_correlation": correlation.to_dict(),
+             "replicates": k, "replicates_rule": ("set by --replicates" if config.replicates else
+                                                  "fewest k >= 2 with run SD / sqrt(k) <= 3 x tolerance, at most 4"),
+             "pairs": {"a": a.tolist(), "b": b.tolist(), "seeds": pair_seeds,
+                       "a_responses": ya.tolist(), "b_responses": yb.tolist()}}
+    loo = model.leave_one_out()
+    return {
+        "workflow": "plausible",
+        "prior": prior.to_dict(),
+        "noise": noise,
+        "design": {"points": [{"stage": p["stage"], "settings": dict(zip(names, p["x"].tolist())),
+                               "responses": p["responses"].tolist(), "mean": float(p["responses"].mean()),
+                               "seeds": p["seeds"], "runs": p["runs"]} for p in design],
+                   "replicates": k, "initial_points": int(n0), "batch": config.batch,
+                   "budget_runs": config.budget_runs, "rounds": rounds, "stopped_because": stopped},
+        "surrogate": {"kernel": str(model.kernel), "length_scales": dict(zip(names, model.length_scales().tolist())),
+                      "leave_one_out": loo, "noise_model": "pooled" if pooled.constant else "per point, shrunk to pooled"},
+        "calibration": {
+            "method": ("posterior of the measured-mean-and-sd prior given the lab's angle of repose, by "
+                       "importance sampling on a stochastic-kriging surrogate of the mean heap angle; "
+                       f"plausible set: implausibility < {IMPLAUSIBILITY_CUT:g} (history matching); "
+                       "recommended point: the posterior mode; heap only"),
+            "likelihood": "heap",
+            "parameters": parameters,
+            "recommended": best, "recommended_inside_ci95": inside,
+            "target_deg": target, "target_sd_deg": lab_sd, "target_n": lab_n, "target_var": target_var,
+            "discrepancy_sd_deg": config.discrepancy_sd,
+            "plausible": {"cut": IMPLAUSIBILITY_CUT, "share_of_prior": float(np.mean(post.plausible)),
+                          "box": post.plausible_box()},
+            "ess": post.ess,
+            "samples": {"names": list(names),
+                        "prior": post.samples[:KEPT_SAMPLES].tolist(),
+                        "prior_implausibility": post.implausibility[:KEPT_SAMPLES].tolist(),
+                        "posterior": post.samples[draws].tolist()},
+        },
+        "validation": validation,
+        "calibrated_parameters": base.with_(**best["values"]).to_dict(),
+        "fallback_runs": fallbacks,
+    }
+
+
+def _check_band(records, flank_band) -> None:
+    """Angles read with another fitting band than the lab's photos are never compared."""
+    if flank_band is None:
+        return
+    for r in records:
+        band = (r["result"].get("provenance") or {}).get("options", {}).get("flank_band")
+        if band is not None and [round(v, 6) for v in band] != [round(v, 6) for v in flank_band]:
+            raise AnalysisError(f"DEM run {r['key']} read its heap with the fitting band {band}, the lab's "
+                                f"photos with {flank_band}: angles read differently are not compared; "
+                                "delete the run store (runs/) to rerun with the current band")

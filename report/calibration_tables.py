@@ -1,0 +1,168 @@
+"""Tables of the plausible workflow (``analyse.plausible``): prior, noise, runs, surrogate, the
+parameters consistent with the lab, and the validation by equivalence.
+
+Like every table of the report they are pure functions of the stored results (``Campaign``), so
+``demcal audit`` rebuilds them from the replayed analysis and compares cell by cell.
+"""
+
+from __future__ import annotations
+
+from report.tables import Campaign, Table, _results_source, _wall, parameter_label
+
+
+def _names(r: dict) -> list[str]:
+    return list(r["prior"])
+
+
+def _symbols(c: Campaign) -> dict:
+    wall = _wall(c.measurement)
+    return {n: parameter_label(n, wall)[1] for n in _names(c.results)}
+
+
+def design_run_keys(r: dict) -> list[str]:
+    """Keys of every design, sequential and validation run, in campaign order."""
+    keys = [run["key"] for p in r["design"]["points"] for run in p["runs"]]
+    return keys + [run["key"] for run in r["validation"]["runs"]]
+
+
+def table_prior(c: Campaign) -> Table:
+    """Table P1: the prior, each contact parameter's measured mean and sd."""
+    r = c.results
+    wall = _wall(c.measurement)
+    rows = []
+    for name, p in r["prior"].items():
+        label, symbol = parameter_label(name, wall)
+        rows.append((label, symbol, p["source"], p["mean"], p["sd"], p["low"], p["high"]))
+    return Table("P1", "Prior of the contact parameters: the lab's measured mean and sd of each",
+                 ("Parameter", "Symbol", "Measured quantity", "Mean", "SD", "Lowest", "Highest"),
+                 ("", "", "", "", "", "", ""), tuple(rows),
+                 notes=("A normal of the measured mean and the SD of single measurements, truncated to "
+                        "mean ± 3 SD and to the admissible range (lowest, highest): what the lab knows "
+                        "before the heap is used. The design spreads over it.",),
+                 sources=(_results_source("prior"),),
+                 formats=("", "", "", ".4g", ".3g", ".4g", ".4g"))
+
+
+def table_noise_study(c: Campaign) -> Table:
+    """Table P2: the seed-to-seed noise, its constancy and the seed correlation."""
+    r = c.results
+    n = r["noise"]
+    pairs = n["pairs"]
+    rows = [("Runs at the prior mean (seeds shared with the next row)", " / ".join(f"{a:.4g}" for a in pairs["a_responses"]), None, None),
+            ("Runs half a prior SD higher in every parameter", " / ".join(f"{a:.4g}" for a in pairs["b_responses"]), None, None)]
+    for label, key in (("SD of one run, these two points", "centre"), ("SD of one run, design points", "design"),
+                       ("SD of one run, all points (used)", "all_points")):
+        s = n.get(key)
+        if s:
+            rows.append((f"{label} ({s['points']} points, {s['df']} df)", s["sd"], s["ci95"], None))
+    allp = n["all_points"]
+    rows.append(("Same variance at every point: Bartlett's p", allp["constant_p"], None,
+                 "kept" if allp["constant"] else "rejected: per-point noise"))
+    sc = n["seed_correlation"]
+    rows.append((f"Correlation of same-seed runs at the two points ({sc['n']} pairs)", sc["r"], sc["ci95"],
+                 "common random numbers would halve the variance of a difference only above 0.5"))
+    rows.append(("Runs per design point", n["replicates"], None, n["replicates_rule"]))
+    return Table("P2", "Seed-to-seed noise of the simulated angle of repose",
+                 ("Item", "Value", "95 % interval", "Note"), ("", "deg", "deg", ""), tuple(rows),
+                 notes=("Every run is an independent draw of the heap: a design point's angle is the mean "
+                        "of its runs, and the surrogate carries each point's noise over its number of runs.",),
+                 sources=({"kind": "runs", "keys": [run["key"] for p in r["design"]["points"][:2] for run in p["runs"]]},
+                          _results_source("noise")),
+                 formats=("", ".4g", ".3g", ""))
+
+
+def table_design_runs(c: Campaign) -> Table:
+    """Table P3: every design point, its stage, settings, runs and mean angle."""
+    r = c.results
+    names = _names(r)
+    sym = _symbols(c)
+    rows = []
+    for i, p in enumerate(r["design"]["points"], 1):
+        ys = p["responses"]
+        sd = (sum((y - p["mean"]) ** 2 for y in ys) / (len(ys) - 1)) ** 0.5 if len(ys) > 1 else None
+        rows.append((i, p["stage"], *[p["settings"][n] for n in names], len(ys), p["mean"], sd))
+    d = r["design"]
+    return Table("P3", "Design points: noise pair, space-filling design and sequential rounds",
+                 ("#", "Stage", *[sym[n] for n in names], "Runs", "Mean angle", "Run SD"),
+                 ("", "", *[""] * len(names), "", "deg", "deg"), tuple(rows),
+                 notes=(f"{d['initial_points']} points of a Latin hypercube through the prior's quantiles, then "
+                        f"rounds of {d['batch']} points where it was least certain whether the mean angle equals "
+                        f"the target (at most {d['budget_runs']} runs of design and rounds); stopped: "
+                        f"{d['stopped_because']}. Every run has its own seed (Table A2).",),
+                 sources=({"kind": "runs", "keys": [run["key"] for p in d["points"] for run in p["runs"]]},
+                          _results_source("design.points")),
+                 formats=("d", "", *[".3g"] * len(names), "d", ".4g", ".3g"))
+
+
+def table_surrogate(c: Campaign) -> Table:
+    """Table P4: the surrogate's length scales and its leave-one-out check."""
+    r = c.results
+    s = r["surrogate"]
+    sym = _symbols(c)
+    rows = [(f"Length scale, {sym[n]}", v, "fraction of the prior range: large = the angle hardly depends on it")
+            for n, v in s["length_scales"].items()]
+    loo = s["leave_one_out"]
+    rows.append(("Leave-one-out RMSE of a point's mean angle", loo["rmse"], "deg"))
+    rows.append(("Share of points within 2 predicted SD (leave-one-out)", loo["share_within_2"], "about 0.95 when the surrogate and its noise are right"))
+    rows.append(("Noise model", s["noise_model"], ""))
+    return Table("P4", "Surrogate of the mean angle: Gaussian process with per-point noise",
+                 ("Item", "Value", "Note"), ("", "", ""), tuple(rows),
+                 notes=(f"Kernel {s['kernel']}.",),
+                 sources=(_results_source("surrogate"),), formats=("", ".3g", ""))
+
+
+def table_identifiability(c: Campaign) -> Table:
+    """Table P5: what the heap identifies: per parameter the 95 % interval, the ratio of
+    posterior to prior SD and the recommended value."""
+    r = c.results
+    cal = r["calibration"]
+    wall = _wall(c.measurement)
+    rows = []
+    for name, p in cal["parameters"].items():
+        label, symbol = parameter_label(name, wall)
+        rows.append((label, symbol, p["prior_mean"], p["prior_sd"], p["posterior_mean"], p["ci95"],
+                     p["sd_ratio"], p["identifiability"], p["value"]))
+    rec = cal["recommended"]
+    pl = cal["plausible"]
+    return Table("P5", "Calibrated parameters: the set consistent with the measured angle of repose",
+                 ("Parameter", "Symbol", "Prior mean", "Prior SD", "Posterior mean", "95 % interval",
+                  "Posterior/prior SD", "The heap", "Recommended"),
+                 ("", "", "", "", "", "", "", "", ""), tuple(rows),
+                 notes=(f"Posterior of the prior (Table P1) given the lab's angle {cal['target_deg']:.4g}° "
+                        f"(SD of its mean {cal['target_var'] ** 0.5:.3g}°), by importance sampling on the "
+                        f"surrogate (effective sample size {cal['ess']:.0f}). A ratio near 1: the heap does not "
+                        "identify the parameter; its value then rests on its own measurement.",
+                        f"Recommended point: the posterior mode; predicted mean angle {rec['predicted']:.4g} ± "
+                        f"{rec['predicted_sd']:.2g}° (surrogate SD), implausibility {rec['implausibility']:.2g}. "
+                        f"{100 * pl['share_of_prior']:.0f} % of the prior is plausible (implausibility < {pl['cut']:g}).",),
+                 sources=(_results_source("calibration"),),
+                 formats=("", "", ".4g", ".3g", ".4g", ".4g", ".2f", "", ".4g"))
+
+
+def table_equivalence(c: Campaign) -> Table:
+    """Table P6: the validation, an equivalence test with the lab that can fail."""
+    r = c.results
+    v = r["validation"]
+    t = v["test"]
+    rows = [(f"Look after {look['n_runs']} runs", look["verdict"], look["difference_ci90"], look["p_tost"])
+            for look in t["looks"]]
+    rows += [("Simulated mean angle (95 % CI)", v["mean_deg"], v["ci95"], None),
+             ("Lab target (SD of one heap, heaps)", v["target_deg"], None,
+              None if t.get("target_sd_deg") is None else t["target_sd_deg"]),
+             ("Difference simulated - lab", t["difference_deg"], t["difference_ci90"], t["p_tost"]),
+             ("Tolerance", v["tolerance_deg"], None, None),
+             ("Smallest bias detected with 80 % power", v["detectable_bias_deg"], None, None),
+             ("Verdict", v["verdict"], None, None)]
+    return Table("P6", "Validation at the recommended point: equivalence with the lab (two one-sided tests)",
+                 ("Item", "Value", "Interval", "p (TOST) / SD"), ("", "deg", "deg", ""), tuple(rows),
+                 notes=(t["note"],
+                        "Equivalent: the interval of the difference lies within ± tolerance; different: it lies "
+                        "entirely beyond it; otherwise undecided. Runs are added until the verdict is decided "
+                        "or the cap is reached."),
+                 sources=({"kind": "runs", "keys": [run["key"] for run in v["runs"]]}, _results_source("validation")),
+                 formats=("", ".4g", ".4g", ".3g"))
+
+
+#: Tables of the plausible workflow, in report order.
+PLAUSIBLE_TABLES = (table_prior, table_noise_study, table_design_runs, table_surrogate,
+                    table_identifiability, table_equivalence)

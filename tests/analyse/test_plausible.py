@@ -1,0 +1,127 @@
+"""The plausible workflow end to end on the example workbook, with a stand-in heap whose noise
+is a fresh draw for every (parameters, seed), as the chaotic DEM's is (a stand-in whose noise
+depended on the seed alone would hide what this workflow is for)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from analyse.campaign import CampaignConfig, calibrate, derive_results
+from analyse.plausible import SeedStream
+from measure.pipeline import measure_workbook
+from tests.analyse.standin import HEAP_NOISE_SD, heap_standin_angle, heap_standin_runner
+
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLE = ROOT / "data" / "astragalus" / "workbook.xlsx"
+
+
+@pytest.fixture(scope="module")
+def measurement():
+    if not EXAMPLE.exists():
+        pytest.skip(f"example workbook missing: {EXAMPLE}")
+    return measure_workbook(EXAMPLE)
+
+
+@pytest.fixture(scope="module")
+def campaign(measurement, tmp_path_factory):
+    out = tmp_path_factory.mktemp("plausible")
+    config = CampaignConfig(workers=1, progress=False, seed=3)
+    return out, config, calibrate(EXAMPLE, out, config, runner=heap_standin_runner, measurement=measurement)
+
+
+def test_noise_is_measured_and_sizes_the_replicates(campaign):
+    _, _, res = campaign
+    noise = res["noise"]
+    # the pooled run sd's 95 % interval holds the stand-in's true sd
+    lo, hi = noise["all_points"]["ci95"]
+    assert lo <= HEAP_NOISE_SD <= hi
+    # k from the measured noise: run sd / sqrt(k) <= 3 x tolerance (tolerance 1 deg here)
+    k = noise["replicates"]
+    assert k == max(2, int(np.ceil((noise["centre"]["sd"] / 3.0) ** 2)))
+    assert all(len(p["responses"]) == k for p in res["design"]["points"][2:])
+    assert -1.0 <= noise["seed_correlation"]["r"] <= 1.0
+
+
+def test_every_run_has_its_own_seed_and_the_budget_holds(campaign):
+    _, config, res = campaign
+    points = res["design"]["points"]
+    seeds = [s for p in points[2:] for s in p["seeds"]] + res["validation"]["seeds"]
+    assert len(seeds) == len(set(seeds))                  # independent draws everywhere ...
+    assert points[0]["seeds"] == points[1]["seeds"]        # ... but the noise pair, by design
+    design_runs = sum(len(p["responses"]) for p in points[2:])
+    assert design_runs <= config.budget_runs
+    assert res["validation"]["n_runs"] <= config.validation_cap
+    assert {p["stage"] for p in points} >= {"noise", "design", "sequential 1"}
+
+
+def test_the_set_holds_the_truth_and_names_what_the_heap_cannot_identify(campaign):
+    _, _, res = campaign
+    cal = res["calibration"]
+    params = cal["parameters"]
+    # the stand-in ignores these: the heap says nothing about them
+    for name in ("poisson_ratio", "e_pw", "mu_r_pw"):
+        assert params[name]["identifiability"] == "not identified", name
+        assert params[name]["sd_ratio"] > 0.9
+    # it is steep in mu_s_pw: the heap narrows it
+    assert params["mu_s_pw"]["sd_ratio"] < 0.9
+    # the recommended point lies in every interval and its true mean angle is on target
+    rec = cal["recommended"]["values"]
+    for name, p in params.items():
+        assert p["ci95"][0] <= rec[name] <= p["ci95"][1]
+        assert p["value"] == rec[name]
+    true_angle = heap_standin_angle({**res["calibrated_parameters"]})
+    assert abs(true_angle - res["target_angle_deg"]) < 3 * cal["recommended"]["predicted_sd"] + 0.5
+
+
+def test_validation_reports_the_issue_keys(campaign):
+    _, _, res = campaign
+    v = res["validation"]
+    assert v["verdict"] in ("equivalent", "different", "undecided")
+    for key in ("mean_deg", "ci95", "tolerance_deg", "target_deg", "n_runs", "detectable_bias_deg"):
+        assert key in v
+    assert v["n_runs"] == len(v["responses"]) == len(v["runs"])
+    assert v["tolerance_deg"] == pytest.approx(1.0)  # the lab's heap-to-heap sd is below 1 deg
+    for name, p in res["calibration"]["parameters"].items():
+        assert set(p) >= {"value", "ci95", "prior_mean", "prior_sd", "sd_ratio"}
+
+
+def test_replay_from_the_store_gives_the_same_answer_and_reruns_nothing(campaign, measurement):
+    out, config, res = campaign
+    replay = derive_results(measurement, config, out / "runs")
+    assert replay["calibration"]["parameters"] == res["calibration"]["parameters"]
+    assert replay["validation"]["verdict"] == res["validation"]["verdict"]
+    again = calibrate(EXAMPLE, out, config, runner=heap_standin_runner, measurement=measurement)
+    assert all(stage["ran"] == 0 for stage in again["stages"])
+
+
+def test_another_seed_draws_other_runs_and_a_consistent_answer(campaign, measurement, tmp_path):
+    _, config, res = campaign
+    other = calibrate(EXAMPLE, tmp_path, CampaignConfig(workers=1, progress=False, seed=4),
+                      runner=heap_standin_runner, measurement=measurement)
+    seeds_a = {s for p in res["design"]["points"] for s in p["seeds"]}
+    seeds_b = {s for p in other["design"]["points"] for s in p["seeds"]}
+    assert not seeds_a & seeds_b
+    # the two plausible sets overlap and each recommended point lies in the other's intervals
+    for name, p in res["calibration"]["parameters"].items():
+        q = other["calibration"]["parameters"][name]
+        assert p["ci95"][0] <= q["ci95"][1] and q["ci95"][0] <= p["ci95"][1], name
+        assert q["ci95"][0] <= p["value"] <= q["ci95"][1], name
+        assert p["ci95"][0] <= q["value"] <= p["ci95"][1], name
+
+
+def test_seed_streams_are_distinct_and_reproducible():
+    a, b = SeedStream(1), SeedStream(1)
+    first = a.take("design", 5) + a.take("design", 5)
+    assert first == b.take("design", 10)
+    assert len(set(first + a.take("validation", 10))) == 20
+    assert SeedStream(2).take("design", 10) != first
+
+
+def test_the_critique_names_what_the_heap_cannot_identify(campaign):
+    from analyse.critique.mechanisms import ill_conditioned
+
+    _, _, res = campaign
+    found = {f.covariate for f in ill_conditioned(res) if f.verdict == "found"}
+    expected = {n for n, p in res["calibration"]["parameters"].items() if p["sd_ratio"] > 0.9}
+    assert found == expected and {"poisson_ratio", "e_pw", "mu_r_pw"} <= found

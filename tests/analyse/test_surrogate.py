@@ -1,0 +1,103 @@
+"""The surrogate and the posterior: leave-one-out in closed form against refits without each
+point (a second implementation), predictions against a known function, the prior against
+scipy's truncated normal, and the importance-sampled posterior against the conjugate normal
+answer."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from analyse.surrogate import NoisySurrogate, Prior, next_points, posterior, recommend, space_filling
+
+
+def prior_2d():
+    return Prior.from_measured(["a", "b"], [0.5, 0.3], [0.1, 0.05], [(0.0, 1.0), (0.0, 1.0)], ["qa", "qb"])
+
+
+def truth(x):
+    x = np.atleast_2d(x)
+    return 30.0 + 40.0 * (x[:, 0] - 0.5) + 10.0 * np.sin(20.0 * (x[:, 1] - 0.3))
+
+
+def fitted(seed=0, n=25, noise_sd=0.5):
+    prior = prior_2d()
+    rng = np.random.default_rng(seed)
+    x = space_filling(prior, n, seed)
+    y = truth(x) + rng.normal(0, noise_sd, n)
+    return prior, NoisySurrogate(prior.low, prior.high, seed=0).fit(x, y, np.full(n, noise_sd ** 2)), x, y
+
+
+def test_prior_is_scipys_truncated_normal():
+    prior = prior_2d()
+    assert prior.low == pytest.approx([0.2, 0.15]) and prior.high == pytest.approx([0.8, 0.45])
+    m, s = prior.truncated_mean_sd()
+    ref = stats.truncnorm(-3, 3, loc=0.5, scale=0.1)
+    assert m[0] == pytest.approx(ref.mean()) and s[0] == pytest.approx(ref.std())
+    x = prior.sample(20000, np.random.default_rng(1))
+    assert x[:, 0].std() == pytest.approx(ref.std(), rel=0.03)
+    assert np.all((x >= prior.low) & (x <= prior.high))
+
+
+def test_leave_one_out_equals_refits_without_each_point():
+    prior, model, x, y = fitted()
+    loo = model.leave_one_out()
+    for i in (0, 7, 19):
+        keep = np.arange(len(y)) != i
+        other = NoisySurrogate(prior.low, prior.high).fit(x[keep], y[keep], model.noise_var[keep],
+                                                         kernel=model.kernel)
+        # the refit centres y on its own weighted mean, which shifts only the constant
+        other.offset = model.offset
+        other.gp.fit(other.x, y[keep] - model.offset)
+        m, _ = other.predict(x[i])
+        assert loo["residual"][i] == pytest.approx(y[i] - m[0], rel=1e-6, abs=1e-8)
+
+
+def test_predictions_hold_the_known_function():
+    prior, model, _, _ = fitted(n=40)
+    x = prior.sample(500, np.random.default_rng(5))
+    m, s = model.predict(x)
+    z = (m - truth(x)) / s
+    assert np.mean(np.abs(z) < 3) > 0.9
+    assert np.sqrt(np.mean((m - truth(x)) ** 2)) < 1.5
+
+
+class LinearModel:
+    """A surrogate that is exact: m(x) = 30 + 40 (a - 0.5), no uncertainty."""
+
+    low, high = np.array([0.2, 0.15]), np.array([0.8, 0.45])
+
+    def predict(self, x):
+        x = np.atleast_2d(x)
+        return 30.0 + 40.0 * (x[:, 0] - 0.5), np.zeros(len(x))
+
+
+def test_posterior_matches_the_conjugate_normal():
+    prior = Prior.from_measured(["a", "b"], [0.5, 0.3], [0.1, 0.05], [(0.0, 1.0), (0.0, 1.0)], width=6.0)
+    target, v = 32.0, 1.0
+    post = posterior(LinearModel(), prior, target, v, n=200000, seed=3)
+    # a ~ N(0.5, 0.1^2); target | a ~ N(30 + 40 (a - 0.5), 1): conjugate normal posterior
+    prec = 1 / 0.1 ** 2 + 40.0 ** 2 / v
+    mean = (0.5 / 0.1 ** 2 + 40.0 * (target - 30.0 + 40 * 0.5) / v) / prec
+    s = post.summary()
+    assert s["a"]["mean"] == pytest.approx(mean, abs=0.002)
+    assert s["a"]["sd"] == pytest.approx(1 / math.sqrt(prec), rel=0.05)
+    assert s["a"]["ci95"][0] == pytest.approx(mean - 1.96 / math.sqrt(prec), abs=0.004)
+    # b does not enter the angle: its posterior is its prior
+    assert s["b"]["sd_ratio"] == pytest.approx(1.0, abs=0.02)
+    assert s["b"]["identifiability"] == "not identified" and s["a"]["identifiability"] == "identified"
+    rec = recommend(post, LinearModel())
+    assert rec["values"]["a"] == pytest.approx(mean, abs=1e-3)   # the mode of a normal is its mean
+    assert rec["values"]["b"] == pytest.approx(0.3, abs=1e-3)
+
+
+def test_next_points_go_where_the_sign_is_uncertain():
+    prior, model, _, _ = fitted(n=12)
+    pts, u_min = next_points(model, prior, 30.0, 4, noise_var=0.25, seed=2)
+    assert pts.shape == (4, 2)
+    m, s = model.predict(pts[:1])
+    assert abs(m[0] - 30.0) / s[0] == pytest.approx(u_min)
+    # the batch spreads out: no two chosen points coincide
+    d = np.linalg.norm((pts[:, None] - pts[None]) / (prior.high - prior.low), axis=-1)
+    assert d[np.triu_indices(4, 1)].min() > 1e-3
