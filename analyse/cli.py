@@ -296,6 +296,12 @@ def calibration_summary(results: dict) -> str:
     lines.append(f"validation: {v['verdict']} (tolerance {v['tolerance_deg']:.2f} deg): mean "
                  f"{v['mean_deg']:.2f} deg over {v['n_runs']} runs, 95 % CI [{ci[0]:.2f}, {ci[1]:.2f}], "
                  f"target {v['target_deg']:.2f}; smallest bias it would detect {v['detectable_bias_deg']:.2f} deg")
+    if v.get("power_if_on_target") is not None and v["power_if_on_target"] < 0.8:
+        def n(x):
+            return "more than 1000" if x is None else str(x)
+        lines.append(f"  power to show equivalence even exactly on target: {v['power_if_on_target']:.2f}; "
+                     f"80 % would take {n(v.get('runs_for_power'))} runs against this lab target, "
+                     f"{n(v.get('runs_for_power_exact_target'))} against an exactly known one")
     conf = v.get("confirmation")
     if conf:
         lo, hi = conf["pi95"]

@@ -544,3 +544,16 @@ def sequential_equivalence(draw, target_mean: float, target_sd: float | None,
     fields.update(alpha=a_all, note=note)
     return SequentialResult(**fields, looks=tuple(looks), planned_looks=tuple(planned),
                             alpha_per_look=tuple(levels[:len(looks)]), stopped_because=stopped)
+
+
+def lab_heaps_for_power(run_sd: float, n_runs: int, tolerance: float, target_sd: float,
+                        power: float = 0.8, bias: float = 0.0, alpha: float = 0.05,
+                        df_rule: str = "conservative", n_max: int = 50) -> int | None:
+    """Fewest lab heaps for which ``n_runs`` validation runs reach ``power`` of showing
+    equivalence (at a true difference ``bias``): what the lab would need to photograph for the
+    validation to be able to succeed. None if not reached with ``n_max`` heaps."""
+    target_sd = _positive(target_sd, "target_sd")
+    for m in range(2, n_max + 1):
+        if tost_power(bias, run_sd, n_runs, tolerance, target_sd, m, alpha, df_rule) >= power:
+            return m
+    return None

@@ -36,7 +36,8 @@ import math
 
 import numpy as np
 
-from analyse.equivalence import default_tolerance, sequential_equivalence
+from analyse.equivalence import (default_tolerance, lab_heaps_for_power, runs_for_power,
+                                 sequential_equivalence, tost_power)
 from analyse.noise import pooled_noise, replicates_for, seed_correlation
 from analyse.surrogate import (IMPLAUSIBILITY_CUT, U_STOP, NoisySurrogate, Prior, next_points,
                                posterior, recommend, space_filling)
@@ -214,9 +215,18 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
     seq = sequential_equivalence(draw, target, lab_sd, lab_n, tolerance, first=config.validation_first,
                                  step=config.validation_step, cap=config.validation_cap, alpha=config.alpha)
     vdict = seq.to_dict()
+    # could this validation have succeeded? its power at the cap for a model exactly on target,
+    # at the measured noise; the runs 80 % power would take against this lab target and against
+    # an exactly known one; the lab heaps it would take at the cap
+    power = tost_power(0.0, pooled.sd, config.validation_cap, tolerance, lab_sd, lab_n, config.alpha)
+    needed = runs_for_power(0.0, pooled.sd, tolerance, 0.8, lab_sd, lab_n, config.alpha, n_max=1000)
+    needed_exact = runs_for_power(0.0, pooled.sd, tolerance, 0.8, alpha=config.alpha, n_max=1000)
+    heaps = lab_heaps_for_power(pooled.sd, config.validation_cap, tolerance, lab_sd) if lab_sd else None
     validation = {"verdict": vdict["verdict"], "mean_deg": vdict["mean_deg"], "ci95": vdict["ci95"],
                   "tolerance_deg": tolerance, "target_deg": target, "n_runs": vdict["n_runs"],
                   "detectable_bias_deg": vdict["detectable_bias_deg"], "settings": best["values"],
+                  "power_if_on_target": power, "runs_for_power": needed,
+                  "runs_for_power_exact_target": needed_exact, "lab_heaps_for_power": heaps,
                   "test": vdict, **val}
 
     # what is kept for plots and the audit

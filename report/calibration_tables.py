@@ -152,13 +152,20 @@ def table_equivalence(c: Campaign) -> Table:
              ("Difference simulated - lab", t["difference_deg"], t["difference_ci90"], t["p_tost"]),
              ("Tolerance", v["tolerance_deg"], None, None),
              ("Smallest bias detected with 80 % power", v["detectable_bias_deg"], None, None),
+             (f"Power to show equivalence with {r['config']['validation_cap']} runs if exactly on target",
+              v["power_if_on_target"], None, None),
+             ("Runs that would give 80 % power (this lab target; an exact one)",
+              [v["runs_for_power"], v["runs_for_power_exact_target"]], None, None),
+             (f"Lab heaps that would give 80 % power with {r['config']['validation_cap']} runs",
+              v["lab_heaps_for_power"], None, None),
              ("Verdict", v["verdict"], None, None)]
     return Table("P6", "Validation at the recommended point: equivalence with the lab (two one-sided tests)",
                  ("Item", "Value", "Interval", "p (TOST) / SD"), ("", "deg", "deg", ""), tuple(rows),
                  notes=(t["note"],
                         "Equivalent: the interval of the difference lies within ± tolerance; different: it lies "
                         "entirely beyond it; otherwise undecided. Runs are added until the verdict is decided "
-                        "or the cap is reached."),
+                        "or the cap is reached. The power rows say whether this validation could have "
+                        "shown equivalence at all (none: not within 1000 runs, or 50 heaps)."),
                  sources=({"kind": "runs", "keys": [run["key"] for run in v["runs"]]}, _results_source("validation")),
                  formats=("", ".4g", ".4g", ".3g"))
 

@@ -260,3 +260,13 @@ def test_sequential_looks_stop_and_replay():
 
     with pytest.raises(InputError, match="returned"):
         sequential_equivalence(lambda k: [32.0], 32.0, LAB_SD, LAB_N, 1.0)
+
+
+def test_lab_heaps_for_power():
+    from analyse.equivalence import lab_heaps_for_power
+
+    m = lab_heaps_for_power(1.0, 40, 1.0, 0.5)
+    assert m is not None and m > 3
+    assert tost_power(0.0, 1.0, 40, 1.0, 0.5, m) >= 0.8 > tost_power(0.0, 1.0, 40, 1.0, 0.5, m - 1)
+    # the runs alone put it out of reach: 40 runs of sd 4 have a half-width above 1 deg
+    assert lab_heaps_for_power(4.0, 40, 1.0, 0.5) is None
