@@ -121,6 +121,10 @@ class CampaignConfig:
         heap-to-heap sd.
     discrepancy_sd : float
         sd allowed for what the model cannot represent, added to the target's [deg].
+    likelihood : str
+        ``plausible``: ``joint`` (the drop and incline twins constrain the restitutions and
+        frictions, the heap the rest) or ``heap`` (the heap alone, the lab's direct readings as
+        the prior).
     climb_levels : int
         Levels of the steepest climb.
     validation_seeds : tuple of int
@@ -148,6 +152,7 @@ class CampaignConfig:
     validation_cap: int = 40
     tolerance: float | None = None
     discrepancy_sd: float = 0.0
+    likelihood: str = "joint"
     climb_levels: int = 6
     validation_seeds: tuple = (101, 102, 103)
     alpha: float = 0.05
@@ -178,6 +183,8 @@ class CampaignConfig:
                              f"got {self.validation_first} and {self.validation_cap}")
         if self.tolerance is not None and not self.tolerance > 0:
             raise InputError(f"tolerance must be positive, got {self.tolerance!r}")
+        if self.likelihood not in ("joint", "heap"):
+            raise InputError(f"likelihood must be 'joint' or 'heap', got {self.likelihood!r}")
         if not self.discrepancy_sd >= 0:
             raise InputError(f"discrepancy_sd must be >= 0, got {self.discrepancy_sd!r}")
 
@@ -189,6 +196,21 @@ class CampaignConfig:
         if unknown:
             raise InputError(f"unknown campaign settings {unknown}; valid: {sorted(names)}")
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+
+
+def campaign_runner(inputs: dict) -> dict:
+    """Run one campaign task on the rig its ``rig`` names: the repose twin, or the drop and
+    incline twins of the joint calibration (top level, so workers can pickle it)."""
+    rig = inputs.get("rig", "repose")
+    if rig == "repose":
+        return repose_runner(inputs)
+    from analyse.critique.twins import drop_twin_runner, incline_twin_runner
+
+    if rig == "drop":
+        return drop_twin_runner(inputs)
+    if rig == "incline":
+        return incline_twin_runner(inputs)
+    raise InputError(f"unknown rig {rig!r} in a campaign task")
 
 
 def repose_runner(inputs: dict) -> dict:
@@ -370,7 +392,7 @@ def calibrate(workbook, out_dir, config: CampaignConfig | None = None, *, runner
         ``annotated/`` (processed heap photos).
     config : CampaignConfig
     runner : callable, optional
-        ``runner(inputs) -> dict`` performing one DEM run (default :func:`repose_runner`);
+        ``runner(inputs) -> dict`` performing one DEM run (default :func:`campaign_runner`);
         tests pass a cheap stand-in. Its qualified name is kept in ``results["runner"]``.
     measurement : measure.pipeline.Measurement, optional
         Use this measurement instead of measuring ``workbook`` again.
@@ -389,7 +411,7 @@ def calibrate(workbook, out_dir, config: CampaignConfig | None = None, *, runner
     if measurement is None:
         measurement = measure_workbook(workbook, annotate_dir=out / "annotated")
     write_json(out / "measure.json", measurement.to_dict())
-    runner = runner or repose_runner
+    runner = runner or campaign_runner
     results = _derive(measurement, config, _Runner(config, RunStore(out / "runs"), runner))
     results["runner"] = f"{getattr(runner, '__module__', '?')}.{getattr(runner, '__qualname__', repr(runner))}"
     results["wall_s"] = time.perf_counter() - t_start

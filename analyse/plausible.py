@@ -17,9 +17,13 @@ says what the lab data pin down, instead of picking one optimum of one noisy sur
 4. **Sequential runs.** Batches of ``batch`` points where it is least certain whether the mean
    angle equals the target, until that is settled everywhere (U >= 2) or ``budget_runs`` runs
    of design and sequence are spent.
-5. **Posterior and plausible set.** Measured means and sds of the seven contact parameters as
-   the prior, the lab target with its own uncertainty as the datum; per parameter a 95 %
-   interval and posterior sd / prior sd; the recommended point is the posterior mode.
+5. **Posterior and plausible set.** The prior of the seven contact parameters: with the
+   ``joint`` likelihood (default) what each one's lab test says through its twin (drops for
+   the restitutions, the incline for the frictions; ``analyse.twin_likelihood``), with
+   ``heap`` the measured means and sds read directly; the lab target with its own uncertainty
+   as the datum; per parameter a 95 % interval and posterior sd / prior sd; the recommended
+   point is the posterior mode. A joint campaign also reports the heap-only posterior on the
+   same surrogate, for comparison.
 6. **Validation that can fail.** Fresh runs at the recommended point, ``validation_first`` and
    then ``validation_step`` more at a time up to ``validation_cap``, tested for equivalence
    with the lab (two one-sided tests, tolerance the larger of 1 deg and the lab's
@@ -66,18 +70,22 @@ class SeedStream:
         return [int(s % (2 ** 31 - 1)) for s in state[start:]]
 
 
-def measured_prior(measurement, factors) -> Prior:
-    """The prior of the seven contact parameters: each one's measured mean and sd."""
+def measured_prior(measurement, factors, constraints: dict | None = None) -> Prior:
+    """The prior of the seven contact parameters: each one's measured mean and sd, or, for a
+    parameter in ``constraints`` (``analyse.twin_likelihood``), the mean and sd its lab test's
+    twin gives it."""
     from analyse.campaign import PARAMETER_BOUNDS
 
+    constraints = constraints or {}
     names, mean, sd, bounds, sources = [], [], [], [], []
     for f in factors.values():
         est = measurement.quantities[f["quantity"]]
+        c = constraints.get(f["parameter"])
         names.append(f["parameter"])
-        mean.append(float(est.value))
-        sd.append(float(est.sd))
+        mean.append(float(c.mean if c else est.value))
+        sd.append(float(c.sd if c else est.sd))
         bounds.append(PARAMETER_BOUNDS[f["parameter"]])
-        sources.append(f["quantity"])
+        sources.append(f"{f['quantity']} ({c.rig} twin)" if c else f["quantity"])
     return Prior.from_measured(names, mean, sd, bounds, sources)
 
 
@@ -105,10 +113,18 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
     target_var = lab_sd ** 2 / lab_n if lab_sd is not None else 0.0
     tolerance = float(config.tolerance) if config.tolerance else default_tolerance(lab_sd)
     flank_band = measurement.provenance.options.get("flank_band")
-    prior = measured_prior(measurement, factors)
-    names = prior.names
+    heap_prior = measured_prior(measurement, factors)
     seeds = SeedStream(config.seed)
     fallbacks: list = []
+    constraints = {}
+    if config.likelihood == "joint":
+        from analyse.twin_likelihood import twin_constraints
+
+        constraints = twin_constraints(measurement, base, factors, execute, run_refs)
+    prior = measured_prior(measurement, factors, constraints)
+    names = prior.names
+    # the surrogate spans both priors, so that the heap-only posterior can be compared on it
+    box_low, box_high = np.minimum(prior.low, heap_prior.low), np.maximum(prior.high, heap_prior.high)
 
     def task(x, seed):
         return {"rig": "repose", "profile": config.profile,
@@ -161,7 +177,7 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
         pooled = pooled_noise(groups)
         x = np.array([p["x"] for p in design])
         y = np.array([p["responses"].mean() for p in design])
-        model = NoisySurrogate(prior.low, prior.high, seed=surrogate_seed).fit(x, y, _noise_variances(groups, pooled))
+        model = NoisySurrogate(box_low, box_high, seed=surrogate_seed).fit(x, y, _noise_variances(groups, pooled))
         return model, pooled
 
     model, pooled = fit()
@@ -193,6 +209,16 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
                      seed=np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 1]))
     best = recommend(post, model)
     summary = post.summary()
+    heap_only = None
+    if constraints:
+        hp = posterior(model, heap_prior, target, target_var, discrepancy_var=config.discrepancy_sd ** 2,
+                       seed=np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 3]))
+        hs, hb = hp.summary(), recommend(hp, model)
+        heap_only = {"parameters": {n: {"value": hb["values"][n], "ci95": hs[n]["ci95"],
+                                        "prior_mean": hs[n]["prior_mean"], "prior_sd": hs[n]["prior_sd"],
+                                        "sd_ratio": hs[n]["sd_ratio"], "posterior_mean": hs[n]["mean"],
+                                        "posterior_sd": hs[n]["sd"]} for n in names},
+                     "recommended": hb, "ess": hp.ess}
     parameters = {n: {"value": best["values"][n], "ci95": summary[n]["ci95"],
                       "prior_mean": summary[n]["prior_mean"], "prior_sd": summary[n]["prior_sd"],
                       "sd_ratio": summary[n]["sd_ratio"], "posterior_mean": summary[n]["mean"],
@@ -257,8 +283,12 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
             "method": ("posterior of the measured-mean-and-sd prior given the lab's angle of repose, by "
                        "importance sampling on a stochastic-kriging surrogate of the mean heap angle; "
                        f"plausible set: implausibility < {IMPLAUSIBILITY_CUT:g} (history matching); "
-                       "recommended point: the posterior mode; heap only"),
-            "likelihood": "heap",
+                       "recommended point: the posterior mode; "
+                       + ("joint: the drop and incline twins constrain the restitutions and frictions "
+                          "first (analyse.twin_likelihood)" if constraints else "heap only")),
+            "likelihood": config.likelihood,
+            "twins": {n: c.to_dict() for n, c in constraints.items()},
+            "heap_only": heap_only,
             "parameters": parameters,
             "recommended": best, "recommended_inside_ci95": inside,
             "target_deg": target, "target_sd_deg": lab_sd, "target_n": lab_n, "target_var": target_var,

@@ -19,12 +19,6 @@ def _symbols(c: Campaign) -> dict:
     return {n: parameter_label(n, wall)[1] for n in _names(c.results)}
 
 
-def design_run_keys(r: dict) -> list[str]:
-    """Keys of every design, sequential and validation run, in campaign order."""
-    keys = [run["key"] for p in r["design"]["points"] for run in p["runs"]]
-    return keys + [run["key"] for run in r["validation"]["runs"]]
-
-
 def table_prior(c: Campaign) -> Table:
     """Table P1: the prior, each contact parameter's measured mean and sd."""
     r = c.results
@@ -36,11 +30,63 @@ def table_prior(c: Campaign) -> Table:
     return Table("P1", "Prior of the contact parameters: the lab's measured mean and sd of each",
                  ("Parameter", "Symbol", "Measured quantity", "Mean", "SD", "Lowest", "Highest"),
                  ("", "", "", "", "", "", ""), tuple(rows),
-                 notes=("A normal of the measured mean and the SD of single measurements, truncated to "
-                        "mean ± 3 SD and to the admissible range (lowest, highest): what the lab knows "
-                        "before the heap is used. The design spreads over it.",),
+                 notes=("A normal of the mean and the SD of single measurements (for the joint calibration, "
+                        "those of the twin-implied values of Table P1a), truncated to mean ± 3 SD and to the "
+                        "admissible range (lowest, highest): what the lab knows before the heap is used. "
+                        "The design spreads over it.",),
                  sources=(_results_source("prior"),),
                  formats=("", "", "", ".4g", ".3g", ".4g", ".4g"))
+
+
+def table_twins(c: Campaign) -> Table | None:
+    """Table P1a: what each lab test's twin says about its parameter (joint calibration)."""
+    r = c.results
+    twins = r["calibration"].get("twins") or {}
+    if not twins:
+        return None
+    wall = _wall(c.measurement)
+    rows = []
+    for name, t in twins.items():
+        label, symbol = parameter_label(name, wall)
+        rows.append((label, symbol, t["quantity"], t["rig"], t["trials"], t["measured_mean"], t["measured_sd"],
+                     t["mean"], t["sd"], [t["grid"][0], t["grid"][-1]], "yes" if t["at_edge"] else "no"))
+    keys = [run["key"] for t in twins.values() for run in t["runs"]]
+    return Table("P1a", "Every lab test's twin: the DEM parameter that reproduces each reading",
+                 ("Parameter", "Symbol", "Measured quantity", "Twin", "Trials", "Lab reading", "SD",
+                  "Twin-implied value", "SD", "Grid", "At the grid's edge"),
+                 ("", "", "", "", "", "", "", "", "", "", ""), tuple(rows),
+                 notes=("The twin of each lab trial (the logged drop height and landing orientation; the "
+                        "incline surface and mode) run over a grid of the parameter; the value whose twin "
+                        "readings match the lab's on average, and the spread of single readings carried "
+                        "through the twin. These are the prior of the joint calibration (Table P1); Poisson's "
+                        "ratio has no twin and keeps its measurement.",),
+                 sources=({"kind": "runs", "keys": keys}, _results_source("calibration.twins")),
+                 formats=("", "", "", "", "d", ".4g", ".3g", ".4g", ".3g", ".3g", ""))
+
+
+def table_joint_vs_heap(c: Campaign) -> Table | None:
+    """Table P5a: the joint calibration beside the heap-only one, on the same surrogate."""
+    r = c.results
+    cal = r["calibration"]
+    heap = cal.get("heap_only")
+    if not heap:
+        return None
+    wall = _wall(c.measurement)
+    rows = []
+    for name, p in cal["parameters"].items():
+        h = heap["parameters"][name]
+        rows.append((parameter_label(name, wall)[0], p["value"], p["ci95"], p["sd_ratio"],
+                     h["value"], h["ci95"], h["sd_ratio"]))
+    return Table("P5a", "Joint calibration (every lab test's twin) beside the heap alone",
+                 ("Parameter", "Joint: recommended", "Joint: 95 % interval", "Joint: posterior/prior SD",
+                  "Heap only: recommended", "Heap only: 95 % interval", "Heap only: posterior/prior SD"),
+                 ("", "", "", "", "", "", ""), tuple(rows),
+                 notes=("Heap only: the lab's direct readings as the prior (sqrt(h2/h1) as the contact "
+                        "restitution, tan of the onset angle as the friction), the same surrogate and target. "
+                        "Where the two differ, the lab's reading is not the DEM parameter, and only the joint "
+                        "calibration knows it.",),
+                 sources=(_results_source("calibration.heap_only"), _results_source("calibration.parameters")),
+                 formats=("", ".4g", ".4g", ".2f", ".4g", ".4g", ".2f"))
 
 
 def table_noise_study(c: Campaign) -> Table:
@@ -170,6 +216,7 @@ def table_equivalence(c: Campaign) -> Table:
                  formats=("", ".4g", ".4g", ".3g"))
 
 
-#: Tables of the plausible workflow, in report order.
-PLAUSIBLE_TABLES = (table_prior, table_noise_study, table_design_runs, table_surrogate,
-                    table_identifiability, table_equivalence)
+#: Tables of the plausible workflow, in report order (a builder returning None has nothing to
+#: show for this campaign, e.g. the twins of a heap-only calibration).
+PLAUSIBLE_TABLES = (table_prior, table_twins, table_noise_study, table_design_runs, table_surrogate,
+                    table_identifiability, table_joint_vs_heap, table_equivalence)

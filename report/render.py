@@ -190,7 +190,7 @@ def _runner_text(r: dict) -> tuple[str, bool]:
     runner = r.get("runner")
     if runner is None:
         return "The DEM runner of this campaign is not recorded in results.json.", True
-    if runner == "analyse.campaign.repose_runner":
+    if runner in ("analyse.campaign.campaign_runner", "analyse.campaign.repose_runner"):
         return ("Every DEM run was made by demcal's own DEM (numba; Hertz-Mindlin contacts, "
                 "constant-torque rolling friction, multi-sphere clumps) on its twin of the plate-"
                 "withdrawal repose test; the paper used EDEM 2018."), False

@@ -173,7 +173,8 @@ def load_paper() -> tuple[dict, dict]:
 def run_stages(results: dict) -> list[tuple[str, list]]:
     """(stage, run references) of every stage of the campaign, in campaign order."""
     if results.get("workflow") == "plausible":
-        stages: dict = {}
+        stages: dict = {f"{t['rig']} twins, {name}": t["runs"]
+                        for name, t in (results["calibration"].get("twins") or {}).items()}
         for p in results["design"]["points"]:
             stages.setdefault(p["stage"], []).extend(p["runs"])
         return list(stages.items()) + [("validation", results["validation"]["runs"])]
@@ -1091,7 +1092,7 @@ RESULT_TABLES = (table_pb_levels, table_pb_design, table_pb_anova, table_noise, 
 
 #: Ids of the tables :data:`RESULT_TABLES` build, in order.
 RESULT_TABLE_IDS = ("3", "4", "5", "5a", "6", "7", "8", "9", "9a", "9b", "10", "11", "12", "A2",
-                    "P1", "P2", "P3", "P4", "P5", "P6")
+                    "P1", "P1a", "P2", "P3", "P4", "P5", "P5a", "P6")
 
 
 def build_tables(c: Campaign) -> list[Table]:
@@ -1104,7 +1105,7 @@ def build_tables(c: Campaign) -> list[Table]:
     if c.results is not None and c.results.get("workflow") == "plausible":
         from report.calibration_tables import PLAUSIBLE_TABLES
 
-        tables += [f(c) for f in PLAUSIBLE_TABLES]
+        tables += [t for t in (f(c) for f in PLAUSIBLE_TABLES) if t is not None]
     elif c.results is not None:
         tables += [f(c) for f in RESULT_TABLES]
     tables += critique_tables(c)

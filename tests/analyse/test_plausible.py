@@ -10,7 +10,7 @@ import pytest
 from analyse.campaign import CampaignConfig, calibrate, derive_results
 from analyse.plausible import SeedStream
 from measure.pipeline import measure_workbook
-from tests.analyse.standin import HEAP_NOISE_SD, heap_standin_angle, heap_standin_runner
+from tests.analyse.standin import DROP_RATIO, HEAP_NOISE_SD, heap_standin_angle, heap_standin_runner
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "data" / "astragalus" / "workbook.xlsx"
@@ -125,3 +125,34 @@ def test_the_critique_names_what_the_heap_cannot_identify(campaign):
     found = {f.covariate for f in ill_conditioned(res) if f.verdict == "found"}
     expected = {n for n, p in res["calibration"]["parameters"].items() if p["sd_ratio"] > 0.9}
     assert found == expected and {"poisson_ratio", "e_pw", "mu_r_pw"} <= found
+
+
+def test_joint_calibration_reads_the_restitutions_through_the_drop_twin(campaign, measurement):
+    # the stand-in's segment rebounds at DROP_RATIO times its contact restitution, so the
+    # contact value that reproduces the lab's drops is the measured one over DROP_RATIO
+    _, _, res = campaign
+    cal = res["calibration"]
+    assert cal["likelihood"] == "joint"
+    for name, quantity in (("e_pw", "restitution.particle-steel"), ("e_pp", "restitution.particle-particle")):
+        twin = cal["twins"][name]
+        est = measurement.quantities[quantity]
+        assert twin["mean"] == pytest.approx(est.value / DROP_RATIO, abs=3 * twin["sd_of_mean"] + 0.005)
+        assert twin["sd"] == pytest.approx(est.sd / DROP_RATIO, rel=0.1)
+        assert cal["parameters"][name]["prior_mean"] == pytest.approx(twin["mean"])
+        # the heap-only calibration takes sqrt(h2/h1) at its word
+        assert cal["heap_only"]["parameters"][name]["prior_mean"] == pytest.approx(est.value)
+    # the incline twin reads the friction itself: it reproduces the measured mean
+    assert cal["twins"]["mu_s_pw"]["mean"] == pytest.approx(
+        measurement.quantities["static_friction.steel"].value, abs=0.01)
+    assert "poisson_ratio" not in cal["twins"]
+
+
+def test_heap_only_calibration_runs_no_twin(measurement, tmp_path):
+    res = calibrate(EXAMPLE, tmp_path, CampaignConfig(workers=1, progress=False, seed=5, likelihood="heap",
+                                                      budget_runs=40, validation_cap=20),
+                    runner=heap_standin_runner, measurement=measurement)
+    assert res["calibration"]["likelihood"] == "heap" and not res["calibration"]["twins"]
+    assert res["calibration"]["heap_only"] is None
+    assert res["calibration"]["parameters"]["e_pw"]["prior_mean"] == pytest.approx(
+        measurement.quantities["restitution.particle-steel"].value)
+    assert not [s for s in res["stages"] if "twins" in s["stage"]]

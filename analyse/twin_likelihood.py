@@ -1,0 +1,168 @@
+"""Every lab test's twin in the likelihood: the drops constrain the restitutions, the incline
+the frictions, and the heap has to explain only what they leave open (the "joint" calibration).
+
+The lab measures each contact parameter through a rig: sqrt(h2/h1) of a dropped segment, tan of
+the tilt at which it slides or rolls. A DEM parameter is not that reading: a five-sphere
+segment landing at an angle turns part of its energy into rotation, so its apparent
+restitution falls below the contact value. Each rig's twin is therefore run over a grid of the
+parameter, at every logged trial (drop height and landing orientation, as the lab logged them;
+a random orientation seeded by the row where it did not), and the parameter's likelihood is
+that of the trials' mean residual, lab minus twin:
+
+    r_i(theta) = y_i - twin_i(theta),   L(theta) = N(mean_i r_i; 0, sd_i(r_i)^2 / n)
+
+(linear interpolation between grid points; a flat prior over the grid). For the incline the
+twin is deterministic and the same for every trial of a group, so r_i spreads only by the lab's
+scatter. The posterior on the grid has a mean and an sd (of the parameter's mean value). The
+heap stage then uses, as its prior for the parameter, a normal of that mean and of the spread
+of single trials carried through the twin, sd x sqrt(n) = s / |d twin / d theta|: the same
+meaning as the heap-only prior (the lab's mean and the sd of its single readings), translated
+into the DEM's parameter. Poisson's ratio has no twin: its measured mean and sd stay the
+prior.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from demcal.errors import AnalysisError
+
+#: Grid points per parameter; drops are cheap (about 0.06 s each), the incline more so.
+GRID = {"drop": 9, "incline": 7}
+#: Grid of the contact restitution [-] (the apparent value can be far below the contact one).
+RESTITUTION_RANGE = (0.05, 0.95)
+#: Fine grid on which the interpolated likelihood is evaluated.
+FINE = 401
+
+
+@dataclass
+class TwinConstraint:
+    """What one lab test's twin says about one DEM parameter.
+
+    Attributes
+    ----------
+    parameter : str
+        DEM parameter (``e_pw``, ``mu_s_pp``, ...).
+    quantity : str
+        The lab's measured quantity.
+    rig : str
+        ``drop`` or ``incline``.
+    grid : list of float
+        Parameter values the twin was run at.
+    residual_mean, residual_se : list of float
+        Mean lab-minus-twin residual over the trials, and its standard error, at each grid value.
+    mean, sd_of_mean : float
+        Posterior mean and sd of the parameter on the grid (flat prior over it).
+    sd : float
+        The spread of single trials in the parameter's units, ``sd_of_mean`` x sqrt(trials):
+        the prior sd the heap stage uses.
+    measured_mean, measured_sd : float
+        The lab's direct reading (what the heap-only calibration uses as the prior).
+    trials : int
+    at_edge : bool
+        The posterior piles up at an end of the grid: the twin cannot reach the lab's value
+        inside it.
+    runs : list of dict
+        Run references (key, seed) of every twin run.
+    """
+
+    parameter: str
+    quantity: str
+    rig: str
+    grid: list
+    residual_mean: list
+    residual_se: list
+    mean: float
+    sd_of_mean: float
+    sd: float
+    measured_mean: float
+    measured_sd: float
+    trials: int
+    at_edge: bool
+    runs: list = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def _grid_posterior(grid, r_mean, r_se) -> tuple[float, float, bool]:
+    fine = np.linspace(grid[0], grid[-1], FINE)
+    m = np.interp(fine, grid, r_mean)
+    se = np.maximum(np.interp(fine, grid, r_se), 1e-9)
+    logw = -0.5 * (m / se) ** 2 - np.log(se)
+    w = np.exp(logw - logw.max())
+    w /= w.sum()
+    mean = float(np.sum(w * fine))
+    sd = float(math.sqrt(max(np.sum(w * (fine - mean) ** 2), 0.0)))
+    # more than 5 % of the mass in the outer grid cell at either end
+    cell = (fine[-1] - fine[0]) / (len(grid) - 1)
+    edge = bool(w[fine <= fine[0] + cell].sum() > 0.05 or w[fine >= fine[-1] - cell].sum() > 0.05)
+    return mean, max(sd, 1e-6), edge
+
+
+def twin_constraints(measurement, base, factors: dict, execute, run_refs) -> dict:
+    """Run the drop and incline twins over each parameter's grid and return
+    ``{parameter: TwinConstraint}`` for every parameter a lab test's twin can constrain.
+
+    ``execute(stage, tasks) -> records`` runs the twins (the campaign's run store; the task's
+    ``rig`` says which twin); ``factors`` is ``analyse.campaign.factor_levels``'s table.
+    """
+    from analyse.campaign import PARAMETER_BOUNDS
+    from analyse.critique.twins import drop_task, drop_trials, incline_groups, wall_of
+
+    wall = wall_of(measurement.meta)
+    trials = drop_trials(measurement)
+    groups = incline_groups(measurement)
+    out = {}
+    for f in factors.values():
+        name, quantity = f["parameter"], f["quantity"]
+        est = measurement.quantities[quantity]
+        family, _, surface = quantity.partition(".")
+        lo_b, hi_b = PARAMETER_BOUNDS[name]
+        if family == "restitution":
+            rows = trials.get(surface, [])
+            if len(rows) < 2:
+                continue
+            pair = "particle-particle" if surface == "particle-particle" else "particle-steel"
+            grid = np.linspace(*RESTITUTION_RANGE, GRID["drop"])
+            tasks = [drop_task(base.with_(**{name: float(g)}), pair, h, o, row)
+                     for g in grid for row, _, h, o, _, _ in rows]
+            records = execute(f"drop twins, {name}", tasks)
+            y = np.array([r[1] for r in rows])
+            sim = np.array([float(r["result"]["observable"]["apparent_restitution"]) for r in records])
+            sim = sim.reshape(len(grid), len(rows))
+            rig = "drop"
+        elif family in ("static_friction", "rolling_friction"):
+            mode = "slide" if family == "static_friction" else "roll"
+            rows = groups.get((quantity, surface, mode), [])
+            rig_surface = "steel" if surface == wall else surface if surface == "particle" else None
+            if len(rows) < 2 or rig_surface is None:
+                continue
+            lo = max(lo_b, est.value - 4 * est.sd)
+            hi = min(hi_b, est.value + 4 * est.sd)
+            grid = np.linspace(lo, hi, GRID["incline"])
+            tasks = [{"rig": "incline", "params": base.with_(**{name: float(g)}).to_dict(), "mode": mode,
+                      "surface": rig_surface, "seed": 0} for g in grid]
+            records = execute(f"incline twins, {name}", tasks)
+            key = "static_friction_apparent" if mode == "slide" else "rolling_friction_apparent"
+            onset = np.array([r["result"]["observable"].get(key) for r in records], dtype=float)
+            y = np.array([r[1] for r in rows])
+            sim = np.repeat(onset[:, None], len(rows), axis=1)
+            rig = "incline"
+        else:
+            continue
+        ok = np.all(np.isfinite(sim), axis=1)
+        if ok.sum() < 3:
+            raise AnalysisError(f"{rig} twins of {name}: fewer than 3 of {len(grid)} grid values gave a "
+                                "reading; the twin cannot constrain it")
+        resid = y[None, :] - sim[ok]
+        r_mean = resid.mean(axis=1)
+        r_se = resid.std(axis=1, ddof=1) / math.sqrt(len(y))
+        mean, sd, edge = _grid_posterior(grid[ok], r_mean, r_se)
+        out[name] = TwinConstraint(name, quantity, rig, grid[ok].tolist(), r_mean.tolist(), r_se.tolist(),
+                                   mean, sd, sd * math.sqrt(len(y)), float(est.value), float(est.sd),
+                                   int(len(y)), edge, run_refs(records))
+    return out
