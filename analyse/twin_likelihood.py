@@ -108,7 +108,8 @@ def twin_constraints(measurement, base, factors: dict, execute, run_refs) -> dic
     ``{parameter: TwinConstraint}`` for every parameter a lab test's twin can constrain.
 
     ``execute(stage, tasks) -> records`` runs the twins (the campaign's run store; the task's
-    ``rig`` says which twin); ``factors`` is ``analyse.campaign.factor_levels``'s table.
+    ``rig`` says which twin); ``factors`` is ``analyse.campaign.factor_levels``'s table. While
+    one parameter is varied the others stay at their measured means.
     """
     from analyse.campaign import PARAMETER_BOUNDS
     from analyse.critique.twins import drop_task, drop_trials, incline_groups, wall_of
@@ -116,6 +117,11 @@ def twin_constraints(measurement, base, factors: dict, execute, run_refs) -> dic
     wall = wall_of(measurement.meta)
     trials = drop_trials(measurement)
     groups = incline_groups(measurement)
+    # every other contact parameter at its measured mean while one is varied
+    base = base.with_(**{f["parameter"]: min(max(float(measurement.quantities[f["quantity"]].value),
+                                                 PARAMETER_BOUNDS[f["parameter"]][0]),
+                                             PARAMETER_BOUNDS[f["parameter"]][1])
+                         for f in factors.values()})
     out = {}
     for f in factors.values():
         name, quantity = f["parameter"], f["quantity"]

@@ -623,7 +623,7 @@ def _compression(truth: Truth, rng, specimens, n: int, root: Path) -> pd.DataFra
     return pd.DataFrame(rows)
 
 
-def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base: int):
+def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base: int, geometry=None):
     import cv2
 
     from simulate.render import Lighting, heap_photo, heap_profile
@@ -658,7 +658,7 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
             side = "both"
         else:
             from simulate.rigs import run_rig
-            res = run_rig("repose", truth.params, seed_base + i, profile="quick")
+            res = run_rig("repose", truth.params, seed_base + i, profile="quick", geometry=geometry)
             x = np.asarray(res.record["profile_x"], float)
             z = np.asarray(res.record["profile_z"], float)
             side = "right"
@@ -684,14 +684,18 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
     return frame, expected
 
 
-def _meta(truth: Truth, effects) -> pd.DataFrame:
+def _meta(truth: Truth, effects, geometry=None) -> pd.DataFrame:
+    from simulate.rigs.repose import ReposeGeometry
+
     p = truth.params
+    g = geometry or ReposeGeometry()
     rows = [("material", "Virtual root segments (demcal virtual lab)"), ("contact_material", "steel"),
             ("contact_density_kg_m3", p.wall_density_kg_m3), ("contact_poisson", p.wall_poisson_ratio),
             ("contact_shear_modulus_pa", p.wall_shear_modulus_pa),
             ("particle_shear_modulus_pa", p.shear_modulus_pa),
-            ("box_length_mm", 200), ("box_width_mm", 100), ("box_height_mm", 250),
-            ("plate_lift_speed_mm_s", 100), ("fill_count", 500),
+            ("box_length_mm", round(g.box_length * 1e3, 6)), ("box_width_mm", round(g.box_width * 1e3, 6)),
+            ("box_height_mm", round(g.box_height * 1e3, 6)),
+            ("plate_lift_speed_mm_s", round(g.lift_speed * 1e3, 6)), ("fill_count", g.fill_count),
             ("virtual_lab", "made by simulate.virtual_lab from a known truth (truth.json); planted: "
              + (", ".join(e.kind for e in effects) or "none"))]
     return pd.DataFrame(rows, columns=["key", "value"])
@@ -704,7 +708,7 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
                            orientation_range_deg=(80.0, 90.0), n_tracks: int = 2,
                            surfaces=("particle", "steel"), n_incline: int = 30,
                            n_compression: int = 10, n_photos: int = 4,
-                           cache_dir=None) -> VirtualWorkbook:
+                           cache_dir=None, geometry=None) -> VirtualWorkbook:
     """Write a complete lab workbook from ``truth``, with ``effects`` planted.
 
     Parameters
@@ -737,6 +741,9 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
         Compression tests (with curves); heap photos.
     cache_dir : path, optional
         Disk cache of the drop-twin table (default ``$DEMCAL_CACHE``, else memory only).
+    geometry : simulate.rigs.repose.ReposeGeometry, optional
+        The repose rig's carton and fill (written to the meta sheet, and used for the heaps of
+        ``photos="dem"``); default the paper's 200 x 100 x 250 mm carton of 500 segments.
 
     Returns
     -------
@@ -773,7 +780,7 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
     root = path.parent if xlsx else path
     root.mkdir(parents=True, exist_ok=True)
     specimens = _specimens(truth, rng, n_specimens)
-    sheets = {"meta": _meta(truth, effects), "specimens": specimens,
+    sheets = {"meta": _meta(truth, effects, geometry), "specimens": specimens,
               "density": _density(truth, rng, n_density)}
     expected = []
     if pairs:
@@ -790,7 +797,7 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
         sheets["compression"] = _compression(truth, rng, specimens, n_compression, root)
     if photos != "none" and n_photos:
         sheets["repose"], exp = _photos(truth, rng, effects, n_photos, root, photos,
-                                        seed_base=int(rng.integers(0, 2**31)))
+                                        seed_base=int(rng.integers(0, 2**31)), geometry=geometry)
         expected += exp
     for e in effects:
         if e.sheet not in sheets or not any(x["kind"] == e.kind for x in expected):
@@ -800,7 +807,8 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
     options = {"photos": photos, "n_specimens": n_specimens, "n_density": n_density, "pairs": list(pairs),
                "drop_heights_mm": list(drop_heights_mm), "n_drop": n_drop,
                "orientation_range_deg": [lo, hi], "n_tracks": n_tracks, "surfaces": list(surfaces),
-               "n_incline": n_incline, "n_compression": n_compression, "n_photos": n_photos}
+               "n_incline": n_incline, "n_compression": n_compression, "n_photos": n_photos,
+               "geometry": None if geometry is None else geometry.to_dict()}
     result = VirtualWorkbook(path=path, truth=truth, effects=effects, expected=tuple(expected), seed=seed,
                              provenance=Provenance(seed=seed, options=options))
     write_json(root / "truth.json", result.to_dict())
