@@ -20,3 +20,17 @@ def external():
             pytest.skip(f"reference data not found: {path} (set DEMCAL_EXTERNAL)")
         return pd.read_csv(path)
     return load
+
+
+#: The bundled example workbook.
+EXAMPLE = Path(__file__).resolve().parents[2] / "data" / "astragalus" / "workbook.xlsx"
+
+
+@pytest.fixture(scope="session")
+def measurement():
+    """The example workbook measured once for every campaign test."""
+    from measure.pipeline import measure_workbook
+
+    if not EXAMPLE.exists():
+        pytest.skip(f"example workbook missing: {EXAMPLE}")
+    return measure_workbook(EXAMPLE)

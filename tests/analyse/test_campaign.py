@@ -2,22 +2,11 @@
 the repose rig whose active factors and optimum are known. (The campaign on the real DEM is
 exercised by ``demcal calibrate`` and the opt-in validation run.)"""
 
-from pathlib import Path
-
 import pytest
 
 from analyse.campaign import CampaignConfig, calibrate, factor_levels
-from measure.pipeline import measure_workbook
+from tests.analyse.conftest import EXAMPLE
 from tests.analyse.standin import standin_angle, standin_runner
-
-ROOT = Path(__file__).resolve().parents[2]
-EXAMPLE = ROOT / "data" / "astragalus" / "workbook.xlsx"
-
-@pytest.fixture(scope="module")
-def measurement():
-    if not EXAMPLE.exists():
-        pytest.skip(f"example workbook missing: {EXAMPLE}")
-    return measure_workbook(EXAMPLE)
 
 
 def test_levels_are_the_measured_extremes(measurement):

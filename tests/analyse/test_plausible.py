@@ -2,25 +2,14 @@
 is a fresh draw for every (parameters, seed), as the chaotic DEM's is (a stand-in whose noise
 depended on the seed alone would hide what this workflow is for)."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from analyse.campaign import CampaignConfig, calibrate, derive_results
 from analyse.plausible import SeedStream
-from measure.pipeline import measure_workbook
+from tests.analyse.conftest import EXAMPLE
 from tests.analyse.standin import DROP_RATIO, HEAP_NOISE_SD, heap_standin_angle, heap_standin_runner
 
-ROOT = Path(__file__).resolve().parents[2]
-EXAMPLE = ROOT / "data" / "astragalus" / "workbook.xlsx"
-
-
-@pytest.fixture(scope="module")
-def measurement():
-    if not EXAMPLE.exists():
-        pytest.skip(f"example workbook missing: {EXAMPLE}")
-    return measure_workbook(EXAMPLE)
 
 
 @pytest.fixture(scope="module")
