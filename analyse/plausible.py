@@ -208,22 +208,13 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
                      discrepancy_var=config.discrepancy_sd ** 2,
                      seed=np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 1]))
     best = recommend(post, model)
-    summary = post.summary()
+    parameters = _parameter_table(post, best)
     heap_only = None
     if constraints:
         hp = posterior(model, heap_prior, target, target_var, discrepancy_var=config.discrepancy_sd ** 2,
                        seed=np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 3]))
-        hs, hb = hp.summary(), recommend(hp, model)
-        heap_only = {"parameters": {n: {"value": hb["values"][n], "ci95": hs[n]["ci95"],
-                                        "prior_mean": hs[n]["prior_mean"], "prior_sd": hs[n]["prior_sd"],
-                                        "sd_ratio": hs[n]["sd_ratio"], "posterior_mean": hs[n]["mean"],
-                                        "posterior_sd": hs[n]["sd"]} for n in names},
-                     "recommended": hb, "ess": hp.ess}
-    parameters = {n: {"value": best["values"][n], "ci95": summary[n]["ci95"],
-                      "prior_mean": summary[n]["prior_mean"], "prior_sd": summary[n]["prior_sd"],
-                      "sd_ratio": summary[n]["sd_ratio"], "posterior_mean": summary[n]["mean"],
-                      "posterior_sd": summary[n]["sd"], "identifiability": summary[n]["identifiability"],
-                      "source": summary[n]["source"]} for n in names}
+        hb = recommend(hp, model)
+        heap_only = {"parameters": _parameter_table(hp, hb), "recommended": hb, "ess": hp.ess}
     inside = {n: bool(parameters[n]["ci95"][0] <= best["values"][n] <= parameters[n]["ci95"][1]) for n in names}
 
     # 5. validation by equivalence ---------------------------------------------------------------
@@ -305,6 +296,16 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
         "calibrated_parameters": base.with_(**best["values"]).to_dict(),
         "fallback_runs": fallbacks,
     }
+
+
+def _parameter_table(post, best) -> dict:
+    """Per parameter: the recommended value, the 95 % interval, prior and posterior mean and sd,
+    their ratio and what the heap says about it (``results["calibration"]["parameters"]``)."""
+    summary = post.summary()
+    return {n: {"value": best["values"][n], "ci95": s["ci95"], "prior_mean": s["prior_mean"],
+                "prior_sd": s["prior_sd"], "sd_ratio": s["sd_ratio"], "posterior_mean": s["mean"],
+                "posterior_sd": s["sd"], "identifiability": s["identifiability"], "source": s["source"]}
+            for n, s in summary.items()}
 
 
 def _check_band(records, flank_band) -> None:

@@ -96,6 +96,10 @@ def format_unit(unit: str) -> str:
     return html.escape(unit).replace("^2", "²").replace("^3", "³")
 
 
+#: Run keys printed under a table; the rest are in Table A2.
+MAX_KEYS_SHOWN = 24
+
+
 def describe_sources(sources) -> list[str]:
     """The ``sources`` of a table as short lines (HTML-escaped)."""
     lines, seen = [], set()
@@ -130,8 +134,11 @@ def describe_sources(sources) -> list[str]:
         out.append("files read by those rows (SHA-256, first 16 hex digits; all in Table A1): "
                    + ", ".join(files))
     if runs:
+        # a long list of keys says nothing to a reader: Table A2 lists every run with its stage
+        shown = runs if len(runs) <= MAX_KEYS_SHOWN else runs[:MAX_KEYS_SHOWN]
         out.append(f"{len(runs)} DEM run record(s), runs/<key>.json (Table A2): "
-                   + ", ".join(k[:10] for k in runs))
+                   + ", ".join(k[:10] for k in shown)
+                   + (f", ... ({len(runs) - len(shown)} more in Table A2)" if len(shown) < len(runs) else ""))
     return [html.escape(x, quote=False) for x in out + lines]
 
 
