@@ -327,6 +327,12 @@ def abstract_plausible(c: Campaign) -> dict:
 
     ident, partly, not_ident = names("identified"), names("partly identified"), names("not identified")
     runs = sum(len(p["runs"]) for p in r["design"]["points"])
+    # the lab readings the twins translate into other DEM values (beyond a reading's spread)
+    moved = [f"{parameter_label(n, wall)[0].lower()} {t['mean']:.3g} where the lab reads {t['measured_mean']:.3g}"
+             for n, t in (cal.get("twins") or {}).items()
+             if abs(t["mean"] - t["measured_mean"]) > t["measured_sd"]]
+    twins = (" The twins of the drop and incline tests put " + "; ".join(moved)
+             + ": the lab's reading is not the DEM's parameter there." if moved else "")
     text = (f"The physical and contact parameters of {m.get('material')} were measured "
             f"({q.get('length_mm', {}).get('n', 0)} segments measured with callipers: "
             f"{_f(q.get('length_mm', {}).get('value'))} mm × {_f(q.get('diameter_mm', {}).get('value'))} mm). "
@@ -334,7 +340,7 @@ def abstract_plausible(c: Campaign) -> dict:
             f"calibration target. One simulated heap scatters by {noise['all_points']['sd']:.2g}° (SD) from "
             f"seed to seed, so the calibration ran {runs} independent heaps over the measured range of the "
             f"seven contact parameters, modelled their mean angle with a Gaussian process that carries the "
-            f"noise, and reports the parameters consistent with the measured angle. "
+            f"noise, and reports the parameters consistent with the measured angle.{twins} "
             + (f"The heap identifies {', '.join(ident)}; " if ident else "The heap identifies no parameter alone; ")
             + (f"it narrows {', '.join(partly)}; " if partly else "")
             + (f"it does not identify {', '.join(not_ident)}, whose values rest on their own "
