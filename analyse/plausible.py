@@ -24,10 +24,12 @@ says what the lab data pin down, instead of picking one optimum of one noisy sur
    as the datum; per parameter a 95 % interval and posterior sd / prior sd; the recommended
    point is the posterior mode. A joint campaign also reports the heap-only posterior on the
    same surrogate, for comparison.
-6. **Validation that can fail.** Fresh runs at the recommended point, ``validation_first`` and
-   then ``validation_step`` more at a time up to ``validation_cap``, tested for equivalence
-   with the lab (two one-sided tests, tolerance the larger of 1 deg and the lab's
-   heap-to-heap sd, the lab mean's uncertainty included): equivalent, different or undecided.
+6. **Validation that can fail.** Fresh runs at the recommended point: a first batch sized by
+   power (the runs the test needs for 80 % power at the predicted bias, at least
+   ``validation_first``), then ``validation_step`` more at a time up to ``validation_cap``,
+   tested for equivalence with the lab (two one-sided tests, tolerance the larger of 1 deg and
+   the lab's heap-to-heap sd, the lab mean's uncertainty included): equivalent, different or
+   undecided.
 
 All seeds come from ``config.seed`` through ``numpy.random.SeedSequence``, one stream per stage,
 so ``--seed`` redraws every run of every stage and a replay of the same campaign asks the run
@@ -229,7 +231,12 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
         val["runs"] += run_refs(records)
         return y
 
-    seq = sequential_equivalence(draw, target, lab_sd, lab_n, tolerance, first=config.validation_first,
+    # the first look comes when the test has 80 % power to decide at the predicted bias (at
+    # least validation_first runs, at most the cap); then validation_step more at a time
+    first = runs_for_power(best["predicted"] - target, pooled.sd, tolerance, 0.8, lab_sd, lab_n,
+                           config.alpha, n_max=config.validation_cap)
+    first = max(config.validation_first, first) if first is not None else config.validation_first
+    seq = sequential_equivalence(draw, target, lab_sd, lab_n, tolerance, first=first,
                                  step=config.validation_step, cap=config.validation_cap, alpha=config.alpha)
     vdict = seq.to_dict()
     # could this validation have succeeded? its power at the cap for a model exactly on target,

@@ -145,3 +145,18 @@ def test_heap_only_calibration_runs_no_twin(measurement, tmp_path):
     assert res["calibration"]["parameters"]["e_pw"]["prior_mean"] == pytest.approx(
         measurement.quantities["restitution.particle-steel"].value)
     assert not [s for s in res["stages"] if "twins" in s["stage"]]
+
+
+def test_first_validation_look_is_sized_by_power(measurement, tmp_path):
+    from analyse.equivalence import runs_for_power
+
+    # a loose tolerance makes equivalence reachable: the first look comes at the runs that give
+    # 80 % power at the predicted bias, not at validation_first
+    res = calibrate(EXAMPLE, tmp_path, CampaignConfig(workers=1, progress=False, seed=6, likelihood="heap",
+                                                      tolerance=3.0, budget_runs=24, validation_first=2),
+                    runner=heap_standin_runner, measurement=measurement)
+    cal, v = res["calibration"], res["validation"]
+    n = runs_for_power(cal["recommended"]["predicted"] - v["target_deg"], res["noise"]["all_points"]["sd"],
+                       3.0, 0.8, v["test"]["target_sd_deg"], v["test"]["target_n"], n_max=40)
+    assert n is not None and n > 2
+    assert v["test"]["looks"][0]["n_runs"] == n
