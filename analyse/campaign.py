@@ -190,11 +190,14 @@ class CampaignConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> "CampaignConfig":
-        """Rebuild the settings stored in ``results.json`` (``results["config"]``)."""
+        """Rebuild the settings stored in ``results.json`` (``results["config"]``). Settings
+        stored before the plausible workflow existed name no workflow: they were design-expert
+        campaigns."""
         names = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - names)
         if unknown:
             raise InputError(f"unknown campaign settings {unknown}; valid: {sorted(names)}")
+        d = {"workflow": "design-expert", **d}
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 

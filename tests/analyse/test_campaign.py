@@ -71,6 +71,10 @@ def test_workflow_and_replicates_default_by_profile_and_survive_the_stored_confi
     assert (paper.workflow, paper.replicates) == ("design-expert", 1)
     with pytest.raises(Exception, match="workflow must be one of"):
         CampaignConfig(workflow="best-guess")
+    # a campaign stored before workflows existed was a design-expert one, and is replayed as such
+    old = {k: v for k, v in CampaignConfig(workflow="design-expert", replicates=3).__dict__.items()
+           if k in ("profile", "levels", "seed", "replicates", "noise_repeats", "climb_levels")}
+    assert CampaignConfig.from_dict(old).workflow == "design-expert"
     stored = {k: v for k, v in CampaignConfig(profile="paper", replicates=2).__dict__.items()}
     assert CampaignConfig.from_dict(stored).replicates == 2
     with pytest.raises(Exception, match="replicates must be a positive integer"):
