@@ -46,16 +46,17 @@ from pathlib import Path
 
 import numpy as np
 
-from analyse.designs import box_behnken, plackett_burman, to_actual
-from analyse.equivalence import default_tolerance, equivalence_test
-from analyse.optimise import (canonical_analysis, confirmation_interval, optimise_to_target,
+from demcal.analyse.designs import box_behnken, plackett_burman, to_actual
+from demcal.analyse.equivalence import default_tolerance, equivalence_test
+from demcal.analyse.optimise import (canonical_analysis, confirmation_interval, optimise_to_target,
                               steepest_climb_analysis, steepest_climb_plan, validate_repeats)
-from analyse.regression import fit_response_surface
-from analyse.runs import RunStore, run_all, run_key
-from analyse.screening import plackett_burman_screening
+from demcal.analyse.regression import fit_response_surface
+from demcal.analyse.runs import RunStore, run_all, run_key
+from demcal.analyse.screening import plackett_burman_screening
 from demcal.errors import AnalysisError, InputError
 from demcal.jsonio import write_json
 from demcal.provenance import Provenance
+from demcal.units import MM
 
 #: Screening factors: letter, DEM parameter, measured quantity (``{wall}`` = the rig's plate
 #: material from the workbook meta), as the source paper's Plackett-Burman table.
@@ -114,6 +115,9 @@ class CampaignConfig:
     initial_points, batch, budget_runs : int
         ``plausible``: points of the space-filling design, points per sequential round, and
         the most runs of design and sequential rounds together.
+    refine_rounds, refine_runs : int
+        ``plausible``: rounds of runs at the recommended point before the validation, and runs
+        per round.
     validation_first, validation_step, validation_cap : int
         ``plausible``: validation runs before the first look, between looks, and at most.
     tolerance : float or None
@@ -147,6 +151,8 @@ class CampaignConfig:
     initial_points: int = 18
     batch: int = 4
     budget_runs: int = 72
+    refine_rounds: int = 2
+    refine_runs: int = 8
     validation_first: int = 10
     validation_step: int = 10
     validation_cap: int = 40
@@ -173,8 +179,10 @@ class CampaignConfig:
             object.__setattr__(self, "replicates", 1)
         if self.replicates is not None and (int(self.replicates) != self.replicates or self.replicates < 1):
             raise InputError(f"replicates must be a positive integer, got {self.replicates!r}")
-        for name in ("initial_points", "batch", "budget_runs", "validation_first", "validation_step",
-                     "validation_cap"):
+        if int(self.refine_rounds) != self.refine_rounds or self.refine_rounds < 0:
+            raise InputError(f"refine_rounds must be a non-negative integer, got {self.refine_rounds!r}")
+        for name in ("initial_points", "batch", "budget_runs", "refine_runs", "validation_first",
+                     "validation_step", "validation_cap"):
             value = getattr(self, name)
             if int(value) != value or value < 1:
                 raise InputError(f"{name} must be a positive integer, got {value!r}")
@@ -192,12 +200,12 @@ class CampaignConfig:
     def from_dict(cls, d: dict) -> "CampaignConfig":
         """Rebuild the settings stored in ``results.json`` (``results["config"]``). Settings
         stored before the plausible workflow existed name no workflow: they were design-expert
-        campaigns."""
+        campaigns; settings stored before the refinement rounds existed had none."""
         names = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - names)
         if unknown:
             raise InputError(f"unknown campaign settings {unknown}; valid: {sorted(names)}")
-        d = {"workflow": "design-expert", **d}
+        d = {"workflow": "design-expert", "refine_rounds": 0, **d}
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 
@@ -207,7 +215,7 @@ def campaign_runner(inputs: dict) -> dict:
     rig = inputs.get("rig", "repose")
     if rig == "repose":
         return repose_runner(inputs)
-    from analyse.critique.twins import drop_twin_runner, incline_twin_runner
+    from demcal.analyse.critique.twins import drop_twin_runner, incline_twin_runner
 
     if rig == "drop":
         return drop_twin_runner(inputs)
@@ -218,9 +226,9 @@ def campaign_runner(inputs: dict) -> dict:
 
 def repose_runner(inputs: dict) -> dict:
     """Run the repose rig for one set of campaign inputs (top level, so workers can pickle it)."""
-    from simulate.params import DEMParameters
-    from simulate.rigs import run_rig
-    from simulate.rigs.repose import ReposeGeometry
+    from demcal.simulate.params import DEMParameters
+    from demcal.simulate.rigs import run_rig
+    from demcal.simulate.rigs.repose import ReposeGeometry
 
     params = DEMParameters.from_names(inputs["params"])
     result = run_rig("repose", params, inputs["seed"], profile=inputs["profile"],
@@ -271,14 +279,14 @@ def factor_levels(measurement, levels: str = "minmax") -> dict:
 def base_parameters(measurement):
     """DEM parameters from the measured shape, density and materials (meta), paper defaults
     for the rest. Returns a ``simulate.params.DEMParameters``."""
-    from simulate.params import DEMParameters
+    from demcal.simulate.params import DEMParameters
 
     q, meta = measurement.quantities, measurement.meta
     changes = {}
     if "length_mm" in q:
-        changes["segment_length_m"] = q["length_mm"].value / 1000.0
+        changes["segment_length_m"] = q["length_mm"].value * MM
     if "diameter_mm" in q:
-        changes["segment_diameter_m"] = q["diameter_mm"].value / 1000.0
+        changes["segment_diameter_m"] = q["diameter_mm"].value * MM
     if "particle_density_kg_m3" in q:
         changes["particle_density_kg_m3"] = q["particle_density_kg_m3"].value
     for key, name in (("particle_shear_modulus_pa", "shear_modulus_pa"),
@@ -292,7 +300,7 @@ def base_parameters(measurement):
 
 def repose_geometry(meta: dict) -> dict:
     """The repose rig's geometry from the workbook meta, as a plain dict."""
-    from simulate.rigs.repose import ReposeGeometry
+    from demcal.simulate.rigs.repose import ReposeGeometry
 
     return ReposeGeometry.from_meta(meta).to_dict()
 
@@ -405,7 +413,7 @@ def calibrate(workbook, out_dir, config: CampaignConfig | None = None, *, runner
     dict
         The content of ``results.json``.
     """
-    from measure.pipeline import measure_workbook
+    from demcal.measure.pipeline import measure_workbook
 
     config = config or CampaignConfig()
     out = Path(out_dir)
@@ -465,7 +473,7 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
     base = base_parameters(measurement)
     geometry = repose_geometry(measurement.meta)
     if config.workflow == "plausible":
-        from analyse.plausible import derive_plausible
+        from demcal.analyse.plausible import derive_plausible
 
         results = derive_plausible(measurement, config, execute, factors=factors, base=base,
                                    geometry=geometry, responses=_responses, run_refs=_run_refs)
@@ -666,7 +674,7 @@ def _derive_design_expert(measurement, config: CampaignConfig, execute, factors,
 def terms_against_noise(fit, sigma: float) -> dict:
     """Each coded coefficient against the seed-to-seed noise: its standard error if the only
     error were a DEM noise of sd ``sigma`` (sigma^2 (X'X)^-1), and whether it exceeds twice that."""
-    from analyse.regression import term_columns
+    from demcal.analyse.regression import term_columns
 
     x = term_columns(np.asarray(fit.coded, dtype=float), ((),) + tuple(fit.term_powers))
     cov = np.linalg.pinv(x.T @ x)

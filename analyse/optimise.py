@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import optimize, stats
 
-from analyse.designs import to_coded
-from analyse.regression import ResponseSurface
+from demcal.analyse.designs import to_coded
+from demcal.analyse.regression import ResponseSurface
 from demcal.errors import AnalysisError, InputError
 
 
@@ -681,7 +681,7 @@ def confirmation_interval(fit, coded_point, n_runs: int, alpha: float = 0.05) ->
 
     Returns ``{"predicted", "pi95": [lo, hi], "se", "df", "leverage"}``.
     """
-    from analyse.regression import term_columns
+    from demcal.analyse.regression import term_columns
 
     if n_runs < 1:
         raise InputError(f"n_runs must be >= 1, got {n_runs}")

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from analyse.designs import factor_letters, to_actual, to_coded
+from demcal.analyse.designs import factor_letters, to_actual, to_coded
 from demcal.errors import AnalysisError, InputError
 
 #: Model names accepted by :func:`fit_response_surface` (Design-Expert's model orders).

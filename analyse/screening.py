@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from analyse.designs import factor_letters
-from analyse.regression import ResponseSurface, fit_response_surface
+from demcal.analyse.designs import factor_letters
+from demcal.analyse.regression import ResponseSurface, fit_response_surface
 from demcal.errors import AnalysisError, InputError
 
 

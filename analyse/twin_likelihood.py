@@ -111,8 +111,8 @@ def twin_constraints(measurement, base, factors: dict, execute, run_refs) -> dic
     ``rig`` says which twin); ``factors`` is ``analyse.campaign.factor_levels``'s table. While
     one parameter is varied the others stay at their measured means.
     """
-    from analyse.campaign import PARAMETER_BOUNDS
-    from analyse.critique.twins import drop_task, drop_trials, incline_groups, wall_of
+    from demcal.analyse.campaign import PARAMETER_BOUNDS
+    from demcal.analyse.critique.twins import drop_task, drop_trials, incline_groups, wall_of
 
     wall = wall_of(measurement.meta)
     trials = drop_trials(measurement)

@@ -48,8 +48,8 @@ BANDS = ((0.15, 0.85), (0.10, 0.90), (0.05, 0.95), (0.05, 0.85), (0.15, 0.95), (
 
 def run_heap(seed: int) -> Path:
     """One quick repose heap at the paper's measured parameters; its spheres cached as .npz."""
-    from simulate.params import DEMParameters
-    from simulate.rigs import run_rig
+    from demcal.simulate.params import DEMParameters
+    from demcal.simulate.rigs import run_rig
 
     path = CACHE / f"quick_seed{seed}.npz"
     if path.exists():
@@ -65,7 +65,7 @@ def run_heap(seed: int) -> Path:
 
 def read_heap(path: Path) -> dict:
     """Every candidate method's angle of one cached heap [deg] (NaN where it finds no slope)."""
-    from simulate.rigs.repose import heap_angles
+    from demcal.simulate.rigs.repose import heap_angles
 
     h = np.load(path)
     c, r, L, W = h["centres"], h["radii"], float(h["box_length"]), float(h["box_width"])

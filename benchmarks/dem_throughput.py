@@ -30,8 +30,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import numpy as np  # noqa: E402
 
-from simulate.params import DEMParameters  # noqa: E402
-from simulate.scenes import PAPER_DURATION, build_paper_repose_case  # noqa: E402
+from demcal.simulate.params import DEMParameters  # noqa: E402
+from demcal.simulate.scenes import PAPER_DURATION, build_paper_repose_case  # noqa: E402
 
 #: The LIGGGHTS benchmark's parameters (the paper's calibrated values, cylinder mass model).
 BENCHMARK_PARAMETERS = dict(e_pp=0.32, e_pw=0.36, mu_s_pw=0.22, mass_model="cylinder")
@@ -82,7 +82,7 @@ def main(argv=None) -> int:
             if k < len(times):
                 print(f"  kinetic energy at t = {times[k]:.2f} s: {ke[k]:.3e} J")
     if args.vtk:
-        from simulate.vtk import write_vtp
+        from demcal.simulate.vtk import write_vtp
         write_vtp(args.vtk, sim)
         print(f"final frame written to {args.vtk}")
     return 0

@@ -47,8 +47,8 @@ RESULTS_MD_SECTION = (
 
 def run_drops(n_drops: int, height: float) -> list:
     """Time ``n_drops`` drops (seeds 0 .. n_drops - 1) after an untimed first one."""
-    from simulate.params import DEMParameters
-    from simulate.rigs import run_rig
+    from demcal.simulate.params import DEMParameters
+    from demcal.simulate.rigs import run_rig
 
     params = DEMParameters()
     run_rig("drop", params, 0, height=height)      # kernels and segment, not timed

@@ -63,8 +63,8 @@ import time
 t0 = time.perf_counter()
 import sys
 sys.path.insert(0, {root!r})
-from simulate.params import DEMParameters
-from simulate.scenes import build_paper_repose_case
+from demcal.simulate.params import DEMParameters
+from demcal.simulate.scenes import build_paper_repose_case
 sim = build_paper_repose_case(DEMParameters(rolling_lever="liggghts_reff", mass_model="cylinder"),
                               seed=1, n_clumps=5)
 sim.run(n_steps=2)
@@ -75,7 +75,7 @@ print(time.perf_counter() - t0)
 def benchmark_parameters(case=None):
     """``DEMParameters`` of the LIGGGHTS deck's case, with LIGGGHTS' lever and mass model."""
     from benchmarks.liggghts.deck import ReposeCase
-    from simulate.params import DEMParameters
+    from demcal.simulate.params import DEMParameters
 
     c = case or ReposeCase()
     return DEMParameters(
@@ -124,14 +124,14 @@ def startup_times() -> list:
 
 def warm_up(params) -> None:
     """Load (or compile) demcal's kernels in this process before anything is timed."""
-    from simulate.scenes import build_paper_repose_case
+    from demcal.simulate.scenes import build_paper_repose_case
     build_paper_repose_case(params, seed=0, n_clumps=5).run(n_steps=2)
 
 
 def run_demcal(seed: int, duration: float, params) -> dict:
     """The paper case by demcal's repose rig (``paper`` profile, ``duration`` simulated)."""
-    from simulate.rigs import run_rig
-    from simulate.rigs.repose import PROFILES
+    from demcal.simulate.rigs import run_rig
+    from demcal.simulate.rigs.repose import PROFILES
 
     profile = dataclasses.replace(PROFILES["paper"], duration=float(duration))
     t0 = time.perf_counter()
@@ -150,7 +150,7 @@ def run_demcal(seed: int, duration: float, params) -> dict:
 def run_reference(seed: int, duration: float, workdir: Path) -> dict:
     """The same case by LIGGGHTS on one core; its final spheres measured by ``heap_angles``."""
     from benchmarks.liggghts.run import heap_summary, run_liggghts
-    from simulate.rigs.repose import heap_angles
+    from demcal.simulate.rigs.repose import heap_angles
 
     res = run_liggghts(seed, workdir / f"seed{seed}", duration=duration, nice=0)
     heap = heap_angles(res["positions"], res["radii"], res["deck"]["case"]["box_length"])

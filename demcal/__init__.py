@@ -1,8 +1,9 @@
 """demcal: calibrate DEM material models from lab measurements.
 
-The four stages live in the top-level packages ``measure``, ``simulate``, ``analyse`` and
-``report``; this small front-door package holds what they share: the command line, the
-domain errors and provenance.
+The four stages are the subpackages ``demcal.measure``, ``demcal.simulate``, ``demcal.analyse``
+and ``demcal.report`` (the repository's top-level folders of those names). The front door holds
+what they share: the command line, the ``calibrate`` command that composes the stages, the
+domain errors, units and provenance.
 """
 
 __version__ = "0.1.0"

@@ -11,8 +11,9 @@ from demcal import __version__
 from demcal.errors import DemcalError
 
 #: Stage modules that contribute sub-commands, in the order of the pipeline.
-STAGE_CLIS = ("measure.cli", "measure.repose_cli", "simulate.cli", "analyse.cli",
-              "analyse.critique.cli", "report.cli")
+STAGE_CLIS = ("demcal.measure.cli", "demcal.measure.repose_cli", "demcal.simulate.cli",
+              "demcal.analyse.cli", "demcal.calibrate", "demcal.analyse.critique.cli",
+              "demcal.report.cli")
 
 EXIT_INPUT = 2     # bad input or a domain error
 EXIT_FAILURE = 1   # the job ran but failed a check (e.g. audit found differences)
@@ -26,18 +27,18 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in STAGE_CLIS:
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as exc:
-            if exc.name and name.startswith(exc.name):
-                continue  # stage without commands yet
-            raise
-        module.register(sub)
+        importlib.import_module(name).register(sub)
     return parser
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
+    try:
+        parser = build_parser()
+    except ModuleNotFoundError as exc:
+        # a stage (or a library it needs) is missing from this installation: say which
+        print(f"demcal: error: this installation lacks {exc.name!r} ({exc}); reinstall demcal "
+              "with its dependencies (pip install demcal)", file=sys.stderr)
+        return EXIT_FAILURE
     args = parser.parse_args(argv)
     try:
         return int(args.handler(args) or 0)
@@ -47,6 +48,10 @@ def main(argv=None) -> int:
     except FileNotFoundError as exc:
         print(f"demcal {args.command}: error: file not found: {exc.filename}", file=sys.stderr)
         return EXIT_INPUT
+    except ModuleNotFoundError as exc:
+        print(f"demcal {args.command}: error: this installation lacks {exc.name!r} ({exc}); "
+              "reinstall demcal with its dependencies", file=sys.stderr)
+        return EXIT_FAILURE
     except KeyboardInterrupt:
         print(f"demcal {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -15,7 +15,7 @@ class InputError(DemcalError, ValueError):
 class WorkbookError(InputError):
     """A problem in the lab workbook, located by file, sheet, row and column.
 
-    ``row`` counts data rows from 1 (the first row under the header), as lab-workbook.md does.
+    ``row`` counts data rows from 1 (the first row under the header), as docs/workbook.md does.
     """
 
     def __init__(self, message: str, *, file=None, sheet=None, row=None, column=None, value=None):

@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from demcal.jsonio import write_json
-from measure.estimate import OUTLIER_RULES, parse_outlier_rule
+from demcal.measure.estimate import OUTLIER_RULES, parse_outlier_rule
 
 
 def register(subparsers) -> None:
@@ -29,8 +29,8 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from measure.pipeline import measure_workbook
-    from measure.workbook import read_workbook
+    from demcal.measure.pipeline import measure_workbook
+    from demcal.measure.workbook import read_workbook
 
     parse_outlier_rule(args.outliers)  # a bad rule fails before any work
     out = Path(args.json_out) if args.json_out else None

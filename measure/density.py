@@ -18,12 +18,12 @@ from __future__ import annotations
 import numpy as np
 
 from demcal.errors import InputError
-from measure.dimensions import cylinder_volume
-from measure.estimate import summarise
+from demcal.measure.dimensions import cylinder_volume
+from demcal.measure.estimate import summarise
+from demcal.units import MM
 
 GRAM = 1e-3         # [kg]
 MILLILITRE = 1e-6   # [m^3]
-MILLIMETRE = 1e-3   # [m]
 
 
 def displacement_density(mass, volume_before, volume_after):
@@ -88,8 +88,8 @@ def density_estimates(workbook, *, outliers="none") -> dict:
     if sheet is not None and sheet.rows:
         f = sheet.frame
         rho = envelope_density(f["mass_g"].to_numpy(float) * GRAM,
-                               f["length_mm"].to_numpy(float) * MILLIMETRE,
-                               f["diameter_mm"].to_numpy(float) * MILLIMETRE)
+                               f["length_mm"].to_numpy(float) * MM,
+                               f["diameter_mm"].to_numpy(float) * MM)
         records = [{"id": f.at[r, "specimen_id"], "covariates": sheet.covariates_of(r)} for r in sheet.rows]
         out["envelope_density_kg_m3"] = summarise(
             "envelope_density_kg_m3", rho, sheet.rows, unit="kg/m^3", source=sheet.source(),

@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from measure.estimate import Estimate, summarise
+from demcal.measure.estimate import Estimate, summarise
 
 #: Method text shared by the dimension and mass statistics.
 METHOD = "sample mean, sd (n - 1) and Student-t 95 % CI of calliper/balance readings (Student 1908)"
@@ -51,7 +51,7 @@ def specimen_statistics(specimens, *, outliers="none") -> dict:
     -------
     dict of str -> Estimate
         ``length_mm`` [mm], ``diameter_mm`` [mm] and ``mass_g`` [g], named and expressed in
-        the units of lab-workbook.md. ``extra`` holds the minimum and maximum of the rows used.
+        the units of docs/workbook.md. ``extra`` holds the minimum and maximum of the rows used.
     """
     if specimens is None or not specimens.rows:
         return {}

@@ -3,7 +3,7 @@
 The source paper compresses each segment with a texture analyser (5 mm/s, to 30 %
 deformation, in the thickness direction) and takes Poisson's ratio from the width and
 thickness measured before and after loading, its equation (1):
-nu = (L1 - L2) / (H2 - H1), absolute changes. lab-workbook.md normalises each change by its
+nu = (L1 - L2) / (H2 - H1), absolute changes. docs/workbook.md normalises each change by its
 original size, nu = (|w_after - w_before| / w_before) / (|t_before - t_after| / t_before),
 which is the ratio of transverse to axial strain; that is the value used, and eq. (1) is
 reported beside it.
@@ -32,17 +32,17 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from demcal.errors import InputError, WorkbookError
-from measure.estimate import mean_sd_ci95, summarise
+from demcal.measure.estimate import mean_sd_ci95, summarise
+from demcal.units import MM
 
-MILLIMETRE = 1e-3  # [m]
-POISSON_METHOD = ("nu = (|dw| / w0) / (|dt| / t0), normalised strains (lab-workbook.md); "
+POISSON_METHOD = ("nu = (|dw| / w0) / (|dt| / t0), normalised strains (docs/workbook.md); "
                   "source paper eq. (1) |dw| / |dt| in extra")
 MODULUS_METHOD = ("E = (dF/dd) t0 / A over the longest initial window with R^2 >= {r2:g} "
                   "(nominal stress F/A, strain d/t0; Mohsenin 1986)")
 
 
 def poisson_ratio(width_before, width_after, thickness_before, thickness_after):
-    """Poisson's ratio from normalised strains, (|w1 - w0| / w0) / (|t0 - t1| / t0) (lab-workbook.md).
+    """Poisson's ratio from normalised strains, (|w1 - w0| / w0) / (|t0 - t1| / t0) (docs/workbook.md).
 
     Parameters
     ----------
@@ -236,7 +236,7 @@ def _segment_length(workbook, sheet, row) -> float:
     """Length [m] of the compressed segment: the compression row's ``length_mm``, else its specimen's."""
     f = sheet.frame
     if "length_mm" in f and not math.isnan(f.at[row, "length_mm"]):
-        return f.at[row, "length_mm"] * MILLIMETRE
+        return f.at[row, "length_mm"] * MM
     specimen = f.at[row, "specimen_id"]
     specimens = workbook.sheet("specimens")
     matches = [] if specimens is None else [
@@ -246,7 +246,7 @@ def _segment_length(workbook, sheet, row) -> float:
         raise sheet.error(f"radial loading needs the segment length: add length_mm to this row "
                           f"({found} specimens rows with this specimen_id)", row=row,
                           column="specimen_id", value=specimen)
-    return specimens.frame.at[matches[0], "length_mm"] * MILLIMETRE
+    return specimens.frame.at[matches[0], "length_mm"] * MM
 
 
 def compression_estimates(workbook, *, outliers="none", r2_min=0.995, min_points=5,
@@ -262,7 +262,7 @@ def compression_estimates(workbook, *, outliers="none", r2_min=0.995, min_points
         return {}
     f = sheet.frame
     rows = sheet.rows
-    w0, w1, t0, t1 = (f[c].to_numpy(float) * MILLIMETRE for c in
+    w0, w1, t0, t1 = (f[c].to_numpy(float) * MM for c in
                       ("width_before_mm", "width_after_mm", "thickness_before_mm", "thickness_after_mm"))
     nu = poisson_ratio(w0, w1, t0, t1)
     nu1 = poisson_ratio_eq1(w0, w1, t0, t1)
@@ -272,7 +272,7 @@ def compression_estimates(workbook, *, outliers="none", r2_min=0.995, min_points
                     outliers=outliers, per_row=records)
     used = [i for i, r in enumerate(rows) if r in set(est.rows_used)]
     m1, sd1, ci1 = mean_sd_ci95(nu1[used])
-    est = replace(est, extra=dict(est.extra, used="normalised strains (lab-workbook.md)",
+    est = replace(est, extra=dict(est.extra, used="normalised strains (docs/workbook.md)",
                                   eq1={"value": m1, "sd": sd1, "ci95": list(ci1), "n": len(used),
                                        "formula": "|w_before - w_after| / |t_after - t_before| "
                                                   "(source paper eq. 1)"}))
@@ -286,12 +286,12 @@ def compression_estimates(workbook, *, outliers="none", r2_min=0.995, min_points
         rel = f.at[r, "curve_file"]
         table = workbook.attachment(rel)
         axis = f.at[r, "axis"]
-        width = f.at[r, "width_before_mm"] * MILLIMETRE
-        thickness = f.at[r, "thickness_before_mm"] * MILLIMETRE
+        width = f.at[r, "width_before_mm"] * MM
+        thickness = f.at[r, "thickness_before_mm"] * MM
         length = _segment_length(workbook, sheet, r) if axis == "radial" else None
         area = contact_area(axis, width, length)
         try:
-            region = initial_linear_region(table["displacement_mm"].to_numpy() * MILLIMETRE,
+            region = initial_linear_region(table["displacement_mm"].to_numpy() * MM,
                                            table["force_N"].to_numpy(), r2_min=r2_min,
                                            min_points=min_points, trigger=trigger)
         except InputError as exc:

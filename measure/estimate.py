@@ -43,7 +43,7 @@ class Estimate:
     Attributes
     ----------
     name : str
-        Quantity name of lab-workbook.md, e.g. ``"restitution.particle-steel"``.
+        Quantity name of docs/workbook.md, e.g. ``"restitution.particle-steel"``.
     value : float
         The estimate (mean of the rows used) [unit].
     sd : float

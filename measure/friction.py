@@ -30,9 +30,9 @@ from dataclasses import replace
 import numpy as np
 
 from demcal.errors import InputError
-from measure.estimate import summarise
+from demcal.measure.estimate import summarise
+from demcal.units import MM
 
-MILLIMETRE = 1e-3  # [m]
 TILT_METHOD = "tilting plane, mu = tan(angle at onset) (source paper; Zhang et al. 2018)"
 ROLLOUT_METHOD = "roll-out energy balance, mu_r = H sin(theta) / (H cos(theta) + S sin(theta))"
 
@@ -136,8 +136,8 @@ def friction_estimates(workbook, *, outliers="none") -> dict:
                 rec.update(method="tilt", angle_rad=math.radians(angle))
             else:
                 theta = math.radians(f.at[r, "slope_deg"])
-                H = f.at[r, "release_height_mm"] * MILLIMETRE
-                S = f.at[r, "runout_mm"] * MILLIMETRE
+                H = f.at[r, "release_height_mm"] * MM
+                S = f.at[r, "runout_mm"] * MM
                 values.append(float(rolling_from_rollout(theta, H, S)))
                 rec.update(method="rollout", slope_angle_rad=theta, release_height_m=H, runout_m=S)
             rec["covariates"] = sheet.covariates_of(r)

@@ -12,7 +12,7 @@
      "meta": {...}, "unknown_sheets": [...], "workbook": {...}, "provenance": {...},
      "notes": [...]}
 
-Quantity names are those of lab-workbook.md: ``length_mm``, ``diameter_mm``, ``mass_g``,
+Quantity names are those of docs/workbook.md: ``length_mm``, ``diameter_mm``, ``mass_g``,
 ``particle_density_kg_m3``, ``envelope_density_kg_m3``, ``restitution.<pair>``,
 ``static_friction.<surface>``, ``rolling_friction.<surface>``, ``poisson_ratio``,
 ``elastic_modulus_pa``, ``shear_modulus_pa`` (when curves are given) and ``repose_angle_deg``.
@@ -37,13 +37,14 @@ import numpy as np
 
 from demcal.errors import DemcalError, WorkbookError
 from demcal.provenance import Provenance
-from measure.density import density_estimates
-from measure.dimensions import specimen_statistics
-from measure.elasticity import compression_estimates
-from measure.estimate import Estimate, parse_outlier_rule, summarise
-from measure.friction import friction_estimates
-from measure.restitution import STANDARD_GRAVITY, restitution_estimates
-from measure.workbook import Workbook, read_workbook
+from demcal.measure.density import density_estimates
+from demcal.measure.dimensions import specimen_statistics
+from demcal.measure.elasticity import compression_estimates
+from demcal.measure.estimate import Estimate, parse_outlier_rule, summarise
+from demcal.measure.friction import friction_estimates
+from demcal.measure.restitution import restitution_estimates
+from demcal.measure.workbook import Workbook, read_workbook
+from demcal.units import GRAVITY
 
 #: Order of the quantities in outputs (prefixes stand for their families).
 ORDER = ("length_mm", "diameter_mm", "mass_g", "particle_density_kg_m3", "envelope_density_kg_m3",
@@ -67,7 +68,7 @@ class Measurement:
     material : str
         ``meta`` material name.
     quantities : dict of str -> Estimate
-        Quantity name -> estimate, in the order of lab-workbook.md.
+        Quantity name -> estimate, in the order of docs/workbook.md.
     workbook : dict
         ``source``, ``root``, ``files`` (path -> SHA-256), ``sheets`` (file, hash, row count,
         required/optional/covariate columns per sheet) and ``unknown_sheets``.
@@ -122,9 +123,9 @@ class Measurement:
 def _default_photo_estimator():
     """:func:`measure.repose.angle_from_photo`, or None when that module is not installed."""
     try:
-        from measure.repose import angle_from_photo
+        from demcal.measure.repose import angle_from_photo
     except ModuleNotFoundError as exc:
-        if exc.name == "measure.repose":
+        if exc.name == "demcal.measure.repose":
             return None
         raise
     return angle_from_photo
@@ -220,7 +221,7 @@ def repose_estimate(wb: Workbook, *, photo_estimator=None, outliers="none", anno
 
 
 def measure_workbook(wb, *, photo_estimator=None, outliers="none", annotate_dir=None,
-                     r2_min=0.995, g=STANDARD_GRAVITY) -> Measurement:
+                     r2_min=0.995, g=GRAVITY) -> Measurement:
     """Measure every quantity the workbook holds data for.
 
     Parameters
@@ -271,7 +272,7 @@ def measure_workbook(wb, *, photo_estimator=None, outliers="none", annotate_dir=
                "photo_estimator": None if estimator is None else
                f"{getattr(estimator, '__module__', '?')}.{getattr(estimator, '__qualname__', repr(estimator))}"}
     if estimator is not None and photo_estimator is None:
-        from measure.repose import FLANK_BAND
+        from demcal.measure.repose import FLANK_BAND
         options["flank_band"] = list(FLANK_BAND)  # the twins' angles must be read the same way
     return Measurement(material=str(wb.meta["material"]), quantities=quantities, workbook=info,
                        meta=dict(wb.meta), provenance=Provenance(inputs=dict(wb.files), options=options),

@@ -15,7 +15,7 @@ from pathlib import Path
 from demcal.errors import InputError
 from demcal.jsonio import write_json
 from demcal.provenance import Provenance, sha256_file
-from measure.repose import SIDES, angle_from_photo
+from demcal.measure.repose import SIDES, angle_from_photo
 
 
 def register(subparsers) -> None:

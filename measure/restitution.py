@@ -30,10 +30,9 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from demcal.errors import InputError, WorkbookError
-from measure.estimate import summarise
+from demcal.measure.estimate import summarise
+from demcal.units import GRAVITY, MM
 
-STANDARD_GRAVITY = 9.80665  # [m/s^2]
-MILLIMETRE = 1e-3           # [m]
 
 
 def from_rebound_heights(drop_height, rebound_height):
@@ -237,7 +236,7 @@ def _flight_fit(t, y, g):
     return coef, cov, rss, t.size
 
 
-def from_camera_track(t, y, *, g=STANDARD_GRAVITY, contact_band=None, min_points=4) -> TrackFit:
+def from_camera_track(t, y, *, g=GRAVITY, contact_band=None, min_points=4) -> TrackFit:
     """Restitution of the first impact of a high-speed-camera track [3]_.
 
     The track holds the height of the particle's tracked point from release, through the
@@ -344,7 +343,7 @@ def from_camera_track(t, y, *, g=STANDARD_GRAVITY, contact_band=None, min_points
                     impact_time_method=method, contact_band=float(contact_band))
 
 
-def restitution_estimates(workbook, *, outliers="none", g=STANDARD_GRAVITY) -> dict:
+def restitution_estimates(workbook, *, outliers="none", g=GRAVITY) -> dict:
     """``restitution.<pair>`` for every pair of the ``drop`` sheet.
 
     Each drop gives one e: from its camera track when the row has a ``track_file``
@@ -361,8 +360,8 @@ def restitution_estimates(workbook, *, outliers="none", g=STANDARD_GRAVITY) -> d
         rows = [r for r in sheet.rows if f.at[r, "pair"] == pair]
         values, records = [], []
         for r in rows:
-            h1 = f.at[r, "drop_height_mm"] * MILLIMETRE
-            h2 = f.at[r, "rebound_height_mm"] * MILLIMETRE
+            h1 = f.at[r, "drop_height_mm"] * MM
+            h2 = f.at[r, "rebound_height_mm"] * MM
             rec = {"id": f.at[r, "trial_id"], "pair": pair,
                    "drop_height_m": None if math.isnan(h1) else h1,
                    "rebound_height_m": None if math.isnan(h2) else h2}
@@ -372,7 +371,7 @@ def restitution_estimates(workbook, *, outliers="none", g=STANDARD_GRAVITY) -> d
             if track is not None:
                 table = workbook.attachment(track)
                 try:
-                    fit = from_camera_track(table["t_s"].to_numpy(), table["y_mm"].to_numpy() * MILLIMETRE, g=g)
+                    fit = from_camera_track(table["t_s"].to_numpy(), table["y_mm"].to_numpy() * MM, g=g)
                 except InputError as exc:
                     raise WorkbookError(f"track {workbook.resolve(track)}: {exc}", file=str(sheet.file),
                                         sheet=sheet.name, row=r, column="track_file", value=track) from None

@@ -1,4 +1,4 @@
-"""The lab workbook: reading and validating what the lab hands in (see lab-workbook.md).
+"""The lab workbook: reading and validating what the lab hands in (see docs/workbook.md).
 
 A workbook is an ``.xlsx`` file or a folder with one ``<sheet>.csv`` per sheet, with the same
 sheets and columns either way. Photos, force curves and camera tracks are paths relative to
@@ -7,7 +7,7 @@ the workbook (the folder holding the ``.xlsx``, or the CSV folder itself).
 Rules applied by :func:`read_workbook`:
 
 - Sheet and column names are matched case-insensitively and stored under the names of
-  lab-workbook.md; every other column of a known sheet is a covariate, kept with its row.
+  docs/workbook.md; every other column of a known sheet is a covariate, kept with its row.
   Covariates whose non-empty cells are all numbers become numbers; dates become ISO text.
 - ``meta`` and ``specimens`` must be present; every other known sheet is optional, but if
   present its required columns must be there. Sheets we do not know are kept and listed in
@@ -126,7 +126,7 @@ class Sheet:
     Attributes
     ----------
     name : str
-        Sheet name (lab-workbook.md spelling for known sheets).
+        Sheet name (docs/workbook.md spelling for known sheets).
     file : Path
         The file the sheet was read from (the ``.xlsx`` or the sheet's CSV).
     sha256 : str
@@ -137,7 +137,7 @@ class Sheet:
     required : list of str
         Required columns of the sheet (for ``incline``, those of the variants present).
     optional : list of str
-        Optional columns of lab-workbook.md present in the sheet (files, manual readings).
+        Optional columns of docs/workbook.md present in the sheet (files, manual readings).
     covariates : list of str
         Every other column: kept with each row and offered to the diagnosis.
     """

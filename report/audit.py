@@ -13,7 +13,13 @@ Steps:
    are reported as not re-derived;
 4. rebuild the tables with the code that wrote ``tables.json`` (``report.tables.build_tables``)
    and compare them cell by cell: text and integers exactly, floats to a relative 1e-9 (and an
-   absolute 1e-12, so that numerical zeros such as 3e-16 compare equal).
+   absolute 1e-12, so that numerical zeros such as 3e-16 compare equal);
+5. compare the replayed results with ``results.json`` field by field (except the fields that
+   record how the campaign ran rather than what it found: ``VOLATILE_RESULTS`` and the time and
+   code version inside each ``provenance``);
+6. render the report again from the stored results and the re-derived tables and compare what
+   a reader reads: the text of every cell and paragraph of ``report.html``, and the text of
+   ``report.pdf`` read back with a PDF text extractor (pypdf) against a PDF rendered afresh.
 
 The critique tables are rebuilt from the stored ``critique.json`` (checked by its hash): the
 critique stage's own re-derivation is not part of this audit.
@@ -23,14 +29,17 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+import tempfile
+from dataclasses import dataclass, replace
+from difflib import SequenceMatcher
+from html.parser import HTMLParser
 from pathlib import Path
 
 from demcal.errors import DemcalError, InputError
-from demcal.jsonio import read_json
+from demcal.jsonio import read_json, to_jsonable
 from demcal.provenance import sha256_file
-from report.tables import (PAPER_FILE, RESULT_TABLE_IDS, Campaign, build_tables, load_critique,
-                           load_paper, normalised, run_keys)
+from demcal.report.tables import (PAPER_FILE, RESULT_TABLE_IDS, Campaign, build_tables,
+                                  load_campaign, load_critique, load_paper, normalised, run_keys)
 
 #: Relative and absolute tolerance of a float cell.
 REL_TOL = 1e-9
@@ -137,15 +146,17 @@ class AuditResult:
     files: tuple
     tables: tuple
     problems: tuple = ()
+    artefacts: tuple = ()
 
     @property
     def ok(self) -> bool:
         return (all(f.status == "ok" for f in self.files) and all(t.status == "ok" for t in self.tables)
-                and not self.problems)
+                and all(a.status == "ok" for a in self.artefacts) and not self.problems)
 
     def to_dict(self) -> dict:
         return {"directory": self.directory, "ok": self.ok, "files": [f.to_dict() for f in self.files],
-                "tables": [t.to_dict() for t in self.tables], "problems": list(self.problems)}
+                "tables": [t.to_dict() for t in self.tables], "problems": list(self.problems),
+                "artefacts": [a.to_dict() for a in self.artefacts]}
 
     def lines(self) -> list[str]:
         """The audit as text, one finding a line."""
@@ -168,11 +179,73 @@ class AuditResult:
                 out += ["  " + d.describe() for d in t.differences]
             else:
                 out.append(head + t.status.upper() + (f": {t.reason}" if t.reason else ""))
+        for a in self.artefacts:
+            out += a.lines()
         n_cells = sum(len(t.differences) for t in self.tables)
         n_tables = sum(t.status != "ok" for t in self.tables)
-        out.append("audit: OK, every table re-derived from its sources" if self.ok else
+        n_art = [a.artefact for a in self.artefacts if a.status != "ok"]
+        out.append("audit: OK, every table re-derived from its sources, and results.json, report.html "
+                   "and report.pdf agree with them" if self.ok else
                    f"audit: FAILED ({len(bad)} missing or changed file(s), {n_tables} table(s) not "
-                   f"matching, {n_cells} differing cell(s))")
+                   f"matching, {n_cells} differing cell(s)"
+                   + (f"; differs: {', '.join(n_art)}" if n_art else "") + ")")
+        return out
+
+
+@dataclass(frozen=True)
+class PlaceDifference:
+    """What a reader reads differently in one place of an artefact.
+
+    Attributes
+    ----------
+    place : str
+        Where: a JSON path in results.json (``validation.mean_deg``), a table cell or a section
+        of report.html, a page and line of report.pdf.
+    stored, derived : str
+        The text (or value) found and the one re-derived.
+    """
+
+    place: str
+    stored: object
+    derived: object
+
+    def to_dict(self) -> dict:
+        return {"place": self.place, "stored": self.stored, "derived": self.derived}
+
+
+@dataclass(frozen=True)
+class ArtefactCheck:
+    """The audit of one artefact a reader receives (results.json, report.html, report.pdf).
+
+    Attributes
+    ----------
+    artefact : str
+    status : str
+        ``ok``, ``differs``, ``missing`` or ``not checked`` (see ``reason``).
+    differences : tuple of PlaceDifference
+    reason : str
+    """
+
+    artefact: str
+    status: str
+    differences: tuple = ()
+    reason: str = ""
+
+    def to_dict(self) -> dict:
+        return {"artefact": self.artefact, "status": self.status,
+                "differences": [d.to_dict() for d in self.differences], "reason": self.reason}
+
+    def lines(self, limit: int = 20) -> list[str]:
+        head = f"{self.artefact}: "
+        if self.status == "ok":
+            return [head + "OK"]
+        if self.status != "differs":
+            return [head + self.status.upper() + (f": {self.reason}" if self.reason else "")]
+        out = [head + f"{len(self.differences)} difference(s)"]
+        out += [f"  {self.artefact}, {d.place}: reads {d.stored!r}, re-derived {d.derived!r}"
+                for d in self.differences[:limit]]
+        if len(self.differences) > limit:
+            out.append(f"  ... and {len(self.differences) - limit} more")
         return out
 
 
@@ -245,14 +318,244 @@ def compare_tables(stored: dict, derived: dict) -> list[CellDifference]:
     return diffs
 
 
+#: Fields of results.json that record how the campaign ran, not what it found (a replay from the
+#: run store reuses every run and takes its own time): at the top, inside every ``provenance``,
+#: and anywhere (where the annotated photos were written).
+VOLATILE_RESULTS = ("runner", "wall_s", "stages")
+VOLATILE_PROVENANCE = ("created", "code")
+VOLATILE_ANYWHERE = ("annotated",)
+
+
+def _volatile(path: str, key: str) -> bool:
+    return (key in VOLATILE_ANYWHERE or (not path and key in VOLATILE_RESULTS)
+            or (path.endswith("provenance") and key in VOLATILE_PROVENANCE))
+
+
+def compare_results(stored, derived, path: str = "") -> list[PlaceDifference]:
+    """Every field where ``results.json`` differs from the replayed results, by JSON path
+    (``derived`` is compared as it would be written: tuples as lists, NaN as null)."""
+    if not path:
+        derived = to_jsonable(derived)
+    if isinstance(stored, dict) and isinstance(derived, dict):
+        diffs = []
+        for key in dict.fromkeys(list(stored) + list(derived)):
+            if _volatile(path, key):
+                continue
+            where = f"{path}.{key}" if path else str(key)
+            if key not in stored or key not in derived:
+                diffs.append(PlaceDifference(where, stored.get(key, "(absent)"), derived.get(key, "(absent)")))
+            else:
+                diffs += compare_results(stored[key], derived[key], where)
+        return diffs
+    if isinstance(stored, list) and isinstance(derived, list):
+        if len(stored) != len(derived):
+            return [PlaceDifference(f"{path} (length)", len(stored), len(derived))]
+        diffs = []
+        for i, (a, b) in enumerate(zip(stored, derived)):
+            diffs += compare_results(a, b, f"{path}[{i}]")
+        return diffs
+    return [] if _same(stored, derived) else [PlaceDifference(path, stored, derived)]
+
+
+class _ReaderText(HTMLParser):
+    """The words a reader reads in an HTML report, each with its place: the table cell (table
+    id, row, column) or the section heading it is under. Style, script and image data are not
+    read."""
+
+    SKIP = ("style", "script", "title")
+
+    def __init__(self):
+        super().__init__(convert_charrefs=True)
+        self.words: list[tuple[str, tuple]] = []
+        self.section = "top of the report"
+        self._heading: list[str] | None = None
+        self._skip = 0
+        self._table_id: str | None = None
+        self._div_depth = 0
+        self._table_depth = -1
+        self._row = self._col = -1
+        self._in_head = False
+        self.headers: dict = {}
+        self.row_labels: dict = {}
+
+    def handle_starttag(self, tag, attrs):
+        attrs = dict(attrs)
+        if tag in self.SKIP:
+            self._skip += 1
+        elif tag in ("h1", "h2", "h3", "h4"):
+            self._heading = []
+        elif tag == "div":
+            self._div_depth += 1
+            if (attrs.get("id") or "").startswith("table-"):
+                self._table_id = attrs["id"][len("table-"):]
+                self._table_depth = self._div_depth
+                self._row = -1
+        elif tag == "thead":
+            self._in_head = True
+        elif tag == "tr" and self._table_id is not None:
+            self._col = -1
+            if not self._in_head:
+                self._row += 1
+        elif tag in ("td", "th") and self._table_id is not None:
+            self._col += 1
+
+    def handle_endtag(self, tag):
+        if tag in self.SKIP:
+            self._skip -= 1
+        elif tag in ("h1", "h2", "h3", "h4") and self._heading is not None:
+            self.section = " ".join(" ".join(self._heading).split())
+            self._heading = None
+        elif tag == "thead":
+            self._in_head = False
+        elif tag == "table":
+            self._col = -1
+        elif tag == "div":
+            if self._div_depth == self._table_depth:
+                self._table_id, self._table_depth = None, -1
+            self._div_depth -= 1
+
+    def handle_data(self, data):
+        if self._skip:
+            return
+        if self._heading is not None:
+            self._heading.append(data)
+        words = data.split()
+        if not words:
+            return
+        if self._table_id is not None and self._col >= 0:
+            key = (self._table_id, self._row, self._col)
+            if self._in_head:
+                self.headers[(self._table_id, self._col)] = (
+                    self.headers.get((self._table_id, self._col), "") + " " + data).strip()
+                place = ("table", self._table_id, "head", self._col)
+            else:
+                if self._col == 0:
+                    self.row_labels[(self._table_id, self._row)] = (
+                        self.row_labels.get((self._table_id, self._row), "") + data).strip()
+                place = ("table",) + key
+        else:
+            place = ("section", self.section, self._table_id)
+        self.words += [(w, place) for w in words]
+
+    def describe(self, place: tuple) -> str:
+        if place[0] == "table":
+            _, tid, row, col = place
+            column = " ".join(self.headers.get((tid, col), f"#{col + 1}").split())
+            if row == "head":
+                return f"Table {tid}, column heading '{column}'"
+            label = " ".join(self.row_labels.get((tid, row), "").split())
+            return f"Table {tid}, row {row + 1} ({label}), column '{column}'"
+        _, section, tid = place
+        return f"section '{section}'" + (f", near Table {tid}" if tid else "")
+
+
+def reader_words(html_text: str) -> _ReaderText:
+    """Parse ``html_text`` into the words a reader reads, with their places."""
+    parser = _ReaderText()
+    parser.feed(html_text)
+    parser.close()
+    return parser
+
+
+def _word_differences(stored: list[tuple[str, object]], derived: list[tuple[str, object]],
+                      describe) -> list[PlaceDifference]:
+    """Aligned differences of two word sequences; each names the place of the stored words."""
+    a = [w for w, _ in stored]
+    b = [w for w, _ in derived]
+    diffs = []
+    for op, i1, i2, j1, j2 in SequenceMatcher(None, a, b, autojunk=False).get_opcodes():
+        if op == "equal":
+            continue
+        place = stored[i1][1] if i1 < i2 else (stored[i1 - 1][1] if i1 else derived[j1][1])
+        diffs.append(PlaceDifference(describe(place), " ".join(a[i1:i2]), " ".join(b[j1:j2])))
+    return diffs
+
+
+def compare_html(stored_text: str, derived_text: str) -> list[PlaceDifference]:
+    """Where the words of a stored HTML report differ from a freshly rendered one."""
+    stored, derived = reader_words(stored_text), reader_words(derived_text)
+    return _word_differences(stored.words, derived.words, stored.describe)
+
+
+def pdf_words(path) -> list[tuple[str, tuple]]:
+    """The words of a PDF read back with pypdf, each with its page and line."""
+    from pypdf import PdfReader
+
+    words = []
+    for n, page in enumerate(PdfReader(str(path)).pages, 1):
+        for line in (page.extract_text() or "").splitlines():
+            words += [(w, (n, line.strip())) for w in line.split()]
+    return words
+
+
+def compare_pdf(stored_pdf, derived_pdf) -> list[PlaceDifference]:
+    """Where the text of a stored PDF report differs from a freshly rendered one."""
+    def describe(place):
+        page, line = place
+        return f"page {page}, line '{line[:90]}'"
+    return _word_differences(pdf_words(stored_pdf), pdf_words(derived_pdf), describe)
+
+
+def check_artefacts(out: Path, campaign: Campaign, derived_tables: list[dict],
+                    reason: str = "") -> list[ArtefactCheck]:
+    """Compare results.json, report.html and report.pdf with what the sources give.
+
+    ``campaign`` is the re-derived campaign (``rederive``). The report is rendered again from
+    the re-derived results (with the stored values of the fields that record how the campaign
+    ran) and the re-derived tables, so that a change in any one artefact is reported in that
+    artefact only.
+    """
+    from demcal.report.figures import make_figures
+    from demcal.report.render import render_html, write_pdf
+
+    if campaign.results is None:
+        why = reason or "the analysis was not replayed"
+        return [ArtefactCheck(name, "not checked", reason=why)
+                for name in ("results.json", "report.html", "report.pdf")]
+    stored = read_json(out / "results.json")
+    checks = [_check("results.json", compare_results(stored, campaign.results))]
+    html_path, pdf_path = out / "report.html", out / "report.pdf"
+    if not html_path.is_file():
+        return checks + [ArtefactCheck("report.html", "missing", reason=f"{html_path} not found"),
+                         ArtefactCheck("report.pdf", "not checked", reason="no report.html")]
+    results = with_run_record(to_jsonable(campaign.results), stored)
+    rendered = replace(campaign, results=results, measurement=results.get("measurement") or campaign.measurement)
+    with tempfile.TemporaryDirectory(prefix="demcal-audit-") as tmp:
+        html_text = render_html(rendered, derived_tables, make_figures(rendered, Path(tmp) / "figures"))
+        checks.append(_check("report.html", compare_html(html_path.read_text(encoding="utf-8"), html_text)))
+        if not pdf_path.is_file():
+            checks.append(ArtefactCheck("report.pdf", "missing", reason=f"{pdf_path} not found"))
+        else:
+            fresh = write_pdf(html_text, Path(tmp) / "report.pdf", base_url=out)
+            checks.append(_check("report.pdf", compare_pdf(pdf_path, fresh)))
+    return checks
+
+
+def with_run_record(derived, stored, path: str = ""):
+    """``derived`` with the stored values of the fields that record how the campaign ran
+    (``_volatile``), so that a report rendered from it matches one rendered from the stored
+    results whenever the re-derivable fields agree."""
+    if isinstance(derived, list) and isinstance(stored, list) and len(derived) == len(stored):
+        return [with_run_record(d, s_, f"{path}[{i}]") for i, (d, s_) in enumerate(zip(derived, stored))]
+    if not (isinstance(derived, dict) and isinstance(stored, dict)):
+        return derived
+    out = {k: with_run_record(v, stored.get(k), f"{path}.{k}" if path else k) for k, v in derived.items()}
+    out.update({k: v for k, v in stored.items() if _volatile(path, k)})
+    return out
+
+
+def _check(name: str, diffs: list[PlaceDifference]) -> ArtefactCheck:
+    return ArtefactCheck(name, "differs" if diffs else "ok", tuple(diffs))
+
+
 def rederive(out_dir) -> tuple[Campaign | None, list[str]]:
     """Measure the workbook again and replay the analysis from the run store.
 
     Returns the campaign to build tables from (None when the workbook cannot be measured;
     ``results`` None when the replay failed) and the problems met.
     """
-    from analyse.campaign import CampaignConfig, derive_results
-    from measure.pipeline import Measurement, measure_workbook
+    from demcal.analyse.campaign import CampaignConfig, derive_results
+    from demcal.measure.pipeline import Measurement, measure_workbook
 
     out = Path(out_dir)
     problems = []
@@ -324,4 +627,5 @@ def audit(out_dir) -> AuditResult:
     for tid, t in derived.items():
         if tid not in stored_ids:
             checks.append(TableCheck(tid, t["title"], "missing", reason="re-derived but not in tables.json"))
-    return AuditResult(str(out), tuple(files), tuple(checks), tuple(problems))
+    artefacts = check_artefacts(out, campaign, list(derived.values()), problems[0] if problems else "")
+    return AuditResult(str(out), tuple(files), tuple(checks), tuple(problems), tuple(artefacts))

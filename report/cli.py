@@ -33,7 +33,7 @@ def register(subparsers) -> None:
 
 
 def _run_report(args) -> int:
-    from report.render import build_report
+    from demcal.report.render import build_report
 
     paths = build_report(args.dir, pdf=not args.no_pdf)
     print("report: " + ", ".join(str(p) for p in paths))
@@ -41,7 +41,7 @@ def _run_report(args) -> int:
 
 
 def _run_audit(args) -> int:
-    from report.audit import audit
+    from demcal.report.audit import audit
 
     result = audit(args.dir)
     for line in result.lines():

@@ -18,7 +18,7 @@ import numpy as np
 from matplotlib.figure import Figure as _MplFigure
 from matplotlib.image import imread
 
-from report.tables import parameter_label
+from demcal.report.tables import parameter_label
 
 #: Resolution of every PNG [dots per inch].
 DPI = 200

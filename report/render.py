@@ -17,12 +17,13 @@ import re
 from pathlib import Path
 
 import jinja2
+from markupsafe import Markup
 
 from demcal.errors import InputError
 from demcal.jsonio import read_json, write_json
 from demcal.provenance import sha256_file
-from report.figures import make_figures
-from report.tables import Campaign, build_tables, load_campaign, parameter_label, tables_document
+from demcal.report.figures import make_figures
+from demcal.report.tables import Campaign, build_tables, load_campaign, parameter_label, tables_document
 
 HERE = Path(__file__).resolve().parent
 
@@ -68,12 +69,16 @@ def _sci(x: float, spec: str) -> str:
     return f"{m.group(1)}×10<sup>{exp}</sup>"
 
 
-def format_cell(value, fmt: str = "") -> str:
-    """One table cell as HTML text (already escaped)."""
+def format_cell(value, fmt: str = "") -> Markup:
+    """One table cell as HTML (escaped here; marked safe because this code builds its markup)."""
+    return Markup(_cell_html(value, fmt))
+
+
+def _cell_html(value, fmt: str) -> str:
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return "–"
     if isinstance(value, list):
-        return "[" + ", ".join(format_cell(v, fmt) for v in value) + "]"
+        return "[" + ", ".join(_cell_html(v, fmt) for v in value) + "]"
     if isinstance(value, bool):
         return "yes" if value else "no"
     if isinstance(value, str):
@@ -93,7 +98,8 @@ def format_cell(value, fmt: str = "") -> str:
 
 
 def format_unit(unit: str) -> str:
-    return html.escape(unit).replace("^2", "²").replace("^3", "³")
+    """A unit as text (plain: the template escapes it)."""
+    return unit.replace("^2", "²").replace("^3", "³")
 
 
 #: Run keys printed under a table; the rest are in Table A2.
@@ -101,7 +107,7 @@ MAX_KEYS_SHOWN = 24
 
 
 def describe_sources(sources) -> list[str]:
-    """The ``sources`` of a table as short lines (HTML-escaped)."""
+    """The ``sources`` of a table as short lines of plain text."""
     lines, seen = [], set()
     workbook: dict = {}
     files, runs = [], []
@@ -139,7 +145,7 @@ def describe_sources(sources) -> list[str]:
         out.append(f"{len(runs)} DEM run record(s), runs/<key>.json (Table A2): "
                    + ", ".join(k[:10] for k in shown)
                    + (f", ... ({len(runs) - len(shown)} more in Table A2)" if len(shown) < len(runs) else ""))
-    return [html.escape(x, quote=False) for x in out + lines]
+    return out + lines
 
 
 # ----------------------------------------------------------------------------------------------
@@ -197,7 +203,9 @@ def _runner_text(r: dict) -> tuple[str, bool]:
     runner = r.get("runner")
     if runner is None:
         return "The DEM runner of this campaign is not recorded in results.json.", True
-    if runner in ("analyse.campaign.campaign_runner", "analyse.campaign.repose_runner"):
+    # Campaigns stored before the demcal namespace name the runner without the prefix.
+    if runner.removeprefix("demcal.") in ("analyse.campaign.campaign_runner",
+                                          "analyse.campaign.repose_runner"):
         return ("Every DEM run was made by demcal's own DEM (numba; Hertz-Mindlin contacts, "
                 "constant-torque rolling friction, multi-sphere clumps) on its twin of the plate-"
                 "withdrawal repose test; the paper used EDEM 2018."), False
@@ -491,12 +499,13 @@ def _data_uri(path: Path) -> str:
 
 
 def _environment() -> jinja2.Environment:
-    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE)), autoescape=False,
+    # Everything is escaped except what this module builds as markup (cells, the stylesheet).
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE)),
+                             autoescape=jinja2.select_autoescape(["html", "html.j2"]),
                              undefined=jinja2.StrictUndefined, trim_blocks=True, lstrip_blocks=True)
     env.filters["cell"] = format_cell
     env.filters["unit"] = format_unit
     env.filters["sources"] = describe_sources
-    env.filters["e"] = lambda s: html.escape(str(s))
     env.filters["kv"] = lambda d: ", ".join(f"{k} {v}" for k, v in d.items())
     env.globals["fnum"] = _f
     return env
@@ -519,7 +528,7 @@ def render_html(c: Campaign, tables: list[dict], figures: list) -> str:
     """The report as one HTML document (figures embedded, no external resource)."""
     by_id = {t["id"]: t for t in tables}
     figs = {f.id: {"n": i, "src": _data_uri(f.path), "caption": f.caption} for i, f in enumerate(figures, 1)}
-    css = (HERE / "report.css").read_text()
+    css = Markup((HERE / "report.css").read_text())
     r = c.results
     runner_text, runner_warn = _runner_text(r)
     context = {

@@ -36,7 +36,7 @@ SIGNIFICANCE_NOTE = ("Note: 0.01<P<0.05, significant effect (*); P<0.01, highly 
 
 _MARK = {"highly significant": "**", "significant": "*"}
 
-#: Instrument behind each workbook sheet (lab-workbook.md; the paper's in brackets).
+#: Instrument behind each workbook sheet (docs/workbook.md; the paper's in brackets).
 INSTRUMENTS = {
     "specimens": "digital vernier callipers and electronic balance",
     "density": "measuring cylinder, liquid displacement",
@@ -217,7 +217,8 @@ def load_critique(out_dir) -> tuple[dict | None, dict]:
     if not p.exists():
         return None, {}
     try:
-        return read_json(p), {"file": str(p), "sha256": sha256_file(p)}
+        # named relative to the campaign folder, so that a moved or copied folder still audits
+        return read_json(p), {"file": "critique.json", "sha256": sha256_file(p)}
     except json.JSONDecodeError as exc:
         raise InputError(f"{p} is not valid JSON ({exc})") from None
 
@@ -331,7 +332,7 @@ def parameter_label(parameter: str, wall: str) -> tuple[str, str]:
 
 
 def quantity_label(name: str) -> str:
-    """Readable name of a measured quantity (lab-workbook.md names)."""
+    """Readable name of a measured quantity (docs/workbook.md names)."""
     fixed = {"length_mm": "Length", "diameter_mm": "Diameter", "mass_g": "Mass of one segment",
              "particle_density_kg_m3": "Particle density (liquid displacement)",
              "envelope_density_kg_m3": "Envelope density (callipers and balance)",
@@ -1103,7 +1104,7 @@ def build_tables(c: Campaign) -> list[Table]:
     """
     tables = [table_dimensions(c), table_physical(c), table_methods(c)]
     if c.results is not None and c.results.get("workflow") == "plausible":
-        from report.calibration_tables import PLAUSIBLE_TABLES
+        from demcal.report.calibration_tables import PLAUSIBLE_TABLES
 
         tables += [t for t in (f(c) for f in PLAUSIBLE_TABLES) if t is not None]
     elif c.results is not None:

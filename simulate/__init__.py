@@ -14,15 +14,15 @@ Public API (details in each module's docstring):
 - ``write_vtp`` (``simulate.vtk``): frames for ParaView.
 """
 
-from simulate.clump import ClumpTemplate, make_template, segment_from_parameters, segment_template
-from simulate.engine import Escape, RunSummary, Simulation
-from simulate.factory import ParticleFactory
-from simulate.materials import MaterialTable
-from simulate.params import DEMParameters
-from simulate.scenes import build_paper_repose_case
-from simulate.timestep import rayleigh_time
-from simulate.vtk import write_vtp
-from simulate.walls import Plane, Rectangle, box_rectangles
+from demcal.simulate.clump import ClumpTemplate, make_template, segment_from_parameters, segment_template
+from demcal.simulate.engine import Escape, RunSummary, Simulation
+from demcal.simulate.factory import ParticleFactory
+from demcal.simulate.materials import MaterialTable
+from demcal.simulate.params import DEMParameters
+from demcal.simulate.scenes import build_paper_repose_case
+from demcal.simulate.timestep import rayleigh_time
+from demcal.simulate.vtk import write_vtp
+from demcal.simulate.walls import Plane, Rectangle, box_rectangles
 
 __all__ = ["ClumpTemplate", "DEMParameters", "Escape", "MaterialTable", "ParticleFactory", "Plane",
            "Rectangle", "RunSummary", "Simulation", "box_rectangles", "build_paper_repose_case",

@@ -78,7 +78,7 @@ def register(subparsers) -> None:
 
 def parse_sets(items) -> dict:
     """``["NAME=VALUE", ...]`` -> dict; a malformed item names itself and the valid names."""
-    from simulate.params import DEMParameters
+    from demcal.simulate.params import DEMParameters
     out = {}
     for item in items:
         name, sep, value = str(item).partition("=")
@@ -92,7 +92,7 @@ def parse_sets(items) -> dict:
 
 def parameters(items):
     """``DEMParameters`` with the ``--set`` items applied."""
-    from simulate.params import DEMParameters
+    from demcal.simulate.params import DEMParameters
     values = parse_sets(items)
     try:
         return DEMParameters.from_names(values)
@@ -101,7 +101,7 @@ def parameters(items):
 
 
 def _surface_options(items, label) -> dict:
-    from simulate.rigs.surfaces import CONTACT_KEYS, MATERIAL_KEYS
+    from demcal.simulate.rigs.surfaces import CONTACT_KEYS, MATERIAL_KEYS
     if not items:
         return {}
     values = {}
@@ -125,8 +125,8 @@ def rig_options(args) -> tuple[dict, dict]:
     if args.rig == "repose":
         opts = {"profile": args.profile, "annotate_to": args.annotate}
         if args.workbook:
-            from measure.workbook import read_workbook
-            from simulate.rigs.repose import ReposeGeometry
+            from demcal.measure.workbook import read_workbook
+            from demcal.simulate.rigs.repose import ReposeGeometry
             wb = read_workbook(args.workbook)
             opts["geometry"] = ReposeGeometry.from_meta(wb.meta, file=str(wb.source))
             inputs.update(wb.files)
@@ -162,7 +162,7 @@ class _Monitor:
         self.write_vtp = None
         if self.vtk_dir is not None:
             try:
-                from simulate.vtk import write_vtp
+                from demcal.simulate.vtk import write_vtp
             except ImportError:
                 raise InputError("--vtk: simulate.vtk (write_vtp) is not available in this "
                                  "installation") from None
@@ -215,7 +215,7 @@ def result_json(result, full_record: bool = False) -> dict:
 
 
 def run(args) -> int:
-    from simulate.rigs import run_rig
+    from demcal.simulate.rigs import run_rig
 
     params = parameters(args.sets)
     if args.seed < 0:

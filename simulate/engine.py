@@ -77,17 +77,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from demcal.errors import InputError, SimulationError
-from simulate._jit import kernel
-from simulate.clump import ClumpTemplate
-from simulate.contact.hertz_mindlin import impact_damping, normal_force, tangential_force
-from simulate.contact.rolling import (EDEM_COM, EDEM_SPHERE, EPSD, epsd_rolling_torque,
-                                      kick_mode, lever_index, relative_rolling_torque)
-from simulate.integrate import (drift, half_kick, matrix_from_quat, quat_from_matrix, quat_multiply,
-                                refresh_rotation)
-from simulate.materials import MaterialTable
-from simulate.neighbours import build_pair_list, build_wall_list, grid_shape, padded_cell_count
-from simulate.timestep import DEFAULT_MAX_FRACTION, check_time_step, rayleigh_time
-from simulate.walls import Plane, Rectangle, pack_walls, wall_distance, wall_distances
+from demcal.simulate._jit import kernel
+from demcal.simulate.clump import ClumpTemplate
+from demcal.simulate.contact.hertz_mindlin import impact_damping, normal_force, tangential_force
+from demcal.simulate.contact.rolling import (EPSD, LIGGGHTS_REFF, contact_rolling, kick_mode,
+                                             lever_index, rolling_lever)
+from demcal.simulate.integrate import (drift, half_kick, matrix_from_quat, pair_rolling_scale,
+                                       quat_from_matrix, quat_multiply, refresh_rotation)
+from demcal.simulate.materials import MaterialTable
+from demcal.simulate.neighbours import build_pair_list, build_wall_list, grid_shape, padded_cell_count
+from demcal.simulate.timestep import DEFAULT_MAX_FRACTION, check_time_step, rayleigh_time
+from demcal.simulate.walls import Plane, Rectangle, pack_walls, wall_distance, wall_distances
+from demcal.units import GRAVITY
 
 # ----------------------------------------------------------------------------------------------
 # kernels
@@ -142,8 +143,8 @@ def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw):
 
 
 @kernel
-def _contact_forces(hist_dt, lever_mode, rolling_model, eta_r, n_bodies, bx, bv, bw, bf, bt, brm,
-                    brv, binvm, bmat, sbody, sx, srad, ppi, pj, ph, ws, wk, wh,
+def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, n_bodies, bx, bv, bw, bR, bf, bt,
+                    brm, brv, brn, binvm, binvi, bmat, sbody, sx, srad, ppi, pj, ph, ws, wk, wh,
                     wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
                     e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min):
     """Contact forces, torques and rolling torques on every body from the Verlet lists.
@@ -153,8 +154,12 @@ def _contact_forces(hist_dt, lever_mode, rolling_model, eta_r, n_bodies, bx, bv,
     its dashpots from e(v) at its first-touch approach speed (history column
     ``HIST_IMPACT_SPEED``); ``rolling_model`` ``EPSD`` replaces the constant torque by the
     spring-dashpot torque (history columns ``HIST_ROLLING``..+2, damping ratio ``eta_r``),
-    summed into ``brv`` with its limits mu_r F_n R_r in ``brm``.
+    summed into ``brv`` with its limits mu_r F_n R_r in ``brm``. With the constant torque and
+    the LIGGGHTS lever a particle pair's rolling torque goes into ``bt`` as an equal and
+    opposite pair, capped over the step ``dt`` for both bodies alike; wall contacts sum theirs
+    into ``brv``, ``brm`` and ``brn`` (normals weighted by magnitude) for the kick's static stop.
     """
+    relative = rolling_model != EPSD and lever_mode == LIGGGHTS_REFF
     pw = ph.shape[1]
     ww = wh.shape[1]
     store = hist_dt > 0.0
@@ -169,6 +174,9 @@ def _contact_forces(hist_dt, lever_mode, rolling_model, eta_r, n_bodies, bx, bv,
         brv[b, 0] = 0.0
         brv[b, 1] = 0.0
         brv[b, 2] = 0.0
+        brn[b, 0] = 0.0
+        brn[b, 1] = 0.0
+        brn[b, 2] = 0.0
     # ---- sphere-sphere
     for k in range(ppi.shape[0]):
         i = ppi[k]
@@ -250,44 +258,34 @@ def _contact_forces(hist_dt, lever_mode, rolling_model, eta_r, n_bodies, bx, bv,
         bt[bj, 2] -= ajx * fy - ajy * fx
         mr = mu_r[mi, mj]
         if mr > 0.0:
-            if rolling_model == EPSD:
-                k_r = 2.25 * (2.0 * e_star[mi, mj] * sqrt_rd) * mr * mr * r_star * r_star
-                i_ri = SPHERE_CONTACT_INERTIA * ri * ri / binvm[bi]
-                i_rj = SPHERE_CONTACT_INERTIA * rj * rj / binvm[bj]
-                c_r = eta_r * 2.0 * math.sqrt(i_ri * i_rj / (i_ri + i_rj) * k_r)
-                m_max = mr * f_el * r_star
-                sx_, sy_, sz_, tx, ty, tz = epsd_rolling_torque(
-                    ph[k, HIST_ROLLING], ph[k, HIST_ROLLING + 1], ph[k, HIST_ROLLING + 2],
-                    wxi - wxj, wyi - wyj, wzi - wzj, nx, ny, nz, k_r, c_r, m_max, hist_dt)
-                if store:
-                    ph[k, HIST_ROLLING] = sx_
-                    ph[k, HIST_ROLLING + 1] = sy_
-                    ph[k, HIST_ROLLING + 2] = sz_
+            lever_i = rolling_lever(lever_mode, aix, aiy, aiz, a, r_star)
+            lever_j = rolling_lever(lever_mode, ajx, ajy, ajz, rj - 0.5 * overlap, r_star)
+            i_ri = SPHERE_CONTACT_INERTIA * ri * ri / binvm[bi]
+            i_rj = SPHERE_CONTACT_INERTIA * rj * rj / binvm[bj]
+            tx, ty, tz, m_i, m_j = contact_rolling(
+                rolling_model, lever_mode, mr, f_el, e_star[mi, mj], sqrt_rd, r_star, lever_i,
+                lever_j, i_ri * i_rj / (i_ri + i_rj), eta_r, ph, k, HIST_ROLLING,
+                wxi - wxj, wyi - wyj, wzi - wzj, nx, ny, nz, hist_dt)
+            if relative:
+                # resists only the rolling relative to the neighbour (a body turning with its
+                # neighbours keeps turning): an ordinary pair torque, no static stop
+                s = pair_rolling_scale(bR, binvi, bi, bj, tx, ty, tz, wxi - wxj, wyi - wyj,
+                                       wzi - wzj, dt)
+                bt[bi, 0] += s * tx
+                bt[bi, 1] += s * ty
+                bt[bi, 2] += s * tz
+                bt[bj, 0] -= s * tx
+                bt[bj, 1] -= s * ty
+                bt[bj, 2] -= s * tz
+            else:
                 brv[bi, 0] += tx
                 brv[bi, 1] += ty
                 brv[bi, 2] += tz
                 brv[bj, 0] -= tx
                 brv[bj, 1] -= ty
                 brv[bj, 2] -= tz
-                brm[bi] += m_max
-                brm[bj] += m_max
-            elif lever_mode == EDEM_COM:
-                brm[bi] += mr * f_el * math.sqrt(aix * aix + aiy * aiy + aiz * aiz)
-                brm[bj] += mr * f_el * math.sqrt(ajx * ajx + ajy * ajy + ajz * ajz)
-            elif lever_mode == EDEM_SPHERE:
-                brm[bi] += mr * f_el * a
-                brm[bj] += mr * f_el * (rj - 0.5 * overlap)
-            else:
-                # no static stop from particle contacts: this torque resists only the rolling
-                # relative to the neighbour, and a body turning with its neighbours keeps turning
-                tx, ty, tz = relative_rolling_torque(mr, f_el, r_star, wxi - wxj, wyi - wyj,
-                                                     wzi - wzj, nx, ny, nz)
-                brv[bi, 0] -= tx
-                brv[bi, 1] -= ty
-                brv[bi, 2] -= tz
-                brv[bj, 0] += tx
-                brv[bj, 1] += ty
-                brv[bj, 2] += tz
+                brm[bi] += m_i
+                brm[bj] += m_j
     # ---- sphere-wall
     for q in range(ws.shape[0]):
         i = ws[q]
@@ -342,32 +340,19 @@ def _contact_forces(hist_dt, lever_mode, rolling_model, eta_r, n_bodies, bx, bv,
         bt[bi, 2] += aix * fy - aiy * fx
         mr = mu_r[mi, mk]
         if mr > 0.0:
-            if rolling_model == EPSD:
-                # a wall neither turns nor moves under the torque: R_r and I_r are the sphere's
-                k_r = 2.25 * (2.0 * e_star[mi, mk] * sqrt_rd) * mr * mr * ri * ri
-                c_r = eta_r * 2.0 * math.sqrt(SPHERE_CONTACT_INERTIA * ri * ri / binvm[bi] * k_r)
-                m_max = mr * f_el * ri
-                sx_, sy_, sz_, tx, ty, tz = epsd_rolling_torque(
-                    wh[q, HIST_ROLLING], wh[q, HIST_ROLLING + 1], wh[q, HIST_ROLLING + 2],
-                    wxi, wyi, wzi, nx, ny, nz, k_r, c_r, m_max, hist_dt)
-                if store:
-                    wh[q, HIST_ROLLING] = sx_
-                    wh[q, HIST_ROLLING + 1] = sy_
-                    wh[q, HIST_ROLLING + 2] = sz_
-                brv[bi, 0] += tx
-                brv[bi, 1] += ty
-                brv[bi, 2] += tz
-                brm[bi] += m_max
-            elif lever_mode == EDEM_COM:
-                brm[bi] += mr * f_el * math.sqrt(aix * aix + aiy * aiy + aiz * aiz)
-            elif lever_mode == EDEM_SPHERE:
-                brm[bi] += mr * f_el * a
-            else:
-                brm[bi] += mr * f_el * ri
-                tx, ty, tz = relative_rolling_torque(mr, f_el, ri, wxi, wyi, wzi, nx, ny, nz)
-                brv[bi, 0] -= tx
-                brv[bi, 1] -= ty
-                brv[bi, 2] -= tz
+            # a wall neither turns nor moves under the torque: R_r and I_r are the sphere's
+            tx, ty, tz, m_i, _ = contact_rolling(
+                rolling_model, lever_mode, mr, f_el, e_star[mi, mk], sqrt_rd, ri,
+                rolling_lever(lever_mode, aix, aiy, aiz, a, ri), 0.0,
+                SPHERE_CONTACT_INERTIA * ri * ri / binvm[bi], eta_r, wh, q, HIST_ROLLING,
+                wxi, wyi, wzi, nx, ny, nz, hist_dt)
+            brv[bi, 0] += tx
+            brv[bi, 1] += ty
+            brv[bi, 2] += tz
+            brm[bi] += m_i
+            brn[bi, 0] += m_i * nx
+            brn[bi, 1] += m_i * ny
+            brn[bi, 2] += m_i * nz
 
 
 @kernel
@@ -382,7 +367,7 @@ def _wall_velocities(t, wvel, wwin, wvel_now):
 @kernel
 def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
              need_rebuild, need_forces,
-             n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, bmat, bactive,
+             n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bactive,
              n_spheres, sbody, soff, srad, sx, sx0, sxw,
              pstart, ppi, pj, ph, wstart, ws, wk, wh,
              wkind, worig, wnorm, wu, wv, whalf, wvel, wwin, wmat, wx0, wvel_now,
@@ -405,7 +390,8 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
             tau = h if step == 0 else dt
             for b in range(n_bodies):
                 if bactive[b]:
-                    half_kick(b, tau, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, mode)
+                    half_kick(b, tau, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi,
+                              mode)
                     drift(b, dt, bx, bv, bq, bL, bw, bR, binvi)
             _wall_velocities(t + h, wvel, wwin, wvel_now)
             for k in range(n_walls):
@@ -436,14 +422,14 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
         need_rebuild = False
         # the first evaluation of a fresh state must not advance the contact history
         hist_dt = dt if step >= 0 else 0.0
-        _contact_forces(hist_dt, lever_mode, rolling_model, eta_r, n_bodies, bx, bv, bw,
-                        bf, bt, brm, brv, binvm, bmat, sbody, sx, srad, ppi, pj, ph, ws,
+        _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, n_bodies, bx, bv, bw, bR,
+                        bf, bt, brm, brv, brn, binvm, binvi, bmat, sbody, sx, srad, ppi, pj, ph, ws,
                         wk, wh, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
                         e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min)
     if n_steps > 0:
         for b in range(n_bodies):
             if bactive[b]:
-                half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, mode)
+                half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, mode)
     return t, pstart, ppi, pj, ph, wstart, ws, wk, wh, n_rebuilds, n_wall_rebuilds
 
 
@@ -516,7 +502,7 @@ _BODY_FIELDS = {  # name: (trailing shape, dtype)
     "bx": ((3,), np.float64), "bv": ((3,), np.float64), "bq": ((4,), np.float64),
     "bL": ((3,), np.float64), "bw": ((3,), np.float64), "bR": ((3, 3), np.float64),
     "bf": ((3,), np.float64), "bt": ((3,), np.float64), "brm": ((), np.float64),
-    "brv": ((3,), np.float64), "binvm": ((), np.float64), "binvi": ((3,), np.float64),
+    "brv": ((3,), np.float64), "brn": ((3,), np.float64), "binvm": ((), np.float64), "binvi": ((3,), np.float64),
     "bmat": ((), np.int64), "bactive": ((), np.bool_), "btemplate": ((), np.int64),
     "bmass": ((), np.float64), "bI": ((3,), np.float64),
 }
@@ -560,7 +546,7 @@ class Simulation:
     """
 
     def __init__(self, materials: MaterialTable, *, domain_lo, domain_hi, dt: float,
-                 gravity=(0.0, 0.0, -9.81), rolling_lever: str = "liggghts_reff", skin: float | None = None,
+                 gravity=(0.0, 0.0, -GRAVITY), rolling_lever: str = "liggghts_reff", skin: float | None = None,
                  max_dt_fraction: float = DEFAULT_MAX_FRACTION, force: bool = False,
                  max_speed: float = 50.0, chunk_steps: int = 200):
         if not isinstance(materials, MaterialTable):
@@ -894,7 +880,7 @@ class Simulation:
             pt.rolling_model, pt.rolling_damping_ratio, self._need_rebuild,
             self._need_forces,
             self.n_bodies, B["bx"], B["bv"], B["bq"], B["bL"], B["bw"], B["bR"], B["bf"], B["bt"],
-            B["brm"], B["brv"], B["binvm"], B["binvi"], B["bmat"], B["bactive"],
+            B["brm"], B["brv"], B["brn"], B["binvm"], B["binvi"], B["bmat"], B["bactive"],
             self.n_spheres, S["sbody"], S["soff"], S["srad"], S["sx"], S["sx0"], S["sxw"],
             *self._pairs, *self._wpairs,
             W["kind"], W["origin"], W["normal"], W["axis_u"], W["axis_v"], W["half"], W["velocity"],
@@ -1015,8 +1001,9 @@ class Simulation:
 
     def contact_forces(self) -> tuple[np.ndarray, np.ndarray]:
         """Contact force [N] and torque about the centre of mass [N m] on each body at the last
-        step (rolling-friction torque excluded: it is applied in the integration, capped for the
-        constant torque model; see ``rolling_resistance``)."""
+        step. The torque includes the particle-pair rolling torques of the constant torque model
+        with the ``liggghts_reff`` lever (ordinary pair torques, capped per contact); the other
+        rolling torques are applied in the integration (see ``rolling_resistance``)."""
         return self._b["bf"][:self.n_bodies].copy(), self._b["bt"][:self.n_bodies].copy()
 
     def rolling_resistance(self) -> tuple[np.ndarray, np.ndarray]:
@@ -1024,8 +1011,8 @@ class Simulation:
 
         Constant torque model: the summed torque magnitude sum(mu_r F_n R_lever) [N m] over the
         contacts that can hold it still (all contacts with the EDEM levers, wall contacts only
-        with ``liggghts_reff``), and (``liggghts_reff`` only) the summed torque vector [N m],
-        both before the cap. Spring-dashpot model (``epsd``): the summed limit torques
+        with ``liggghts_reff``), and (``liggghts_reff`` only) the summed wall torque vector
+        [N m], both before the cap (particle pairs: see ``contact_forces``). Spring-dashpot model (``epsd``): the summed limit torques
         sum(mu_r F_n R_r) [N m] over all the body's contacts, and the summed spring-dashpot
         torque applied to it [N m] (``simulate.contact.rolling``)."""
         return self._b["brm"][:self.n_bodies].copy(), self._b["brv"][:self.n_bodies].copy()

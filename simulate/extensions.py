@@ -57,16 +57,15 @@ import numpy as np
 from scipy import stats
 
 from demcal.errors import InputError
-from simulate.clump import ClumpTemplate, segment_template
-from simulate.contact.rolling import epsd_damping, epsd_rolling_torque, epsd_stiffness  # noqa: F401
-from simulate.params import DEMParameters
+from demcal.simulate.clump import ClumpTemplate, segment_template
+from demcal.simulate.contact.rolling import epsd_damping, epsd_rolling_torque, epsd_stiffness  # noqa: F401
+from demcal.simulate.params import DEMParameters
+from demcal.units import GRAVITY, MM
 
 #: Extension names, in the order of the critique's catalogue.
 EXTENSIONS = ("velocity_dependent_restitution", "inverted_restitution", "size_distribution",
               "more_spheres", "rolling_spring_dashpot")
 
-#: Standard gravity [m/s^2], as the drop rig uses it.
-G = 9.81
 
 #: Loosest stopping tolerance of :func:`invert_drop_twin` on the mean apparent restitution [-].
 MAX_TOLERANCE = 0.01
@@ -121,7 +120,7 @@ def restitution_parameter(pair: str) -> str:
                          f"valid: {', '.join(RESTITUTION_PARAMETER)}") from None
 
 
-def impact_speed(drop_height: float, g: float = G) -> float:
+def impact_speed(drop_height: float, g: float = GRAVITY) -> float:
     """Free-fall impact speed sqrt(2 g h) [m/s] from a drop height [m]."""
     if not drop_height > 0:
         raise InputError(f"drop height must be positive, got {drop_height!r}")
@@ -185,7 +184,7 @@ class VelocityRestitution:
 
 
 def fit_velocity_restitution(drop_height, restitution, *, pair: str = "particle-steel",
-                             g: float = G) -> VelocityRestitution:
+                             g: float = GRAVITY) -> VelocityRestitution:
     """Fit e(v) = e_ref (v / v_ref)^(-n) to drops from several heights.
 
     Least squares of ln e on ln(v / v_ref), v = sqrt(2 g h) the impact speed of each drop and
@@ -452,8 +451,8 @@ class SizeDistribution:
     @classmethod
     def from_specimens(cls, frame) -> "SizeDistribution":
         """From a ``specimens`` sheet frame (columns ``specimen_id``, ``length_mm``, ``diameter_mm``)."""
-        return cls(tuple(float(v) * 1e-3 for v in frame["length_mm"]),
-                   tuple(float(v) * 1e-3 for v in frame["diameter_mm"]),
+        return cls(tuple(float(v) * MM for v in frame["length_mm"]),
+                   tuple(float(v) * MM for v in frame["diameter_mm"]),
                    tuple(str(v) for v in frame["specimen_id"]))
 
     def size_of(self, specimen_id: str) -> tuple[float, float]:

@@ -36,8 +36,8 @@ import math
 import numpy as np
 
 from demcal.errors import InputError
-from simulate.integrate import matrix_from_quat, random_quaternions
-from simulate.walls import wall_distances
+from demcal.simulate.integrate import matrix_from_quat, random_quaternions
+from demcal.simulate.walls import wall_distances
 
 
 class ParticleFactory:

@@ -30,8 +30,8 @@ import math
 
 import numpy as np
 
-from simulate._jit import evaluator, kernel
-from simulate.contact.rolling import KICK_ELASTIC, KICK_RELATIVE, cap_rolling_impulse
+from demcal.simulate._jit import evaluator, kernel
+from demcal.simulate.contact.rolling import KICK_ELASTIC, KICK_RELATIVE, cap_rolling_impulse
 
 
 @evaluator
@@ -67,6 +67,31 @@ def apply_inverse_inertia(R, b, inv_i, ax, ay, az):
 
 
 @evaluator
+def apply_inertia(R, b, inv_i, wx, wy, wz):
+    """R diag(1 / inv_i) R^T w: a world-frame angular velocity to angular momentum (an axis of
+    zero inverse inertia holds no angular velocity and gives none)."""
+    px = R[b, 0, 0] * wx + R[b, 1, 0] * wy + R[b, 2, 0] * wz
+    py = R[b, 0, 1] * wx + R[b, 1, 1] * wy + R[b, 2, 1] * wz
+    pz = R[b, 0, 2] * wx + R[b, 1, 2] * wy + R[b, 2, 2] * wz
+    px = px / inv_i[b, 0] if inv_i[b, 0] > 0.0 else 0.0
+    py = py / inv_i[b, 1] if inv_i[b, 1] > 0.0 else 0.0
+    pz = pz / inv_i[b, 2] if inv_i[b, 2] > 0.0 else 0.0
+    return (R[b, 0, 0] * px + R[b, 0, 1] * py + R[b, 0, 2] * pz,
+            R[b, 1, 0] * px + R[b, 1, 1] * py + R[b, 1, 2] * pz,
+            R[b, 2, 0] * px + R[b, 2, 1] * py + R[b, 2, 2] * pz)
+
+
+@evaluator
+def pair_rolling_scale(R, inv_i, bi, bj, tx, ty, tz, wrx, wry, wrz, dt):
+    """Fraction in [0, 1] of a pair rolling torque (``t`` on body i, ``-t`` on body j) to apply
+    over ``dt`` so that its impulse does not reverse the relative angular velocity
+    ``w_r = w_i - w_j``; both bodies receive the same fraction, so angular momentum is kept."""
+    dix, diy, diz = apply_inverse_inertia(R, bi, inv_i, tx * dt, ty * dt, tz * dt)
+    djx, djy, djz = apply_inverse_inertia(R, bj, inv_i, tx * dt, ty * dt, tz * dt)
+    return cap_rolling_impulse(wrx, wry, wrz, dix + djx, diy + djy, diz + djz)
+
+
+@evaluator
 def rotate_quat(q0, q1, q2, q3, wx, wy, wz, dt):
     """exp(w dt / 2) * q for a world-frame angular velocity ``w`` [rad/s], normalised."""
     w2 = wx * wx + wy * wy + wz * wz
@@ -92,18 +117,20 @@ def rotate_quat(q0, q1, q2, q3, wx, wy, wz, dt):
 
 
 @evaluator
-def half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, mode):
+def half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, mode):
     """Kick of body ``b`` over ``h`` (dt/2, or dt for two merged half kicks): forces, torques,
     then the rolling torque (see ``simulate.contact.rolling``).
 
     ``brm[b]`` is the summed magnitude of the body's rolling torques. With the EDEM conventions
     (``mode`` ``KICK_DIRECTIONAL``) the torque is ``brm[b]`` against the unit angular velocity
     after the other torques; with the LIGGGHTS convention (``KICK_RELATIVE``) it is the vector
-    ``brv[b]`` summed over the contacts, and ``brm[b]`` counts its wall contacts only (a wall
-    does not turn, so there relative rolling is the body's own). If the resistance ``brm[b]``
-    over ``h`` could absorb the body's whole angular momentum, the rotation stops (the torque
-    acts as a static constraint up to its magnitude); otherwise the torque acts in full, scaled
-    down only so that it never reverses the spin about the current axis. With the spring-dashpot
+    ``brv[b]`` summed over the body's wall contacts (particle pairs apply theirs as ordinary
+    torques, in ``bt``), ``brm[b]`` their magnitudes and ``brn[b]`` their normals weighted by
+    the magnitudes. If the resistance ``brm[b]`` over ``h`` could absorb the body's rolling
+    angular momentum, the rolling stops (the torque acts as a static constraint up to its
+    magnitude); the twist about the normal is kept when every wall contact of the body shares
+    that normal (LIGGGHTS convention). Otherwise the torque acts in full, scaled down only so
+    that it never reverses the spin about the current axis. With the spring-dashpot
     model (``KICK_ELASTIC``) ``brv[b]`` is an ordinary torque, applied in full (a spring must be
     free to turn the body back), and ``brm[b]`` (its limit) is not used. Updates v, L and w of
     the body.
@@ -121,44 +148,94 @@ def half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, binvm, binvi, 
         ly += brv[b, 1] * h
         lz += brv[b, 2] * h
         wx, wy, wz = apply_inverse_inertia(bR, b, binvi, lx, ly, lz)
-    elif m > 0.0 and lx * lx + ly * ly + lz * lz <= (m * h) ** 2:
-        lx = 0.0
-        ly = 0.0
-        lz = 0.0
-        wx = 0.0
-        wy = 0.0
-        wz = 0.0
     else:
-        wx, wy, wz = apply_inverse_inertia(bR, b, binvi, lx, ly, lz)
-        tx = 0.0
-        ty = 0.0
-        tz = 0.0
-        if mode == KICK_RELATIVE:
-            tx = brv[b, 0]
-            ty = brv[b, 1]
-            tz = brv[b, 2]
-        elif m > 0.0:
-            wmag = math.sqrt(wx * wx + wy * wy + wz * wz)
-            if wmag > 0.0:
-                c = m / wmag
-                tx = -c * wx
-                ty = -c * wy
-                tz = -c * wz
-        if tx != 0.0 or ty != 0.0 or tz != 0.0:
-            dwx, dwy, dwz = apply_inverse_inertia(bR, b, binvi, tx * h, ty * h, tz * h)
-            s = cap_rolling_impulse(wx, wy, wz, dwx, dwy, dwz)
-            lx += s * tx * h
-            ly += s * ty * h
-            lz += s * tz * h
-            wx += s * dwx
-            wy += s * dwy
-            wz += s * dwz
+        stops = False
+        wx = wy = wz = 0.0
+        if m > 0.0:
+            stops, sx, sy, sz, wx, wy, wz = rolling_stop(b, m, m * h, lx, ly, lz, bR, binvi, brn, mode)
+            if stops:
+                lx = sx
+                ly = sy
+                lz = sz
+        if not stops:
+            lx, ly, lz, wx, wy, wz = _rolling_kick(b, h, m, lx, ly, lz, bR, binvi, brv, mode)
     bL[b, 0] = lx
     bL[b, 1] = ly
     bL[b, 2] = lz
     bw[b, 0] = wx
     bw[b, 1] = wy
     bw[b, 2] = wz
+
+
+@evaluator
+def rolling_stop(b, m, impulse, lx, ly, lz, bR, binvi, brn, mode):
+    """The static stop of the rolling of body ``b``.
+
+    ``l`` is the body's angular momentum after its other torques, ``m`` its summed rolling
+    resistance and ``impulse`` that over the half step. The rolling part of ``l`` is all of it,
+    except with the LIGGGHTS convention when every wall contact of the body shares one normal
+    (``brn[b]``, the normals weighted by their magnitudes, is then ``m`` long): the spin about
+    that normal is twist, which the rolling torque does not resist, and is kept.
+
+    Returns
+    -------
+    (stops, lx, ly, lz, wx, wy, wz)
+        Whether ``impulse`` absorbs the rolling part; if so, the angular momentum and velocity
+        that remain (the twist, or zero).
+    """
+    tx = 0.0
+    ty = 0.0
+    tz = 0.0
+    if mode == KICK_RELATIVE:
+        nx = brn[b, 0]
+        ny = brn[b, 1]
+        nz = brn[b, 2]
+        nm = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if nm > 0.0 and nm >= (1.0 - 1e-9) * m:
+            wx, wy, wz = apply_inverse_inertia(bR, b, binvi, lx, ly, lz)
+            wn = (wx * nx + wy * ny + wz * nz) / (nm * nm)
+            tx = wn * nx
+            ty = wn * ny
+            tz = wn * nz
+    kx, ky, kz = apply_inertia(bR, b, binvi, tx, ty, tz)
+    rx = lx - kx
+    ry = ly - ky
+    rz = lz - kz
+    if rx * rx + ry * ry + rz * rz <= impulse * impulse:
+        return True, kx, ky, kz, tx, ty, tz
+    return False, lx, ly, lz, 0.0, 0.0, 0.0
+
+
+@evaluator
+def _rolling_kick(b, h, m, lx, ly, lz, bR, binvi, brv, mode):
+    """The rolling torque of body ``b`` over ``h`` when it does not stop the rolling: the wall
+    torque vector (LIGGGHTS convention) or ``m`` against the spin (EDEM), capped so that it
+    never reverses the spin about the current axis. Returns the new L and w."""
+    wx, wy, wz = apply_inverse_inertia(bR, b, binvi, lx, ly, lz)
+    tx = 0.0
+    ty = 0.0
+    tz = 0.0
+    if mode == KICK_RELATIVE:
+        tx = brv[b, 0]
+        ty = brv[b, 1]
+        tz = brv[b, 2]
+    elif m > 0.0:
+        wmag = math.sqrt(wx * wx + wy * wy + wz * wz)
+        if wmag > 0.0:
+            c = m / wmag
+            tx = -c * wx
+            ty = -c * wy
+            tz = -c * wz
+    if tx != 0.0 or ty != 0.0 or tz != 0.0:
+        dwx, dwy, dwz = apply_inverse_inertia(bR, b, binvi, tx * h, ty * h, tz * h)
+        s = cap_rolling_impulse(wx, wy, wz, dwx, dwy, dwz)
+        lx += s * tx * h
+        ly += s * ty * h
+        lz += s * tz * h
+        wx += s * dwx
+        wy += s * dwy
+        wz += s * dwz
+    return lx, ly, lz, wx, wy, wz
 
 
 @evaluator

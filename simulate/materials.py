@@ -30,8 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from demcal.errors import InputError
-from simulate.contact.hertz_mindlin import damping_ratio, effective_modulus, effective_shear_modulus
-from simulate.contact.rolling import EPSD_DAMPING_RATIO, rolling_model_index
+from demcal.simulate.contact.hertz_mindlin import damping_ratio, effective_modulus, effective_shear_modulus
+from demcal.simulate.contact.rolling import EPSD_DAMPING_RATIO, rolling_model_index
 
 
 @dataclass(frozen=True)

@@ -27,8 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from simulate._jit import kernel
-from simulate.walls import wall_distance
+from demcal.simulate._jit import kernel
+from demcal.simulate.walls import wall_distance
 
 
 def grid_shape(lo, hi, cell_min: float, max_cells: int = 4_000_000):

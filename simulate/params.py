@@ -4,7 +4,7 @@
 names (``from_names({"e_pp": 0.32})``, what ``--set NAME=VALUE`` uses); unknown names are
 refused with the list of valid ones.
 
-Defaults (DESIGN.md, "Paper defaults"): the paper's measured means for the contact parameters,
+Defaults (docs/design.md, "Paper defaults"): the paper's measured means for the contact parameters,
 its segment geometry and densities; the particle shear modulus (1e7 Pa) is not in the paper and
 is demcal's stated default.
 
@@ -21,8 +21,8 @@ import math
 from dataclasses import dataclass, fields
 
 from demcal.errors import InputError
-from simulate.clump import MASS_MODELS
-from simulate.contact.rolling import EPSD_DAMPING_RATIO, ROLLING_LEVERS, ROLLING_MODELS
+from demcal.simulate.clump import MASS_MODELS
+from demcal.simulate.contact.rolling import EPSD_DAMPING_RATIO, ROLLING_LEVERS, ROLLING_MODELS
 
 
 @dataclass(frozen=True)

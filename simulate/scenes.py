@@ -22,12 +22,12 @@ from collections import Counter
 
 import numpy as np
 
-from simulate.clump import segment_from_parameters
-from simulate.engine import Simulation
-from simulate.factory import ParticleFactory
-from simulate.materials import MaterialTable
-from simulate.params import DEMParameters
-from simulate.walls import Plane, Rectangle
+from demcal.simulate.clump import segment_from_parameters
+from demcal.simulate.engine import Simulation
+from demcal.simulate.factory import ParticleFactory
+from demcal.simulate.materials import MaterialTable
+from demcal.simulate.params import DEMParameters
+from demcal.simulate.walls import Plane, Rectangle
 
 #: The paper's time step [s].
 PAPER_TIME_STEP = 7.43678e-5
@@ -120,7 +120,7 @@ def _segment_templates(sim: Simulation, params: DEMParameters, size_distribution
     sizes = segment_sizes(params, size_distribution)
     if sizes is None:
         return sim.add_template(segment_from_parameters(params)), None
-    from simulate.extensions import segment_of_size   # scipy only when a distribution is used
+    from demcal.simulate.extensions import segment_of_size   # scipy only when a distribution is used
 
     counts = Counter((float(length), float(dia)) for length, dia in sizes)
     ids = [sim.add_template(segment_of_size(params, length, dia)) for length, dia in counts]

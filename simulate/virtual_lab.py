@@ -3,7 +3,7 @@
 A :class:`Truth` holds what the real material and the real rigs would be (contact parameters,
 segment sizes, moisture, the spread from trial to trial, the reading noise of each instrument,
 the operators and days of the campaign). :func:`write_virtual_workbook` runs a virtual
-campaign of the lab tests of lab-workbook.md and writes every sheet, with realistic
+campaign of the lab tests of docs/workbook.md and writes every sheet, with realistic
 covariates (operator, date, trial order, specimen, moisture, orientation, several drop
 heights), plus the files the sheets point to: heap photos, camera tracks and compression
 curves. It is how demcal's tests hide an effect in data and require the critique loop to find
@@ -74,7 +74,8 @@ import pandas as pd
 from demcal.errors import InputError
 from demcal.jsonio import read_json, write_json
 from demcal.provenance import Provenance
-from simulate.params import DEMParameters
+from demcal.simulate.params import DEMParameters
+from demcal.units import GRAVITY
 
 #: Effect kinds, the identifiers of the critique catalogue that a workbook can carry.
 EFFECT_KINDS = ("velocity_dependent_restitution", "orientation_rotation", "size_dependence",
@@ -318,7 +319,7 @@ def _drop_point(params: DEMParameters, pair: str, height_m: float, orientation_d
     if path is not None and path.is_file():
         value = float(read_json(path)["apparent_restitution"])
     else:
-        from simulate.rigs import run_rig
+        from demcal.simulate.rigs import run_rig
         result = run_rig("drop", params, 0, height=float(height_m), orientation_deg=float(orientation_deg),
                          pair=pair)
         value = float(result.observable["apparent_restitution"])
@@ -353,7 +354,7 @@ def drop_twin_ratio(params: DEMParameters, pair: str, height_m: float, orientati
     numpy.ndarray
         R [-], one per orientation.
     """
-    from simulate.extensions import restitution_parameter
+    from demcal.simulate.extensions import restitution_parameter
 
     o = np.atleast_1d(np.asarray(orientation_deg, dtype=float))
     if np.any((o < 0) | (o > 90)):
@@ -394,7 +395,7 @@ def _level_offset(levels: tuple, value, size: float) -> float:
 
 
 def camera_track(rng: np.random.Generator, drop_height_m: float, e: float, *, fps: float = 1000.0,
-                 g: float = 9.81, pixel_mm: float = 0.4, noise_mm: float = 0.15) -> pd.DataFrame:
+                 g: float = GRAVITY, pixel_mm: float = 0.4, noise_mm: float = 0.15) -> pd.DataFrame:
     """High-speed-camera track of a drop: free fall from rest at ``drop_height_m``, impact,
     rebound at ``e`` times the impact speed; positions with Gaussian noise [mm], quantised to
     the pixel size. Columns ``t_s``, ``y_mm``."""
@@ -626,7 +627,7 @@ def _compression(truth: Truth, rng, specimens, n: int, root: Path) -> pd.DataFra
 def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base: int, geometry=None):
     import cv2
 
-    from simulate.render import Lighting, heap_photo, heap_profile
+    from demcal.simulate.render import Lighting, heap_photo, heap_profile
 
     tilt = [e for e in effects if e.kind == "camera_tilt"]
     block = [e for e in effects if e.kind == "block_effect" and e.sheet == "repose"]
@@ -657,7 +658,7 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
                                 roughness_m=0.002, rng=rng)
             side = "both"
         else:
-            from simulate.rigs import run_rig
+            from demcal.simulate.rigs import run_rig
             res = run_rig("repose", truth.params, seed_base + i, profile="quick", geometry=geometry)
             x = np.asarray(res.record["profile_x"], float)
             z = np.asarray(res.record["profile_z"], float)
@@ -685,7 +686,7 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
 
 
 def _meta(truth: Truth, effects, geometry=None) -> pd.DataFrame:
-    from simulate.rigs.repose import ReposeGeometry
+    from demcal.simulate.rigs.repose import ReposeGeometry
 
     p = truth.params
     g = geometry or ReposeGeometry()
@@ -749,7 +750,7 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
     -------
     VirtualWorkbook
     """
-    from measure.workbook import write_workbook
+    from demcal.measure.workbook import write_workbook
 
     if not isinstance(truth, Truth):
         raise InputError(f"truth must be a Truth, got {type(truth).__name__}")

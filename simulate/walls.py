@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from demcal.errors import InputError
-from simulate._jit import evaluator
+from demcal.simulate._jit import evaluator
 
 PLANE, RECTANGLE = 0, 1
 

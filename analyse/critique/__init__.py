@@ -1,5 +1,5 @@
 """The critique loop: show what the calibrated simulation gets wrong, name the cause, extend the
-model and measure the gain (DESIGN.md, "The critique loop").
+model and measure the gain (docs/design.md, "The critique loop").
 
 - ``twins``: the twin of every lab trial with the calibrated parameters, the discrepancy table;
 - ``diagnosis``: per-row values and twin residuals against every covariate, multiple-testing
@@ -9,6 +9,6 @@ model and measure the gain (DESIGN.md, "The critique loop").
 - ``loop``: all of it, :func:`run_critique`; ``cli``: ``demcal critique``.
 """
 
-from analyse.critique.loop import Critique, run_critique
+from demcal.analyse.critique.loop import Critique, run_critique
 
 __all__ = ["Critique", "run_critique"]

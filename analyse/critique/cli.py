@@ -51,8 +51,8 @@ def register(subparsers) -> None:
 
 
 def critique_command(args) -> int:
-    from analyse.critique.loop import run_critique
-    from simulate.extensions import EXTENSIONS
+    from demcal.analyse.critique.loop import run_critique
+    from demcal.simulate.extensions import EXTENSIONS
 
     source = Path(args.source)
     campaign = source.is_dir() and (source / "results.json").is_file()

@@ -29,9 +29,9 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from analyse.critique.twins import run_drop_twins
+from demcal.analyse.critique.twins import run_drop_twins
 from demcal.errors import InputError
-from simulate.extensions import (describe, fit_velocity_restitution, impact_speed, invert_drop_twin,
+from demcal.simulate.extensions import (describe, fit_velocity_restitution, impact_speed, invert_drop_twin,
                                  restitution_parameter)
 
 MEASURES = ("abs_mean_residual", "rms_residual")

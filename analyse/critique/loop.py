@@ -15,7 +15,7 @@
 ``extensions`` holds flat rows for the report's table; ``extension_records`` the same with the
 provenance record of each extension (``simulate.extensions.describe``).
 
-Steps (DESIGN.md, "The critique loop"):
+Steps (docs/design.md, "The critique loop"):
 
 1. the workbook measured (or the campaign's ``measure.json``), and the parameters of the
    model under critique (the campaign's calibrated parameters, else the measured means);
@@ -37,10 +37,10 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from analyse.critique.diagnosis import (CORRECTIONS, DEFAULT_ALPHA, PRACTICAL_THRESHOLDS, Series,
+from demcal.analyse.critique.diagnosis import (CORRECTIONS, DEFAULT_ALPHA, PRACTICAL_THRESHOLDS, Series,
                                         measured_series, run_tests)
-from analyse.critique.mechanisms import CATALOGUE, ill_conditioned, judge
-from analyse.critique.twins import (TwinRunner, constant_discrepancy, drop_trials, incline_groups,
+from demcal.analyse.critique.mechanisms import CATALOGUE, ill_conditioned, judge
+from demcal.analyse.critique.twins import (TwinRunner, constant_discrepancy, drop_trials, incline_groups,
                                     incline_twin_runner, independent_discrepancy, paired_discrepancy,
                                     repose_validation_angles, rig_pair, run_drop_twins, twin_parameters,
                                     wall_of)
@@ -104,8 +104,8 @@ class Critique:
 def load_source(source):
     """(measurement, workbook or None, results or None, campaign folder or None) of a workbook
     path or a campaign folder (one holding ``results.json``)."""
-    from measure.pipeline import Measurement, measure_workbook
-    from measure.workbook import read_workbook
+    from demcal.measure.pipeline import Measurement, measure_workbook
+    from demcal.measure.workbook import read_workbook
 
     path = Path(source)
     if path.is_dir() and (path / "results.json").is_file():
@@ -209,7 +209,7 @@ def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EX
 
 
 def _drop_twins(runner, measurement, workbook, params, wall, discrepancies, state) -> list:
-    from simulate.extensions import restitution_parameter
+    from demcal.simulate.extensions import restitution_parameter
 
     out = []
     for pair, trials in drop_trials(measurement, workbook).items():
@@ -289,7 +289,7 @@ def _repose_twins(runner, measurement, results, campaign, params, repose_seeds, 
     if results is not None:
         angles, note = repose_validation_angles(campaign, results)
     elif repose_seeds > 0:
-        from analyse.campaign import repose_geometry, repose_runner
+        from demcal.analyse.campaign import repose_geometry, repose_runner
         tasks = [{"rig": "repose", "profile": "quick", "params": params.to_dict(),
                   "geometry": repose_geometry(measurement.meta), "seed": 9000 + i} for i in range(repose_seeds)]
         angles = [r["observable"]["angle_deg"] for r in runner(repose_runner, tasks, "repose twins")]
@@ -320,7 +320,7 @@ def _pairs_named(findings, mechanism: str, state: dict) -> list:
 
 
 def _extensions(runner, params, findings, state, chosen, seed, summary) -> list:
-    from analyse.critique.gain import combined_inversion, inverted_restitution_gain, size_gain, velocity_gain
+    from demcal.analyse.critique.gain import combined_inversion, inverted_restitution_gain, size_gain, velocity_gain
 
     gains = []
     rng = np.random.default_rng(seed)

@@ -52,7 +52,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import stats
 
-from analyse.critique.diagnosis import SPECIMEN_SIZE, adjust_pvalues
+from demcal.analyse.critique.diagnosis import SPECIMEN_SIZE, adjust_pvalues
 
 #: Column-name patterns of trial order.
 ORDER_NAMES = re.compile(r"(^|_)(trial_?order|order|sequence|run_?order|trial_?no|trial_?number)$")
@@ -284,7 +284,7 @@ def _ill_conditioned_from_posterior(results: dict) -> list:
     """Plausible workflow: a parameter is ill-conditioned when the heap leaves its posterior
     as wide as its prior (posterior sd / prior sd above ``NOT_IDENTIFIED_ABOVE``). The effect
     reported is that ratio, with the parameter's 95 % interval in the evidence."""
-    from analyse.surrogate import NOT_IDENTIFIED_ABOVE
+    from demcal.analyse.surrogate import NOT_IDENTIFIED_ABOVE
 
     mech = "ill_conditioned_parameter"
     params = (results.get("calibration") or {}).get("parameters") or {}

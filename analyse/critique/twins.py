@@ -40,10 +40,10 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from analyse.runs import RunStore, run_all, run_key
+from demcal.analyse.runs import RunStore, run_all, run_key
 from demcal.errors import SimulationError
+from demcal.units import GRAVITY
 
-G = 9.81
 
 #: Screening factors' measured quantity -> DEM parameter ({wall}: the rig's plate material).
 MEASURED_PARAMETERS = (("poisson_ratio", "poisson_ratio"),
@@ -72,8 +72,8 @@ def twin_parameters(measurement, results: dict | None = None):
     -------
     (simulate.params.DEMParameters, str)
     """
-    from analyse.campaign import PARAMETER_BOUNDS, base_parameters
-    from simulate.params import DEMParameters
+    from demcal.analyse.campaign import PARAMETER_BOUNDS, base_parameters
+    from demcal.simulate.params import DEMParameters
 
     if results and results.get("calibrated_parameters"):
         return DEMParameters(**results["calibrated_parameters"]), "calibrated (campaign results.json)"
@@ -94,9 +94,9 @@ def twin_parameters(measurement, results: dict | None = None):
 
 def drop_twin_runner(inputs: dict) -> dict:
     """One drop twin (top level, so that worker processes can run it)."""
-    from simulate.extensions import segment_of_size
-    from simulate.params import DEMParameters
-    from simulate.rigs import run_rig
+    from demcal.simulate.extensions import segment_of_size
+    from demcal.simulate.params import DEMParameters
+    from demcal.simulate.rigs import run_rig
 
     params = DEMParameters(**inputs["params"])
     opts = {}
@@ -110,8 +110,8 @@ def drop_twin_runner(inputs: dict) -> dict:
 
 def incline_twin_runner(inputs: dict) -> dict:
     """One incline twin (top level)."""
-    from simulate.params import DEMParameters
-    from simulate.rigs import run_rig
+    from demcal.simulate.params import DEMParameters
+    from demcal.simulate.rigs import run_rig
 
     params = DEMParameters(**inputs["params"])
     res = run_rig("incline", params, int(inputs["seed"]), mode=inputs["mode"], surface=inputs["surface"])
@@ -213,7 +213,7 @@ def rig_pair(pair: str, wall: str) -> str | None:
 def drop_trials(measurement, workbook=None) -> dict:
     """Per pair: the used drop rows as ``(row, measured e, height [m], orientation or None,
     covariates, record)``."""
-    from analyse.critique.diagnosis import row_covariates, specimen_lookup
+    from demcal.analyse.critique.diagnosis import row_covariates, specimen_lookup
 
     specimens = specimen_lookup(workbook)
     out = {}
@@ -226,7 +226,7 @@ def drop_trials(measurement, workbook=None) -> dict:
                 continue
             h = rec.get("drop_height_m")
             if h is None and rec.get("track"):
-                h = rec["track"]["v_before"] ** 2 / (2.0 * G)
+                h = rec["track"]["v_before"] ** 2 / (2.0 * GRAVITY)
             cov = row_covariates(rec, "drop", specimens)
             o = cov.get("orientation_deg")
             o = float(o) if isinstance(o, (int, float)) and 0.0 <= float(o) <= 90.0 else None
@@ -261,7 +261,7 @@ def run_drop_twins(runner: TwinRunner, params, trials, rig_pair_name: str, *, qu
 
 def incline_groups(measurement, workbook=None) -> dict:
     """``(quantity, surface, mode)`` -> used rows ``(row, measured mu, covariates)``."""
-    from analyse.critique.diagnosis import row_covariates, specimen_lookup
+    from demcal.analyse.critique.diagnosis import row_covariates, specimen_lookup
 
     specimens = specimen_lookup(workbook)
     out = {}

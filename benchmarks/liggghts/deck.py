@@ -46,6 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from demcal.errors import InputError
+from demcal.units import GRAVITY
 
 #: File names inside a run folder.
 SCRIPT_NAME = "in.repose"
@@ -183,7 +184,7 @@ class ReposeCase:
     fill_region: tuple = (0.010, 0.190, 0.010, 0.090, 0.100, 0.240)
     insert_interval: float = 0.05
     skin: float = 2.75e-3
-    gravity: float = 9.81
+    gravity: float = GRAVITY
     thermo_interval: float = 0.1
     ntry: int = 1_000_000
 

@@ -19,10 +19,13 @@ force would raise the effective restitution at low ``e`` (0.25 instead of 0.1).
 
 Tangential force (Mindlin 1949, no-slip): a spring on the accumulated tangential displacement
 ``s`` with stiffness S_t = 8 G* sqrt(R* d_n), a dashpot 2 sqrt(5/6) |beta| sqrt(S_t m*) |v_t|
-opposing v_t, and the Coulomb cap |F_t| <= mu_s |F_n|. The stored displacement is turned into the
-current tangent plane each step keeping its length (as LIGGGHTS' ``tangential_model_history``);
+opposing v_t, and the Coulomb cap |F_t| <= mu_s |F_n|. Each step the displacement is first
+incremented by v_t dt and then projected onto the current tangent plane, in that order and
+without restoring its length, as LIGGGHTS-PUBLIC 3.8's ``tangential_model_history.h`` does;
 when the spring alone exceeds the cap the contact slides: the displacement is shortened to
-mu_s |F_n| / S_t and the dashpot is dropped.
+mu_s |F_n| / S_t and the dashpot is dropped. Unlike LIGGGHTS, which leaves the spring and
+dashpot sum uncapped while the spring holds, the sum is also held at mu_s |F_n|. A force
+evaluation with dt = 0 reads the history and never writes it.
 
 Velocity-dependent restitution (optional, per material pair). With an exponent n != 0 the
 restitution of a contact follows the power law e(v) = e_ref (max(v, v_min) / v_ref)^(-n),
@@ -46,7 +49,7 @@ from __future__ import annotations
 
 import math
 
-from simulate._jit import evaluator
+from demcal.simulate._jit import evaluator
 
 SQRT_5_6 = math.sqrt(5.0 / 6.0)
 
@@ -166,7 +169,7 @@ def tangential_force(hist, k, nx, ny, nz, vtx, vty, vtz, g_star, m_star, damping
     f_n : float
         Normal force [N]; the cap is mu_s |f_n|.
     dt : float
-        Time step [s].
+        Time step [s]; 0 evaluates the force without advancing or writing the history.
 
     Returns
     -------
@@ -175,22 +178,16 @@ def tangential_force(hist, k, nx, ny, nz, vtx, vty, vtz, g_star, m_star, damping
     sx = hist[k, 0]
     sy = hist[k, 1]
     sz = hist[k, 2]
-    s2 = sx * sx + sy * sy + sz * sz
-    if s2 > 0.0:
-        # turn the stored displacement into the current tangent plane, keeping its length
+    update = dt > 0.0
+    if update:
+        # LIGGGHTS' order: increment, then project onto the current tangent plane
+        sx += vtx * dt
+        sy += vty * dt
+        sz += vtz * dt
         sn = sx * nx + sy * ny + sz * nz
         sx -= sn * nx
         sy -= sn * ny
         sz -= sn * nz
-        p2 = sx * sx + sy * sy + sz * sz
-        if p2 > 0.0:
-            scale = math.sqrt(s2 / p2)
-            sx *= scale
-            sy *= scale
-            sz *= scale
-    sx += vtx * dt
-    sy += vty * dt
-    sz += vtz * dt
     s_t = 8.0 * g_star * sqrt_rd
     f_max = mu_s * abs(f_n)
     spring2 = s_t * s_t * (sx * sx + sy * sy + sz * sz)
@@ -214,7 +211,8 @@ def tangential_force(hist, k, nx, ny, nz, vtx, vty, vtz, g_star, m_star, damping
             ftx *= ratio
             fty *= ratio
             ftz *= ratio
-    hist[k, 0] = sx
-    hist[k, 1] = sy
-    hist[k, 2] = sz
+    if update:
+        hist[k, 0] = sx
+        hist[k, 1] = sy
+        hist[k, 2] = sz
     return ftx, fty, ftz

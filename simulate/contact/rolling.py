@@ -1,5 +1,8 @@
 """Rolling resistance: the constant directional torque model (EDEM "type A", LIGGGHTS ``cdt``)
-and the elastic-plastic spring-dashpot model (Ai et al. 2011 "type C", LIGGGHTS ``epsd2``).
+and the elastic-plastic spring-dashpot model (Ai et al. 2011 "type C", LIGGGHTS ``epsd``).
+
+Each model is one evaluator, ``contact_rolling``, called alike by the engine's sphere-sphere
+and sphere-wall loops (as ``hertz_mindlin`` is for the contact force).
 
 The model is chosen by name (``ROLLING_MODELS``): ``"constant_torque"`` (default) or ``"epsd"``.
 
@@ -38,13 +41,20 @@ photographed 35.8 deg. With ``liggghts_reff`` 7-10 % leave and the face reads 34
 of eight seeds (the other two 42 and 48 deg). The EDEM readings stay selectable.
 
 Cap. A constant torque does not vanish as w -> 0, so an explicit step makes the body spin back
-and forth (Ai et al. 2011). The engine therefore applies the rolling torque of a body after its
-other torques, in each half step of the integrator (``simulate.integrate.half_kick``):
+and forth (Ai et al. 2011). Between two particles (``liggghts_reff``) the pair torque is scaled
+down, for both bodies alike, just enough that its impulse over the step does not reverse their
+relative angular velocity (``pair_rolling_scale``). Against walls, and for every contact with
+the EDEM levers, the engine applies the rolling torque of a body after its other torques, in
+each half step of the integrator (``simulate.integrate.half_kick``):
 
 1. if the summed resistance sum(mu_r F_n R_lever) over the half step could absorb the body's
-   whole angular momentum, the rotation stops: the torque acts as a static constraint up to
+   rolling angular momentum, the rolling stops: the torque acts as a static constraint up to
    its magnitude, so a body whose driving torque is below the rolling resistance rests
-   exactly, as the continuous model says;
+   exactly, as the continuous model says. With ``liggghts_reff`` the rolling part is the
+   rotation about axes in the tangent plane: when all the body's wall contacts share one
+   normal, the spin about that normal (twist, which no rolling model resists) is kept. The
+   EDEM torque acts against the body's whole angular velocity, twist included, and so does
+   its stop;
 2. otherwise the torque acts in full, with w the angular velocity the other torques give, its
    impulse scaled down only so that it never reverses the spin about the current rotation axis
    (``cap_rolling_impulse``; this matters for the anisotropic inertia of a clump).
@@ -65,8 +75,9 @@ on body i, -M on body j (an equal and opposite pair), with
 
     R_r = R_i R_j / (R_i + R_j) (the sphere radius R_i against a wall; the ``rolling_lever``
           conventions belong to the constant torque model and are not used),
-    k_r = 2.25 k_n mu_r^2 R_r^2, k_n = 2 E* sqrt(R* d_n) the Hertz normal stiffness (eq. 15,
-          after Iwashita & Oda 1998),
+    k_r = 2.25 k_n mu_r^2 R_r^2 (eq. 15, after Iwashita & Oda 1998), with k_n = 4/3 E*
+          sqrt(R* d_n) the Hertz secant stiffness F_n / d_n, as LIGGGHTS-PUBLIC 3.8's
+          ``rolling_model_epsd.h`` takes it from ``normal_model_hertz.h``,
     C_r = eta_r 2 sqrt(I_r k_r), eta_r the rolling damping ratio (0.3 recommended, eq. 16),
           1/I_r = 1/I_i + 1/I_j with I_i = 7/5 m_i R_i^2 the moment of inertia about the
           contact point of a sphere of the clump's mass m_i and the touching sphere's radius,
@@ -88,14 +99,15 @@ in discrete element simulations. Powder Technol. 206, 269-282 (model types A and
 Iwashita, K., Oda, M. (1998). Rolling resistance at contacts in simulation of shear band
 development by DEM. J. Eng. Mech. 124(3), 285-292.
 DEM Solutions (2018). EDEM 2018 Theory Reference Guide, "Rolling friction".
-LIGGGHTS-PUBLIC 3.8 documentation, ``gran rolling_friction cdt``.
+LIGGGHTS-PUBLIC 3.8 documentation, ``gran rolling_friction cdt`` and ``epsd``; source files
+``rolling_model_cdt.h``, ``rolling_model_epsd.h`` and ``normal_model_hertz.h``.
 """
 
 from __future__ import annotations
 
 import math
 
-from simulate._jit import evaluator
+from demcal.simulate._jit import evaluator
 
 #: Lever-arm conventions by name; the index is what the kernels receive.
 ROLLING_LEVERS = ("edem_com", "edem_sphere", "liggghts_reff")
@@ -237,3 +249,75 @@ def epsd_rolling_torque(mx, my, mz, wrx, wry, wrz, nx, ny, nz, k_r, c_r, m_max, 
         mz *= scale
         return mx, my, mz, mx, my, mz
     return mx, my, mz, mx - c_r * rx, my - c_r * ry, mz - c_r * rz
+
+
+# ----------------------------------------------------------------------------------------------
+# one evaluator per contact, for the pair loop and the wall loop alike
+
+
+@evaluator
+def rolling_lever(lever, ax, ay, az, sphere_lever, r_eff):
+    """Lever arm [m] of the constant torque for one body at one contact (``ROLLING_LEVERS``):
+    |a| the contact point's distance from the body's centre of mass (``edem_com``), the
+    touching sphere's R - d_n/2 (``edem_sphere``) or R_eff (``liggghts_reff``)."""
+    if lever == EDEM_COM:
+        return math.sqrt(ax * ax + ay * ay + az * az)
+    if lever == EDEM_SPHERE:
+        return sphere_lever
+    return r_eff
+
+
+@evaluator
+def contact_rolling(model, lever, mu_r, f_el, e_star, sqrt_rd, r_roll, lever_i, lever_j,
+                    inertia_r, eta_r, hist, row, col, wrx, wry, wrz, nx, ny, nz, dt):
+    """The rolling resistance of one contact.
+
+    Parameters
+    ----------
+    model, lever : int
+        ``ROLLING_MODELS`` and ``ROLLING_LEVERS`` indices.
+    mu_r, f_el : float
+        Rolling friction coefficient [-] and elastic (Hertz) normal force [N].
+    e_star, sqrt_rd : float
+        Effective Young's modulus [Pa] and sqrt(R* d_n) [m] (spring-dashpot stiffness).
+    r_roll : float
+        Rolling radius R_eff (the sphere radius against a wall) [m].
+    lever_i, lever_j : float
+        Lever arms of the constant torque on bodies i and j (``rolling_lever``) [m].
+    inertia_r : float
+        Moment of inertia about the contact point of the spring-dashpot damping [kg m^2].
+    eta_r : float
+        Spring-dashpot damping ratio [-].
+    hist, row, col : array, int, int
+        Contact history; the spring-dashpot keeps its spring torque in ``hist[row, col:col+3]``.
+    wrx, wry, wrz : float
+        Relative angular velocity w_i - w_j (w_i against a wall) [rad/s].
+    nx, ny, nz : float
+        Unit contact normal.
+    dt : float
+        Time step [s]; 0 evaluates without advancing or writing the history.
+
+    Returns
+    -------
+    (tx, ty, tz, m_i, m_j)
+        Torque vector on body i [N m] (body j receives the opposite; zero with the EDEM levers,
+        whose torque the kick applies against each body's own spin) and the magnitudes
+        mu_r F_n R_lever [N m] of bodies i and j (the limit mu_r F_n R_r with ``epsd``).
+    """
+    if model == EPSD:
+        k_r = 2.25 * (4.0 / 3.0 * e_star * sqrt_rd) * mu_r * mu_r * r_roll * r_roll
+        c_r = eta_r * 2.0 * math.sqrt(inertia_r * k_r)
+        m_max = mu_r * f_el * r_roll
+        sx, sy, sz, tx, ty, tz = epsd_rolling_torque(hist[row, col], hist[row, col + 1],
+                                                     hist[row, col + 2], wrx, wry, wrz,
+                                                     nx, ny, nz, k_r, c_r, m_max, dt)
+        if dt > 0.0:
+            hist[row, col] = sx
+            hist[row, col + 1] = sy
+            hist[row, col + 2] = sz
+        return tx, ty, tz, m_max, m_max
+    if lever == LIGGGHTS_REFF:
+        tx, ty, tz = relative_rolling_torque(mu_r, f_el, r_roll, wrx, wry, wrz, nx, ny, nz)
+        m = mu_r * f_el * r_roll
+        return -tx, -ty, -tz, m, m
+    return 0.0, 0.0, 0.0, mu_r * f_el * lever_i, mu_r * f_el * lever_j

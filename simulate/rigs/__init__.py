@@ -32,9 +32,9 @@ from demcal.errors import InputError
 from demcal.provenance import Provenance
 
 #: Rig name -> "module:function".
-RIGS = {"repose": "simulate.rigs.repose:run_repose",
-        "drop": "simulate.rigs.drop:run_drop",
-        "incline": "simulate.rigs.incline:run_incline"}
+RIGS = {"repose": "demcal.simulate.rigs.repose:run_repose",
+        "drop": "demcal.simulate.rigs.drop:run_drop",
+        "incline": "demcal.simulate.rigs.incline:run_incline"}
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ of mass is still descending as the first contact ends, e.g. one end struck and t
 and the rotational share of the kinetic energy after it.
 
 Multi-sphere contacts. Each member sphere makes its own contact, with the mass of the whole
-body in m* (DESIGN.md, as EDEM). A segment landing flat touches with all n spheres at once:
+body in m* (docs/design.md, as EDEM). A segment landing flat touches with all n spheres at once:
 the body then sees n springs and n dashpots whose damping is set for one, so its damping
 ratio is sqrt(n) times the contact's and the rebound far lower than ``e`` (0.04 instead of
 0.35 for 5 spheres; Kodam et al. 2010). A segment landing end on (one contact through the
@@ -68,14 +68,15 @@ import numpy as np
 
 from demcal.errors import InputError
 from demcal.provenance import Provenance
-from simulate.clump import ClumpTemplate, segment_from_parameters
-from simulate.contact.hertz_mindlin import contact_duration_elastic, effective_modulus
-from simulate.engine import Simulation
-from simulate.integrate import axis_angle_quat, matrix_from_quat, quat_multiply
-from simulate.params import DEMParameters
-from simulate.rigs import RigResult, RunTally, check_seed, run_meta
-from simulate.rigs.surfaces import PARTICLE, make_surface, surface_from_pair
-from simulate.walls import Plane
+from demcal.simulate.clump import ClumpTemplate, segment_from_parameters
+from demcal.simulate.contact.hertz_mindlin import contact_duration_elastic, effective_modulus
+from demcal.simulate.engine import Simulation
+from demcal.simulate.integrate import axis_angle_quat, matrix_from_quat, quat_multiply
+from demcal.simulate.params import DEMParameters
+from demcal.simulate.rigs import RigResult, RunTally, check_seed, run_meta
+from demcal.simulate.rigs.surfaces import PARTICLE, make_surface, surface_from_pair
+from demcal.simulate.walls import Plane
+from demcal.units import GRAVITY
 
 #: The paper's drop height [m] ("fixed at 400 mm").
 PAPER_DROP_HEIGHT = 0.400
@@ -130,7 +131,7 @@ def release_orientation(orientation_deg, rng: np.random.Generator):
     return axis_angle_quat((0.0, 1.0, 0.0), -math.radians(a)), a
 
 
-def shortest_contact_time(template: ClumpTemplate, surface, height: float, gravity: float = 9.81) -> float:
+def shortest_contact_time(template: ClumpTemplate, surface, height: float, gravity: float = GRAVITY) -> float:
     """t_c [s]: the elastic Hertz contact duration of the smallest member sphere against the
     plate, with 1/n of the body mass (n member spheres), at the impact speed sqrt(2 g height)."""
     table = surface.materials
@@ -142,12 +143,12 @@ def shortest_contact_time(template: ClumpTemplate, surface, height: float, gravi
                                     e_star, speed)
 
 
-def automatic_time_step(template: ClumpTemplate, surface, height: float, gravity: float = 9.81) -> float:
+def automatic_time_step(template: ClumpTemplate, surface, height: float, gravity: float = GRAVITY) -> float:
     """dt [s]: t_c / STEPS_PER_CONTACT, capped at MAX_RAYLEIGH_FRACTION of the Rayleigh time.
 
     t_c is :func:`shortest_contact_time`.
     """
-    from simulate.timestep import rayleigh_time
+    from demcal.simulate.timestep import rayleigh_time
     p = surface.materials.material(PARTICLE)
     t_c = shortest_contact_time(template, surface, height, gravity)
     t_r = rayleigh_time(float(template.radii.min()), p.density, p.shear_modulus, p.poisson_ratio)
@@ -210,7 +211,7 @@ def run_drop(params: DEMParameters, seed: int = 0, *, height: float = PAPER_DROP
         raise InputError(f"template must be a ClumpTemplate, got {type(tpl).__name__}")
     rng = np.random.default_rng(seed)
     q, angle = release_orientation(orientation_deg, rng)
-    g = 9.81
+    g = GRAVITY
     if dt is None:
         dt = automatic_time_step(tpl, surface, height, g)
 

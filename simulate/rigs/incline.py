@@ -44,21 +44,21 @@ import numpy as np
 
 from demcal.errors import InputError
 from demcal.provenance import Provenance
-from simulate.clump import ClumpTemplate, segment_from_parameters
-from simulate.engine import Simulation
-from simulate.integrate import axis_angle_quat, matrix_from_quat
-from simulate.params import DEMParameters
-from simulate.rigs import RigResult, RunTally, check_seed, run_meta
-from simulate.rigs.surfaces import PARTICLE, make_surface
-from simulate.scenes import PAPER_TIME_STEP
-from simulate.walls import Plane
+from demcal.simulate.clump import ClumpTemplate, segment_from_parameters
+from demcal.simulate.engine import Simulation
+from demcal.simulate.integrate import axis_angle_quat, matrix_from_quat
+from demcal.simulate.params import DEMParameters
+from demcal.simulate.rigs import RigResult, RunTally, check_seed, run_meta
+from demcal.simulate.rigs.surfaces import PARTICLE, make_surface
+from demcal.simulate.scenes import PAPER_TIME_STEP
+from demcal.simulate.walls import Plane
+from demcal.units import GRAVITY
 
 MODES = ("slide", "roll")
 #: Tilt held constant over each chunk [deg].
 CHUNK_DEG = 0.01
 #: Movement after which the run ends [m].
 STOP_DISTANCE = 0.05
-G = 9.81
 
 
 def rotation_vector(R) -> np.ndarray:
@@ -218,4 +218,4 @@ def run_incline(params: DEMParameters, seed: int = 0, *, mode: str = "slide", su
 def _gravity(tilt_deg: float) -> tuple:
     """Gravity [m/s2] for a plate tilted by ``tilt_deg``, +x down the slope."""
     a = math.radians(tilt_deg)
-    return (G * math.sin(a), 0.0, -G * math.cos(a))
+    return (GRAVITY * math.sin(a), 0.0, -GRAVITY * math.cos(a))

@@ -1,7 +1,7 @@
 """Repose rig: the twin of the plate-withdrawal ("pumping plate") angle-of-repose test.
 
 The lab fills a carton with segments, pulls its end plate up, lets the segments flow out and
-come to rest, and photographs the heap from the side (DESIGN.md, "Rigs"). The twin builds the
+come to rest, and photographs the heap from the side (docs/design.md, "Rigs"). The twin builds the
 same carton (``simulate.scenes.build_paper_repose_case``: carton of inside ``box_length`` x
 ``box_width`` x ``box_height``, x along its length, back wall x = 0, end plate x = L, open top,
 steel floor z = 0), fills it with segments from a particle factory, lifts the plate and lets
@@ -19,7 +19,7 @@ the heap settle. The heap is then measured in three ways:
 ``angle_outside_deg``
     The same fit restricted to the profile beyond the end plate (x > L), from its own top at
     the plate line to its toe. With the paper's carton only about 10 % of the segments leave
-    it, so this heap is a few segments high and its angle noisy (DESIGN.md); it is reported,
+    it, so this heap is a few segments high and its angle noisy (docs/design.md); it is reported,
     not compared.
 
 Profiles (``PROFILES``):
@@ -59,9 +59,10 @@ import numpy as np
 
 from demcal.errors import InputError, WorkbookError
 from demcal.provenance import Provenance
-from simulate.params import DEMParameters
-from simulate.rigs import RigResult, RunTally, check_seed, run_meta
-from simulate.scenes import PAPER_DURATION, PAPER_TIME_STEP, build_paper_repose_case
+from demcal.simulate.params import DEMParameters
+from demcal.simulate.rigs import RigResult, RunTally, check_seed, run_meta
+from demcal.simulate.scenes import PAPER_DURATION, PAPER_TIME_STEP, build_paper_repose_case
+from demcal.units import MM
 
 #: rms speed of the bodies below which a fill or a heap counts as settled [m/s].
 SETTLED_SPEED = 0.005
@@ -92,8 +93,8 @@ class ReposeGeometry:
     fill_count: int = 500
 
     #: meta key -> (field, factor to SI)
-    META_KEYS = {"box_length_mm": ("box_length", 1e-3), "box_width_mm": ("box_width", 1e-3),
-                 "box_height_mm": ("box_height", 1e-3), "plate_lift_speed_mm_s": ("lift_speed", 1e-3),
+    META_KEYS = {"box_length_mm": ("box_length", MM), "box_width_mm": ("box_width", MM),
+                 "box_height_mm": ("box_height", MM), "plate_lift_speed_mm_s": ("lift_speed", MM),
                  "fill_count": ("fill_count", 1)}
 
     def __post_init__(self):
@@ -108,7 +109,7 @@ class ReposeGeometry:
     @classmethod
     def from_meta(cls, meta: dict, file=None) -> "ReposeGeometry":
         """From a workbook ``meta`` dict (keys ``box_length_mm``, ``box_width_mm``,
-        ``box_height_mm``, ``plate_lift_speed_mm_s``, ``fill_count``; lab-workbook.md); a
+        ``box_height_mm``, ``plate_lift_speed_mm_s``, ``fill_count``; docs/workbook.md); a
         missing or empty key keeps the default (200, 100, 250 mm, 100 mm/s, 500). A bad value
         raises ``WorkbookError`` naming the sheet, the key and the value (and ``file``)."""
         values = {}
@@ -294,8 +295,8 @@ def heap_angles(centres, radii, box_length: float, *, px_per_m: float = PX_PER_M
     -------
     HeapAngles
     """
-    from measure.repose import angle_from_photo, angle_from_profile
-    from simulate.render import silhouette
+    from demcal.measure.repose import angle_from_photo, angle_from_profile
+    from demcal.simulate.render import silhouette
 
     c = np.asarray(centres, dtype=float).reshape(-1, 3)
     r = np.broadcast_to(np.asarray(radii, dtype=float), (c.shape[0],))
@@ -379,7 +380,7 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
         [m], ``geometry`` (the carton simulated), ``t_lift``, ``t_clear``, ``t_end`` [s], and
         the kinetic-energy history ``ke_t`` [s], ``ke`` [J].
     """
-    from simulate.extensions import engine_hooks, with_size_distribution  # scipy: only when running
+    from demcal.simulate.extensions import engine_hooks, with_size_distribution  # scipy: only when running
 
     seed = check_seed(seed)
     if not isinstance(params, DEMParameters):
@@ -477,7 +478,7 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
            "body_positions": body[act], "geometry": geo.to_dict(), "t_lift": t_lift, "t_clear": t_clear,
            "t_end": sim.time, "ke_t": np.array(ke_t), "ke": np.array(ke),
            "escapes": [e.to_dict() for e in sim.escaped]}
-    from measure.repose import FLANK_BAND
+    from demcal.measure.repose import FLANK_BAND
     options = {"profile": prof.name, "geometry": base.to_dict(), "force": force,
                "flank_band": list(FLANK_BAND)}
     hooks = engine_hooks(params)

@@ -24,8 +24,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from demcal.errors import InputError
-from simulate.materials import MaterialTable, pair_contact
-from simulate.params import DEMParameters
+from demcal.simulate.materials import MaterialTable, pair_contact
+from demcal.simulate.params import DEMParameters
 
 #: Material name of the bodies in every rig.
 PARTICLE = "particle"

@@ -29,7 +29,7 @@ EXAMPLE = Path(__file__).resolve().parents[2] / "data" / "astragalus" / "workboo
 @pytest.fixture(scope="session")
 def measurement():
     """The example workbook measured once for every campaign test."""
-    from measure.pipeline import measure_workbook
+    from demcal.measure.pipeline import measure_workbook
 
     if not EXAMPLE.exists():
         pytest.skip(f"example workbook missing: {EXAMPLE}")

@@ -4,7 +4,7 @@ exercised by ``demcal calibrate`` and the opt-in validation run.)"""
 
 import pytest
 
-from analyse.campaign import CampaignConfig, calibrate, factor_levels
+from demcal.analyse.campaign import CampaignConfig, calibrate, factor_levels
 from tests.analyse.conftest import EXAMPLE
 from tests.analyse.standin import standin_angle, standin_runner
 
@@ -48,7 +48,7 @@ def test_campaign_finds_the_active_factors_and_the_target(measurement, tmp_path)
 
 
 def test_response_falls_back_to_the_profile_fit_when_the_photo_method_finds_no_slope():
-    from analyse.campaign import _responses
+    from demcal.analyse.campaign import _responses
     from demcal.errors import AnalysisError
 
     records = [{"key": "a", "result": {"observable": {"angle_deg": 31.0, "angle_profile_deg": 30.0}}},
@@ -82,7 +82,7 @@ def test_workflow_and_replicates_default_by_profile_and_survive_the_stored_confi
 
 
 def test_design_point_response_is_the_median_of_its_replicates():
-    from analyse.campaign import _point_responses
+    from demcal.analyse.campaign import _point_responses
 
     records = [{"key": str(i), "result": {"observable": {"angle_deg": a}}}
                for i, a in enumerate([30.0, 47.5, 31.0, 20.0, 22.0, 21.0])]

@@ -26,7 +26,7 @@ KILL_AFTER = 6
 def tiny_repose_runner(inputs: dict) -> dict:
     """The campaign's repose runner; a heap of 25 segments that slid flat and shows no slope
     counts as 0 deg (this test is about the run store, not about the angle)."""
-    from analyse.campaign import repose_runner
+    from demcal.analyse.campaign import repose_runner
 
     result = repose_runner(inputs)
     obs = result["observable"]
@@ -55,7 +55,7 @@ def killed_and_rerun(tmp_path, config: str, kill_after: int, most: int):
     script = f"""
 import sys
 sys.path.insert(0, {str(ROOT)!r})
-from analyse.campaign import CampaignConfig, calibrate
+from demcal.analyse.campaign import CampaignConfig, calibrate
 from tests.analyse.test_campaign_resume import tiny_repose_runner
 calibrate({str(workbook)!r}, {str(out)!r}, {config}, runner=tiny_repose_runner)
 """

@@ -127,13 +127,13 @@ def test_errors_name_file_row_and_column(tmp_path, capsys):
 def test_calibrate_passes_its_options_and_prints_the_validation(tmp_path, capsys, monkeypatch):
     """``demcal calibrate``: the options reach the campaign's settings, and the verdict printed
     is the stored validation's (the campaign itself is tested in test_campaign*.py)."""
-    import analyse.campaign as campaign
+    import demcal.analyse.campaign as campaign
     from pathlib import Path
 
     seen = {}
 
-    def fake_calibrate(workbook, out, config):
-        seen.update(workbook=Path(workbook), config=config)
+    def fake_calibrate(workbook, out, config, measurement=None):
+        seen.update(workbook=Path(workbook), config=config, measurement=measurement)
         return {"target_angle_deg": 36.1, "workflow": config.workflow,
                 "config": {"replicates": config.replicates},
                 "validation": {"settings": {"mu_s_pw": 0.19}, "verdict": "undecided",
@@ -150,6 +150,8 @@ def test_calibrate_passes_its_options_and_prints_the_validation(tmp_path, capsys
                "--no-report"])
     assert rc == 0
     assert seen["workbook"].name == "workbook.xlsx"
+    # the front door measured the workbook before handing it to the campaign
+    assert "repose_angle_deg" in seen["measurement"].quantities
     cfg = seen["config"]
     assert (cfg.profile, cfg.workflow, cfg.replicates, cfg.workers, cfg.seed, cfg.tolerance) == \
         ("paper", "design-expert", 2, 1, 7, 1.5)

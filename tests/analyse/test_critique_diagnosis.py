@@ -9,10 +9,10 @@ import statsmodels.api as sm
 from scipy import stats
 from statsmodels.stats.multitest import multipletests
 
-from analyse.critique import diagnosis
-from analyse.critique.diagnosis import (Series, adjust_pvalues, block_test, mean_test, series_tests,
+from demcal.analyse.critique import diagnosis
+from demcal.analyse.critique.diagnosis import (Series, adjust_pvalues, block_test, mean_test, series_tests,
                                         trend_test)
-from analyse.critique.mechanisms import classify, ill_conditioned, judge
+from demcal.analyse.critique.mechanisms import classify, ill_conditioned, judge
 from demcal.errors import InputError
 
 

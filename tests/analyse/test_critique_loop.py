@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analyse.campaign import CampaignConfig, calibrate
-from analyse.critique import run_critique
-from analyse.critique.cli import register
-from analyse.critique.twins import independent_discrepancy, paired_discrepancy
+from demcal.analyse.campaign import CampaignConfig, calibrate
+from demcal.analyse.critique import run_critique
+from demcal.analyse.critique.cli import register
+from demcal.analyse.critique.twins import independent_discrepancy, paired_discrepancy
 from demcal.errors import InputError
-from measure.pipeline import measure_workbook
-from simulate.virtual_lab import Truth, write_virtual_workbook
+from demcal.measure.pipeline import measure_workbook
+from demcal.simulate.virtual_lab import Truth, write_virtual_workbook
 
 NOISE_SD = 0.3
 
@@ -94,7 +94,7 @@ def test_campaign_ill_conditioned_parameter_and_repose_twin(campaign):
 
 
 def test_cli_writes_critique_json_and_the_report_renders_it(campaign, tmp_path):
-    from report.tables import critique_tables, load_campaign
+    from demcal.report.tables import critique_tables, load_campaign
 
     parser = argparse.ArgumentParser()
     register(parser.add_subparsers())
@@ -151,7 +151,7 @@ def test_example_campaign_drop_twin_says_whether_sqrt_h2_h1_may_feed_the_dem(tmp
 def test_loop_recovers_the_contact_restitution_of_hand_dropped_segments(tmp_path):
     """Virtual drops at any orientation, made with the twin's physics at e_pw = 0.35: the loop
     names orientation_rotation and the inverted contact restitution covers 0.35."""
-    from simulate.virtual_lab import PlantedEffect
+    from demcal.simulate.virtual_lab import PlantedEffect
 
     vw = write_virtual_workbook(Truth(), tmp_path / "lab", effects=(PlantedEffect("orientation_rotation"),),
                                 rng=8, photos="none", pairs=("particle-steel",), drop_heights_mm=(400.0,),

@@ -15,8 +15,8 @@ these signatures); ``test_critique_loop`` runs them.
 
 import pytest
 
-from analyse.critique import run_critique
-from simulate.virtual_lab import EFFECT_DEFAULTS, PlantedEffect, Truth, write_virtual_workbook
+from demcal.analyse.critique import run_critique
+from demcal.simulate.virtual_lab import EFFECT_DEFAULTS, PlantedEffect, Truth, write_virtual_workbook
 
 #: Design of the planted-effect workbooks: every sheet but the photos (their own test below).
 DESIGN = dict(photos="none")

@@ -4,7 +4,7 @@ coding of levels."""
 import numpy as np
 import pytest
 
-from analyse.designs import (PB_GENERATORS, box_behnken, factor_letters, plackett_burman,
+from demcal.analyse.designs import (PB_GENERATORS, box_behnken, factor_letters, plackett_burman,
                              run_order, to_actual, to_coded)
 from demcal.errors import InputError
 

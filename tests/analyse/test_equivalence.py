@@ -12,7 +12,7 @@ import pytest
 from scipy import stats
 from statsmodels.stats.weightstats import ttost_ind, ttost_paired
 
-from analyse.equivalence import (INTERIM_ALPHA, EquivalenceResult, SequentialResult, default_tolerance,
+from demcal.analyse.equivalence import (INTERIM_ALPHA, EquivalenceResult, SequentialResult, default_tolerance,
                                  equivalence_test, runs_for_power, sequential_equivalence,
                                  tost_power)
 from demcal.errors import InputError
@@ -263,7 +263,7 @@ def test_sequential_looks_stop_and_replay():
 
 
 def test_lab_heaps_for_power():
-    from analyse.equivalence import lab_heaps_for_power
+    from demcal.analyse.equivalence import lab_heaps_for_power
 
     m = lab_heaps_for_power(1.0, 40, 1.0, 0.5)
     assert m is not None and m > 3

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from analyse.noise import pooled_noise, replicates_for, seed_correlation
+from demcal.analyse.noise import pooled_noise, replicates_for, seed_correlation
 from demcal.errors import InputError
 
 

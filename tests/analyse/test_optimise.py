@@ -5,11 +5,11 @@ target-angle optimisation and validation, and the steepest climb by hand."""
 import numpy as np
 import pytest
 
-from analyse.designs import box_behnken, to_coded
-from analyse.optimise import (canonical_analysis, optimise, optimise_to_target,
+from demcal.analyse.designs import box_behnken, to_coded
+from demcal.analyse.optimise import (canonical_analysis, optimise, optimise_to_target,
                               steepest_ascent, steepest_climb_analysis, steepest_climb_plan,
                               validate_repeats)
-from analyse.regression import fit_response_surface
+from demcal.analyse.regression import fit_response_surface
 from demcal.errors import InputError
 from tests.analyse.reference import paper_eq5
 
@@ -187,7 +187,7 @@ def test_steepest_climb_by_hand():
 
 
 def test_isotonic_fit_by_hand():
-    from analyse.optimise import isotonic
+    from demcal.analyse.optimise import isotonic
 
     # pool adjacent violators: (44.0, 37.5) pool to 40.75; a falling sequence mirrors it
     assert isotonic([15.1, 32.3, 34.4, 40.0, 44.0, 37.5]).tolist() == pytest.approx(

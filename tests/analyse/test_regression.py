@@ -5,8 +5,8 @@ Type III ANOVA, and a brute-force leave-one-out PRESS."""
 import numpy as np
 import pytest
 
-from analyse.designs import box_behnken, plackett_burman, to_coded
-from analyse.regression import fit_response_surface, significance
+from demcal.analyse.designs import box_behnken, plackett_burman, to_coded
+from demcal.analyse.regression import fit_response_surface, significance
 from demcal.errors import AnalysisError, InputError
 from tests.analyse.reference import PAPER_EQ5, paper_eq5
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from analyse.runs import RunStore, run_all, run_key
+from demcal.analyse.runs import RunStore, run_all, run_key
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -73,7 +73,7 @@ def test_killed_campaign_resumes_without_redoing_finished_runs(tmp_path):
     script = f"""
 import sys
 sys.path.insert(0, {str(ROOT)!r})
-from analyse.runs import RunStore, run_all
+from demcal.analyse.runs import RunStore, run_all
 from tests.analyse.test_runs import square_runner
 tasks = [{{"x": x, "seed": x, "log": {str(log)!r}, "sleep": 0.4}} for x in range(8)]
 out = run_all(tasks, square_runner, RunStore({str(tmp_path / 'runs')!r}), progress=False)

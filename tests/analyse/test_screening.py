@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from analyse.designs import plackett_burman
-from analyse.screening import (box_meyer, lenth, pareto, plackett_burman_screening,
+from demcal.analyse.designs import plackett_burman
+from demcal.analyse.screening import (box_meyer, lenth, pareto, plackett_burman_screening,
                                two_level_effects)
 from demcal.errors import AnalysisError, InputError
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from analyse.surrogate import NoisySurrogate, Prior, next_points, posterior, recommend, space_filling
+from demcal.analyse.surrogate import NoisySurrogate, Prior, next_points, posterior, recommend, space_filling
 
 
 def prior_2d():

@@ -9,11 +9,11 @@ degrees, so the lab's heap-to-heap sd sets the tolerance. The paper's carton is 
 
 import pytest
 
-from analyse.campaign import CampaignConfig, calibrate
-from measure.pipeline import measure_workbook
-from simulate.params import DEMParameters
-from simulate.rigs.repose import ReposeGeometry
-from simulate.virtual_lab import Truth, write_virtual_workbook
+from demcal.analyse.campaign import CampaignConfig, calibrate
+from demcal.measure.pipeline import measure_workbook
+from demcal.simulate.params import DEMParameters
+from demcal.simulate.rigs.repose import ReposeGeometry
+from demcal.simulate.virtual_lab import Truth, write_virtual_workbook
 
 #: Away from the paper's measured values (e 0.3 / 0.35, mu_s 0.65 / 0.2, mu_r 0.53 / 0.15).
 TRUTH = DEMParameters(e_pp=0.45, e_pw=0.5, mu_s_pp=0.55, mu_s_pw=0.3, mu_r_pp=0.45, mu_r_pw=0.1,

@@ -14,9 +14,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from measure.workbook import write_workbook
+from demcal.measure.workbook import write_workbook
+from demcal.units import GRAVITY
 
-G = 9.80665
+G = GRAVITY  # the gravity the estimator assumes
 
 
 def track_frame(e, drop_height=0.3, fps=500.0, t_release=0.02, g=G):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
-import measure.pipeline as pipeline
+import demcal.measure.pipeline as pipeline
 from demcal.cli import main
 from demcal.jsonio import read_json
 from tests.measure.conftest import stub_photo_estimator

@@ -7,8 +7,8 @@ import math
 import pytest
 
 from demcal.errors import InputError
-from measure.density import displacement_density, envelope_density
-from measure.dimensions import cylinder_volume
+from demcal.measure.density import displacement_density, envelope_density
+from demcal.measure.dimensions import cylinder_volume
 
 
 def test_displacement_density_hand_values():

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from demcal.errors import InputError
-from measure.elasticity import (contact_area, elastic_modulus, initial_linear_region,
+from demcal.measure.elasticity import (contact_area, elastic_modulus, initial_linear_region,
                                 poisson_ratio, poisson_ratio_eq1, shear_modulus)
 from tests.measure.conftest import curve_frame
 

@@ -7,7 +7,7 @@ import math
 import pytest
 
 from demcal.errors import InputError
-from measure.estimate import (Estimate, grubbs_critical, mean_sd_ci95, parse_outlier_rule,
+from demcal.measure.estimate import (Estimate, grubbs_critical, mean_sd_ci95, parse_outlier_rule,
                               screen_outliers, summarise)
 
 SOURCE = {"file": "f.csv", "sheet": "s", "sha256": "0" * 64}

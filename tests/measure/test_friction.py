@@ -10,8 +10,8 @@ import pandas as pd
 import pytest
 
 from demcal.errors import InputError
-from measure.estimate import summarise
-from measure.friction import from_tilt_angle, from_tilt_height, rolling_from_rollout
+from demcal.measure.estimate import summarise
+from demcal.measure.friction import from_tilt_angle, from_tilt_height, rolling_from_rollout
 
 EXTERNAL = Path("/work/shared/external/lab_tests")
 

@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 
-import measure.pipeline as pipeline
+import demcal.measure.pipeline as pipeline
 from demcal.errors import InputError, WorkbookError
 from demcal.jsonio import read_json, write_json
-from measure.pipeline import Measurement, measure_workbook
-from measure.workbook import read_workbook
+from demcal.measure.pipeline import Measurement, measure_workbook
+from demcal.measure.workbook import read_workbook
 from tests.measure.conftest import curve_frame, stub_photo_estimator
 
 T = math.tan

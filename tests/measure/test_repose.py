@@ -26,9 +26,9 @@ import demcal.cli
 from demcal.errors import InputError
 from demcal.jsonio import to_jsonable
 from demcal.provenance import sha256_file
-from measure.repose import angle_from_drum, angle_from_photo, angle_from_profile
-from measure.repose_cli import register
-from simulate.render import Lighting, heap_photo, heap_profile, silhouette
+from demcal.measure.repose import angle_from_drum, angle_from_photo, angle_from_profile
+from demcal.measure.repose_cli import register
+from demcal.simulate.render import Lighting, heap_photo, heap_profile, silhouette
 
 EXTERNAL_IMAGES = Path("/work/shared/external/images")
 
@@ -435,7 +435,7 @@ def test_cli_writes_json_and_annotated_image(tmp_path, cone_photo, capsys):
 
 
 def test_cli_bad_input_exits_2_with_one_line(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(demcal.cli, "STAGE_CLIS", ("measure.repose_cli",))
+    monkeypatch.setattr(demcal.cli, "STAGE_CLIS", ("demcal.measure.repose_cli",))
     garbage = tmp_path / "bad.jpg"
     garbage.write_bytes(b"not an image")
     code = demcal.cli.main(["repose", str(garbage), "--json", str(tmp_path / "o.json")])

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 from demcal.errors import InputError
-from measure.workbook import read_workbook, resolve_workbook
+from demcal.measure.workbook import read_workbook, resolve_workbook
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "data" / "astragalus" / "workbook.xlsx"
 

@@ -10,11 +10,12 @@ import pandas as pd
 import pytest
 
 from demcal.errors import InputError
-from measure.restitution import (from_camera_track, from_height_regression,
+from demcal.measure.restitution import (from_camera_track, from_height_regression,
                                  from_rebound_heights)
+from demcal.units import GRAVITY
 
 EXTERNAL = Path("/work/shared/external/lab_tests")
-G = 9.80665
+G = GRAVITY  # the gravity the estimator assumes
 
 
 def test_from_rebound_heights_source_paper_eq4():

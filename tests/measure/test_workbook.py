@@ -1,4 +1,4 @@
-"""Reading and validating the lab workbook (lab-workbook.md), as .xlsx and as a CSV folder."""
+"""Reading and validating the lab workbook (docs/workbook.md), as .xlsx and as a CSV folder."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 
 from demcal.errors import InputError, WorkbookError
 from demcal.provenance import sha256_file
-from measure.workbook import read_workbook, write_workbook
+from demcal.measure.workbook import read_workbook, write_workbook
 from tests.measure.conftest import write_attachments
 
 

@@ -13,10 +13,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from analyse.campaign import CampaignConfig, calibrate
+from demcal.analyse.campaign import CampaignConfig, calibrate
 from demcal.cli import main
 from demcal.provenance import sha256_file
-from report.render import build_report, write_tables
+from demcal.report.render import build_report, write_tables
 from tests.analyse.standin import standin_runner
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -207,6 +207,62 @@ def test_audit_names_a_changed_table_cell(campaign, capsys, tmp_path):
     assert "audit: FAILED" in text
 
 
+def _copy(campaign, tmp_path) -> Path:
+    out = tmp_path / "copy"
+    shutil.copytree(campaign["out"], out)
+    return out
+
+
+def test_audit_names_a_changed_number_in_results_json(campaign, capsys, tmp_path):
+    out = _copy(campaign, tmp_path)
+    res = json.loads((out / "results.json").read_text())
+    true = res["validation"]["mean_deg"]
+    res["validation"]["mean_deg"] = true + 0.5
+    (out / "results.json").write_text(json.dumps(res))
+    code, text = _audit(capsys, out)
+    assert code == 1
+    assert f"results.json, validation.mean_deg: reads {true + 0.5!r}, re-derived {true!r}" in text
+    # the report was built from the true value: it still agrees with the sources
+    assert re.search(r"^report\.html: OK$", text, re.M) and re.search(r"^report\.pdf: OK$", text, re.M)
+    assert "audit: FAILED" in text and "differs: results.json" in text
+
+
+def test_audit_names_a_changed_cell_of_report_html(campaign, capsys, tmp_path):
+    out = _copy(campaign, tmp_path)
+    html = (out / "report.html").read_text(encoding="utf-8")
+    label, cells = next((r[1][0], r[1]) for r in _html_rows(html, "2") if r[1][0].startswith("Mass"))
+    j = next(j for j, c in enumerate(cells) if j > 0 and re.fullmatch(r"\d+\.\d+", c))
+    start = html.index('id="table-2"')
+    row_at = html.index(f">{label}</td>", start)
+    cell_at = html.index(f">{cells[j]}</td>", row_at)
+    changed = f"{float(cells[j]) + 1:.{len(cells[j].split('.')[1])}f}"
+    html = html[:cell_at + 1] + changed + html[cell_at + 1 + len(cells[j]):]
+    (out / "report.html").write_text(html, encoding="utf-8")
+    code, text = _audit(capsys, out)
+    assert code == 1
+    column = campaign["tables"]["2"]["columns"][j]
+    line = next(ln for ln in text.splitlines() if ln.strip().startswith("report.html, Table 2"))
+    assert f"row 3 ({label})" in line or f"({label})" in line
+    assert f"column '{column}" in line and repr(changed) in line and repr(cells[j]) in line
+    assert re.search(r"^results\.json: OK$", text, re.M) and re.search(r"^report\.pdf: OK$", text, re.M)
+
+
+def test_audit_names_a_changed_number_in_report_pdf(campaign, capsys, tmp_path):
+    from demcal.report.render import write_pdf
+
+    out = _copy(campaign, tmp_path)
+    html = (out / "report.html").read_text(encoding="utf-8")
+    m = re.search(r"The mean\s+over the photos, (\d+\.\d+)°", html)
+    true = m.group(1)
+    changed = f"{float(true) + 2:.{len(true.split('.')[1])}f}"
+    write_pdf(html[:m.start(1)] + changed + html[m.end(1):], out / "report.pdf", base_url=out)
+    code, text = _audit(capsys, out)
+    assert code == 1
+    line = next(ln for ln in text.splitlines() if ln.strip().startswith("report.pdf, page"))
+    assert f"{changed}°" in line and f"{true}°" in line
+    assert re.search(r"^report\.html: OK$", text, re.M) and re.search(r"^results\.json: OK$", text, re.M)
+
+
 def test_audit_names_a_missing_run_record(campaign, capsys, tmp_path):
     out = tmp_path / "copy"
     shutil.copytree(campaign["out"], out)
@@ -299,7 +355,7 @@ def test_tables_render_when_lenth_has_no_pse(campaign, tmp_path):
     import json
     import shutil
 
-    from report.tables import build_tables, load_campaign
+    from demcal.report.tables import build_tables, load_campaign
 
     out = tmp_path / "campaign"
     shutil.copytree(campaign["out"], out)
@@ -412,30 +468,30 @@ def _html_rows(text: str, table_id: str) -> list[tuple[str, list[str]]]:
 
 
 def test_critique_summary_opens_the_critique_section(critique_report):
-    import html as htmllib
+    import markupsafe  # the escaping of the report's template (jinja2 autoescape)
 
     text = critique_report["html"]
     start, c1 = text.index("Critique of the calibrated model"), text.index('id="table-C1"')
     for sentence in CRITIQUE["summary"]:
-        para = f"<p>{htmllib.escape(sentence)}</p>"
+        para = f"<p>{markupsafe.escape(sentence)}</p>"
         assert text.count(para) == 1, sentence[:40]                  # each sentence once, as a paragraph
         assert start < text.index(para) < c1                         # before the tables
     # the answer on sqrt(h2/h1) leads, with the twin's apparent restitution against the measured one
     box = text[text.index('<div class="direct-use">'):]
     box = box[:box.index("</div>")]
-    assert ("<b>restitution.particle-steel: sqrt(h2/h1) may not feed the DEM directly. The lab&#x27;s drops "
+    assert ("<b>restitution.particle-steel: sqrt(h2/h1) may not feed the DEM directly. The lab&#39;s drops "
             "give sqrt(h2/h1) = 0.352 [0.339, 0.365] (n 20); the drop twin rebounds with an apparent 0.281 "
             "[0.268, 0.294] (n 20): measured minus twin 0.0712, beyond its 95 % uncertainty ±0.0121 "
             "(Table C1).</b>") in box
     # ... and the gain of the extension that fixes it, from the summary
     assert "gain 0.0631 [0.0512, 0.0748]: it helps" in box and "0.0712 before, 0.00814 after" in box
-    assert "restitution.particle-wood: not assessed; the lab&#x27;s sqrt(h2/h1) is 0.41 [0.38, 0.44]" in box
-    assert htmllib.escape(CRITIQUE["summary"][2]) not in box         # the finding follows the box
+    assert "restitution.particle-wood: not assessed; the lab&#39;s sqrt(h2/h1) is 0.41 [0.38, 0.44]" in box
+    assert str(markupsafe.escape(CRITIQUE["summary"][2])) not in box         # the finding follows the box
     assert box.index("restitution.particle-steel: sqrt") < box.index("restitution.particle-wood")
 
 
 def test_table_c4_lists_every_covariate_test_sorted_and_marked(critique_report):
-    from report.render import format_cell
+    from demcal.report.render import format_cell
 
     c4 = critique_report["tables"]["C4"]
     tests = CRITIQUE["tests"]

@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from report.audit import compare_tables
-from report.figures import polynomial
-from report.render import format_cell
-from report.tables import Table, row_ranges
+from demcal.report.audit import compare_tables
+from demcal.report.figures import polynomial
+from demcal.report.render import format_cell
+from demcal.report.tables import Table, row_ranges
 
 
 def _table(rows):
@@ -56,7 +56,7 @@ def test_polynomial_evaluates_design_expert_terms():
 
 
 def test_heap_profile_reads_both_record_layouts():
-    from report.figures import heap_profile
+    from demcal.report.figures import heap_profile
 
     standin = {"result": {"record": {"profile": {"x": [0.0, 0.1, 0.2], "z": [0.08, 0.08, 0.0]}}}}
     rig = {"result": {"record": {"profile_x": [0.0, 0.1, 0.2, 0.3], "profile_z": [0.05, float("nan"), 0.02, 0.0],
@@ -69,7 +69,7 @@ def test_heap_profile_reads_both_record_layouts():
 
 
 def test_covariate_tests_table_sorts_by_adjusted_p_and_keeps_every_test_and_field():
-    from report.tables import Campaign, table_covariate_tests
+    from demcal.report.tables import Campaign, table_covariate_tests
 
     def t(series, p, p_adj, **kw):
         return {"series": series, "sheet": "drop", "source": "measured", "covariate": "drop_height_mm",
@@ -94,7 +94,7 @@ def test_covariate_tests_table_sorts_by_adjusted_p_and_keeps_every_test_and_fiel
 
 
 def test_critique_text_states_direct_use_and_each_summary_sentence_once():
-    from report.render import critique_text
+    from demcal.report.render import critique_text
 
     drop = {"observable": "restitution.particle-particle (drop twin, apparent sqrt(h2/h1))", "measured": 0.3,
             "measured_ci95": [0.28, 0.32], "simulated": 0.29, "simulated_ci95": [0.27, 0.31], "difference": 0.01,

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from simulate import DEMParameters, MaterialTable, Plane, Simulation
-from simulate.clump import make_template
+from demcal.simulate import DEMParameters, MaterialTable, Plane, Simulation
+from demcal.simulate.clump import make_template
 
 #: Radius of the paper's spheres [m].
 R = 0.0055

@@ -6,7 +6,7 @@ import pytest
 
 from demcal.cli import main
 from demcal.jsonio import read_json
-from measure.workbook import write_workbook
+from demcal.measure.workbook import write_workbook
 
 JSON_KEYS = {"rig", "observable", "wall_s", "steps", "spheres", "sphere_steps_per_s", "seed",
              "params", "record", "provenance"}
@@ -54,7 +54,7 @@ def test_simulate_repose_geometry_from_workbook(tmp_path):
     assert JSON_KEYS <= set(doc) and doc["profile"] == "quick"
     assert set(doc["observable"]) == {"angle_deg", "angle_profile_deg", "angle_outside_deg", "escaped",
                                       "outside_fraction"}
-    from simulate.rigs.repose import PROFILES
+    from demcal.simulate.rigs.repose import PROFILES
     s = PROFILES["quick"].scale
     assert doc["record"]["geometry"]["box_length"] == pytest.approx(0.08 * s)
     assert doc["record"]["geometry"]["fill_count"] == round(60 * s ** 3)
@@ -64,7 +64,7 @@ def test_simulate_repose_geometry_from_workbook(tmp_path):
 
 
 def test_simulate_vtk_frames(tmp_path):
-    pytest.importorskip("simulate.vtk")
+    pytest.importorskip("demcal.simulate.vtk")
     frames = tmp_path / "frames"
     assert main(["simulate", "incline", "--tilt-rate", "4", "--vtk", str(frames)]) == 0
     written = sorted(p.name for p in frames.glob("*.vtp"))

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from demcal.errors import InputError
-from simulate.clump import (make_template, segment_centres, segment_template, union_mass_properties)
+from demcal.simulate.clump import (make_template, segment_centres, segment_template, union_mass_properties)
 
 
 def _monte_carlo(centres, radii, density, n, seed):

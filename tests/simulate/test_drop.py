@@ -13,9 +13,9 @@ import math
 import numpy as np
 import pytest
 
-from simulate import DEMParameters
-from simulate.clump import segment_template
-from simulate.integrate import matrix_from_quat, random_quaternions
+from demcal.simulate import DEMParameters
+from demcal.simulate.clump import segment_template
+from demcal.simulate.integrate import matrix_from_quat, random_quaternions
 from tests.simulate.helpers import floor, simulation, sphere_template
 
 G = 9.81

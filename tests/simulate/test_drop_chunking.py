@@ -12,8 +12,8 @@ import math
 
 import pytest
 
-import simulate.rigs.drop as drop
-from simulate.params import DEMParameters
+import demcal.simulate.rigs.drop as drop
+from demcal.simulate.params import DEMParameters
 
 PARAMS = DEMParameters()
 EVENTS = ("t_contact", "t_separation", "t_apex", "z_contact", "z_apex")

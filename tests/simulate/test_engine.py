@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from demcal.errors import InputError, SimulationError
-from simulate import DEMParameters, MaterialTable, Plane, Simulation, rayleigh_time
-from simulate.clump import segment_from_parameters
-from simulate.integrate import axis_angle_quat
+from demcal.simulate import DEMParameters, MaterialTable, Plane, Simulation, rayleigh_time
+from demcal.simulate.clump import segment_from_parameters
+from demcal.simulate.integrate import axis_angle_quat
 from tests.simulate.helpers import R, floor, simulation, sphere_template
 
 

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from demcal.errors import InputError
-from simulate import DEMParameters, ParticleFactory
-from simulate.clump import segment_from_parameters
-from simulate.walls import box_rectangles
+from demcal.simulate import DEMParameters, ParticleFactory
+from demcal.simulate.clump import segment_from_parameters
+from demcal.simulate.walls import box_rectangles
 from tests.simulate.helpers import floor, simulation
 
 LO, HI = np.array([0.01, 0.01, 0.10]), np.array([0.19, 0.09, 0.24])
@@ -88,7 +88,7 @@ SIZES = ((0.021, 0.0095), (0.023, 0.0100), (0.025, 0.0110), (0.025, 0.0110), (0.
 def _sized_sim(n, seed, sizes=SIZES, dt=7.43678e-5):
     from collections import Counter
 
-    from simulate.extensions import segment_of_size
+    from demcal.simulate.extensions import segment_of_size
 
     params = DEMParameters()
     sim = simulation(params, dt=dt, lo=(-0.3, -0.3, -0.3), hi=(0.3, 0.3, 0.3))
@@ -158,7 +158,7 @@ def test_single_template_in_a_list_is_the_single_template_factory():
 
 def test_time_step_check_uses_the_smallest_sphere_of_all_templates():
     from demcal.errors import UnsafeTimeStepError
-    from simulate import rayleigh_time
+    from demcal.simulate import rayleigh_time
 
     t_small = rayleigh_time(0.0095 / 2, 912.0, 1e7, 0.25)
     t_large = rayleigh_time(0.0125 / 2, 912.0, 1e7, 0.25)

@@ -13,8 +13,8 @@ import math
 
 import pytest
 
-from simulate import DEMParameters
-from simulate.clump import make_template
+from demcal.simulate import DEMParameters
+from demcal.simulate.clump import make_template
 from tests.simulate.helpers import R, floor, simulation
 
 

@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from simulate import DEMParameters
-from simulate.clump import segment_template
-from simulate.integrate import random_quaternions
+from demcal.simulate import DEMParameters
+from demcal.simulate.clump import segment_template
+from demcal.simulate.integrate import random_quaternions
 from tests.simulate.helpers import simulation
 
 

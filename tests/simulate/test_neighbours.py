@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from simulate import DEMParameters
-from simulate.clump import segment_template
-from simulate.neighbours import build_pair_list, build_wall_list, grid_shape, padded_cell_count
-from simulate.walls import Plane, Rectangle, pack_walls, wall_distances
+from demcal.simulate import DEMParameters
+from demcal.simulate.clump import segment_template
+from demcal.simulate.neighbours import build_pair_list, build_wall_list, grid_shape, padded_cell_count
+from demcal.simulate.walls import Plane, Rectangle, pack_walls, wall_distances
 from tests.simulate.helpers import R, floor, simulation
 
 

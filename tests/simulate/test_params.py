@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from demcal.errors import InputError
-from simulate import DEMParameters
+from demcal.simulate import DEMParameters
 
 
 def test_defaults_are_the_paper_values():

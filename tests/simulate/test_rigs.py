@@ -20,12 +20,12 @@ from scipy.integrate import solve_ivp
 
 from demcal.errors import InputError, WorkbookError
 from demcal.jsonio import read_json, write_json
-from simulate.clump import make_template
-from simulate.params import DEMParameters
-from simulate.rigs import RIGS, RigResult, run_rig
-from simulate.rigs.drop import release_orientation
-from simulate.rigs.repose import PROFILES, ReposeGeometry, ReposeProfile, heap_angles, top_profile
-from simulate.rigs.surfaces import make_surface, surface_from_pair
+from demcal.simulate.clump import make_template
+from demcal.simulate.params import DEMParameters
+from demcal.simulate.rigs import RIGS, RigResult, run_rig
+from demcal.simulate.rigs.drop import release_orientation
+from demcal.simulate.rigs.repose import PROFILES, ReposeGeometry, ReposeProfile, heap_angles, top_profile
+from demcal.simulate.rigs.surfaces import make_surface, surface_from_pair
 
 PARAMS = DEMParameters()
 R = 0.0055

@@ -11,8 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from simulate.params import DEMParameters
-from simulate.rigs import run_rig
+from demcal.simulate.params import DEMParameters
+from demcal.simulate.rigs import run_rig
 
 pytestmark = pytest.mark.validation
 

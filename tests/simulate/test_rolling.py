@@ -13,8 +13,8 @@ import math
 import numpy as np
 import pytest
 
-from simulate import DEMParameters
-from simulate.clump import segment_template
+from demcal.simulate import DEMParameters
+from demcal.simulate.clump import segment_template
 from tests.simulate.helpers import R, floor, simulation, sphere_template
 
 MU_R = 0.15
@@ -94,20 +94,26 @@ def test_lever_arms_of_a_segment_lying_on_the_floor_by_hand():
 
 def test_liggghts_pair_torque_by_hand():
     # two spheres pressed together, one spinning about z: torque -mu_r F_el R_eff w/|w| on it,
-    # the opposite on the other (normal along x, so w is tangential)
-    params = DEMParameters(mu_r_pp=0.4)
-    sim = simulation(params, dt=1e-6, rolling_lever="liggghts_reff")
-    tpl = sphere_template(sim)
+    # the opposite on the other (normal along x, so w is tangential); a particle pair's rolling
+    # torque is an ordinary pair torque, so it is the torque with mu_r minus the one without
+    def pressed(mu_r):
+        sim = simulation(DEMParameters(mu_r_pp=mu_r), dt=1e-6, rolling_lever="liggghts_reff")
+        tpl = sphere_template(sim)
+        sim.add_clump(tpl, (0.0, 0.0, 0.0), angular_velocity=(0.0, 0.0, 3.0))
+        sim.add_clump(tpl, (2 * R - overlap, 0.0, 0.0))
+        sim.evaluate_forces()
+        return sim
+
     overlap = 5e-5
-    sim.add_clump(tpl, (0.0, 0.0, 0.0), angular_velocity=(0.0, 0.0, 3.0))
-    sim.add_clump(tpl, (2 * R - overlap, 0.0, 0.0))
-    sim.evaluate_forces()
+    sim, plain = pressed(0.4), pressed(0.0)
     e_p = 2 * 1e7 * 1.25
     e_star = 1.0 / (2 * (1 - 0.25 ** 2) / e_p)
     r_eff = R * R / (2 * R)
     f_el = 4.0 / 3.0 * e_star * math.sqrt(r_eff) * overlap ** 1.5
-    magnitude, vector = sim.rolling_resistance()
-    np.testing.assert_allclose(vector[0], [0.0, 0.0, -0.4 * f_el * r_eff], rtol=1e-10, atol=1e-20)
+    rolling = sim.contact_forces()[1] - plain.contact_forces()[1]
+    np.testing.assert_allclose(rolling[0], [0.0, 0.0, -0.4 * f_el * r_eff], rtol=1e-9, atol=1e-18)
+    np.testing.assert_allclose(rolling[1], -rolling[0], rtol=1e-12, atol=1e-20)
     # a particle contact resists relative rolling only, so it never holds a body still
+    magnitude, vector = sim.rolling_resistance()
     np.testing.assert_array_equal(magnitude, [0.0, 0.0])
-    np.testing.assert_allclose(vector[1], -vector[0], rtol=1e-12, atol=1e-20)
+    np.testing.assert_array_equal(vector, np.zeros((2, 3)))

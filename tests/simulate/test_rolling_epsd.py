@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from demcal.errors import InputError
-from simulate import DEMParameters, MaterialTable
+from demcal.simulate import DEMParameters, MaterialTable
 from tests.simulate.helpers import R, floor, simulation, sphere_template
 from tests.simulate.test_rolling import MU_R, slope_run
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from simulate import DEMParameters
-from simulate.scenes import PAPER_DURATION, build_paper_repose_case
+from demcal.simulate import DEMParameters
+from demcal.simulate.scenes import PAPER_DURATION, build_paper_repose_case
 
 #: The LIGGGHTS benchmark's parameters (the paper's calibrated values, cylinder mass model).
 BENCHMARK = dict(e_pp=0.32, e_pw=0.36, mu_s_pw=0.22, mass_model="cylinder")
@@ -43,7 +43,7 @@ def test_scaled_down_repose_case_forms_a_heap():
 
 @pytest.mark.validation
 def test_paper_repose_case_full_run_liggghts_convention():
-    # DESIGN.md (LIGGGHTS, 5 seeds): with these frictions only about 10 % of the segments
+    # docs/design.md (LIGGGHTS, 5 seeds): with these frictions only about 10 % of the segments
     # leave the 200 x 100 mm carton; the same rolling convention should give the same picture
     params = DEMParameters().with_(rolling_lever="liggghts_reff", **BENCHMARK)
     sim = build_paper_repose_case(params, seed=1)
@@ -57,7 +57,7 @@ def test_paper_repose_case_full_run_liggghts_convention():
 
 
 def test_repose_case_draws_segments_from_a_size_distribution():
-    from simulate.extensions import SizeDistribution, segment_of_size
+    from demcal.simulate.extensions import SizeDistribution, segment_of_size
 
     dist = SizeDistribution(lengths=(0.022, 0.025, 0.025, 0.028), diameters=(0.010, 0.011, 0.011, 0.012))
     params = DEMParameters().with_(**BENCHMARK)

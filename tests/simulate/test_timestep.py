@@ -7,15 +7,15 @@ import math
 import pytest
 
 from demcal.errors import UnsafeTimeStepError
-from simulate import DEMParameters, rayleigh_time
-from simulate.clump import segment_from_parameters
+from demcal.simulate import DEMParameters, rayleigh_time
+from demcal.simulate.clump import segment_from_parameters
 from tests.simulate.helpers import simulation
 
 
 def test_rayleigh_time_by_hand_and_paper_fraction():
     t_r = math.pi * 0.0055 * math.sqrt(912 / 1e7) / (0.1631 * 0.25 + 0.8766)
     assert rayleigh_time(0.0055, 912.0, 1e7, 0.25) == pytest.approx(t_r, rel=1e-14)
-    # the paper's step is 0.41 T_R at G = 1e7 Pa (DESIGN.md)
+    # the paper's step is 0.41 T_R at G = 1e7 Pa (docs/design.md)
     assert 7.43678e-5 / t_r == pytest.approx(0.41, abs=0.005)
 
 

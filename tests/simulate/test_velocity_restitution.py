@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 from demcal.errors import InputError
-from simulate import DEMParameters, MaterialTable
-from simulate.clump import segment_template
-from simulate.integrate import axis_angle_quat
+from demcal.simulate import DEMParameters, MaterialTable
+from demcal.simulate.clump import segment_template
+from demcal.simulate.integrate import axis_angle_quat
 from tests.simulate.helpers import R, floor, simulation, sphere_template
 
 G = 9.81

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from demcal.errors import InputError
-from measure.pipeline import measure_workbook
-from measure.workbook import read_workbook
-from simulate.params import DEMParameters
-from simulate.virtual_lab import (EFFECT_KINDS, PlantedEffect, Truth, VirtualWorkbook, drop_twin_ratio,
+from demcal.measure.pipeline import measure_workbook
+from demcal.measure.workbook import read_workbook
+from demcal.simulate.params import DEMParameters
+from demcal.simulate.virtual_lab import (EFFECT_KINDS, PlantedEffect, Truth, VirtualWorkbook, drop_twin_ratio,
                                   write_virtual_workbook)
 
 

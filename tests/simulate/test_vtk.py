@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from demcal.errors import InputError
-from simulate import DEMParameters
-from simulate.clump import segment_from_parameters
-from simulate.vtk import read_vtp, write_vtp
+from demcal.simulate import DEMParameters
+from demcal.simulate.clump import segment_from_parameters
+from demcal.simulate.vtk import read_vtp, write_vtp
 from tests.simulate.helpers import simulation
 
 

@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from simulate import DEMParameters, Rectangle
-from simulate.walls import box_rectangles
+from demcal.simulate import DEMParameters, Rectangle
+from demcal.simulate.walls import box_rectangles
 from tests.simulate.helpers import R, simulation, sphere_template
 
 

@@ -1,0 +1,117 @@
+"""``demcal calibrate``: the whole calibration, composed from the stages.
+
+    measure (demcal.measure) -> DEM campaign (demcal.analyse) -> report (demcal.report)
+
+The workbook is measured before any DEM run, so a bad workbook costs nothing; finished DEM runs
+are kept in ``DIR/runs`` and never redone, so a killed campaign resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from demcal.errors import InputError
+
+
+def register(subparsers) -> None:
+    """Add ``demcal calibrate``."""
+    cal = subparsers.add_parser(
+        "calibrate", help="whole calibration: measure, runs of the repose twin, the parameters "
+        "consistent with the lab, validation (runs the DEM)",
+        description="Calibrate DEM parameters from a lab workbook. With --profile quick (the "
+        "plausible workflow): measure the noise, run a space-filling design and sequential runs, "
+        "fit a surrogate that models the noise, report the set of parameters consistent with "
+        "the measured angle and validate by an equivalence test. With --profile paper (the "
+        "design-expert workflow): the source paper's Plackett-Burman screening, steepest climb, "
+        "Box-Behnken design, optimisation and validation. Finished DEM runs are kept in DIR/runs "
+        "and never redone, so a killed campaign resumes where it stopped.")
+    cal.add_argument("workbook", type=Path, help="lab workbook (.xlsx, or a folder of CSVs "
+                     "or holding workbook.xlsx)")
+    cal.add_argument("--out", required=True, type=Path, help="output folder")
+    cal.add_argument("--profile", choices=("quick", "paper"), default="quick",
+                     help="repose-rig profile (default quick; paper = the source paper's case)")
+    cal.add_argument("--workers", type=int, default=None,
+                     help="local worker processes (default: all cores)")
+    cal.add_argument("--scheduler", help="Dask scheduler address (e.g. tcp://host:8786); "
+                     "runs go to that cluster")
+    cal.add_argument("--levels", choices=("minmax", "sd"), default="minmax",
+                     help="screening levels: measured min/max (default, as the paper) or mean -+ sd")
+    cal.add_argument("--workflow", choices=("plausible", "design-expert"), default=None,
+                     help="plausible (default with --profile quick) or design-expert (default "
+                          "with --profile paper)")
+    cal.add_argument("--seed", type=int, default=1,
+                     help="campaign seed: every run of every stage, validation included, draws "
+                          "its seed from it (default 1)")
+    cal.add_argument("--replicates", type=int, default=None,
+                     help="DEM runs per design point (default: plausible, from the measured "
+                          "noise; design-expert, 1 as the paper did)")
+    cal.add_argument("--budget", type=int, default=None, dest="budget_runs",
+                     help="plausible: most runs of design and sequential rounds (default 72)")
+    cal.add_argument("--validation-cap", type=int, default=None,
+                     help="plausible: most validation runs (default 40)")
+    cal.add_argument("--tolerance", type=float, default=None,
+                     help="equivalence tolerance of the validation [deg] (default: the larger of "
+                          "1 deg and the lab's heap-to-heap sd)")
+    cal.add_argument("--no-report", action="store_true", help="skip the HTML/PDF report")
+    cal.set_defaults(handler=_run_calibrate)
+
+
+def calibration_summary(results: dict) -> str:
+    """The headline of a campaign: calibrated values (with the plausible set's 95 % intervals)
+    and the validation verdict."""
+    v = results["validation"]
+    lines = [f"target angle {results['target_angle_deg']:.2f} deg ({results['workflow']} workflow)"]
+    cal = results.get("calibration")
+    if cal:
+        for name, p in cal["parameters"].items():
+            lines.append(f"  {name:14s} {p['value']:.4g}  95 % set [{p['ci95'][0]:.4g}, {p['ci95'][1]:.4g}]"
+                         f"  posterior/prior sd {p['sd_ratio']:.2f} ({p['identifiability']})")
+        rec = cal["recommended"]
+        lines.append(f"  predicted mean angle at the recommended point {rec['predicted']:.2f} "
+                     f"+- {rec['predicted_sd']:.2f} deg")
+    else:
+        lines.append("calibrated " + ", ".join(f"{k} = {x:.4g}" for k, x in v["settings"].items()))
+    ci = v.get("ci95") or [float("nan")] * 2
+    lines.append(f"validation: {v['verdict']} (tolerance {v['tolerance_deg']:.2f} deg): mean "
+                 f"{v['mean_deg']:.2f} deg over {v['n_runs']} runs, 95 % CI [{ci[0]:.2f}, {ci[1]:.2f}], "
+                 f"target {v['target_deg']:.2f}; smallest bias it would detect {v['detectable_bias_deg']:.2f} deg")
+    if v.get("power_if_on_target") is not None and v["power_if_on_target"] < 0.8:
+        def n(x):
+            return "more than 1000" if x is None else str(x)
+        lines.append(f"  power to show equivalence even exactly on target: {v['power_if_on_target']:.2f}; "
+                     f"80 % would take {n(v.get('runs_for_power'))} runs against this lab target, "
+                     f"{n(v.get('runs_for_power_exact_target'))} against an exactly known one")
+    conf = v.get("confirmation")
+    if conf:
+        lo, hi = conf["pi95"]
+        lines.append(f"Design-Expert confirmation: predicted {conf['predicted']:.2f} deg, 95 % PI of the "
+                     f"mean of {v['n_runs']} runs [{lo:.2f}, {hi:.2f}]: the target lies "
+                     + ("inside" if conf["target_inside"] else "outside"))
+    return "\n".join(lines)
+
+
+def _run_calibrate(args) -> int:
+    from demcal.analyse.campaign import CampaignConfig, calibrate
+    from demcal.measure.pipeline import measure_workbook
+    from demcal.measure.workbook import resolve_workbook
+    from demcal.report.render import build_report
+
+    workbook = resolve_workbook(args.workbook)
+    optional = {name: getattr(args, name) for name in ("workers", "budget_runs", "tolerance")
+                if getattr(args, name) is not None}
+    if args.validation_cap is not None:
+        optional["validation_cap"] = args.validation_cap
+    config = CampaignConfig(profile=args.profile, workflow=args.workflow, levels=args.levels,
+                            seed=args.seed, replicates=args.replicates, scheduler=args.scheduler,
+                            **optional)
+    if config.workers < 1:
+        raise InputError(f"--workers must be >= 1, got {config.workers}")
+    # measure first: a bad workbook stops before any DEM run
+    measurement = measure_workbook(workbook, annotate_dir=args.out / "annotated")
+    results = calibrate(workbook, args.out, config, measurement=measurement)
+    print(calibration_summary(results))
+    print(f"results: {args.out / 'results.json'}")
+    if not args.no_report:
+        paths = build_report(args.out)
+        print("report: " + ", ".join(str(p) for p in paths))
+    return 0
