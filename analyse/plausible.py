@@ -22,8 +22,10 @@ says what the lab data pin down, instead of picking one optimum of one noisy sur
    the restitutions, the incline for the frictions; ``analyse.twin_likelihood``), with
    ``heap`` the measured means and sds read directly; the lab target with its own uncertainty
    as the datum; per parameter a 95 % interval and posterior sd / prior sd; the recommended
-   point is the posterior mode. A joint campaign also reports the heap-only posterior on the
-   same surrogate, for comparison.
+   point is the posterior mode. It is then refined: ``refine_rounds`` times, ``refine_runs``
+   runs at the recommended point join the surrogate and the posterior is computed again, so
+   that the mean angle where the validation runs is measured, not only extrapolated. A joint
+   campaign also reports the heap-only posterior on the same surrogate, for comparison.
 6. **Validation that can fail.** Fresh runs at the recommended point: a first batch sized by
    power (the runs the test needs for 80 % power at the predicted bias, at least
    ``validation_first``), then ``validation_step`` more at a time up to ``validation_cap``,
@@ -42,15 +44,15 @@ import math
 
 import numpy as np
 
-from analyse.equivalence import (default_tolerance, lab_heaps_for_power, runs_for_power,
+from demcal.analyse.equivalence import (default_tolerance, lab_heaps_for_power, runs_for_power,
                                  sequential_equivalence, tost_power)
-from analyse.noise import pooled_noise, replicates_for, seed_correlation
-from analyse.surrogate import (IMPLAUSIBILITY_CUT, U_STOP, NoisySurrogate, Prior, next_points,
+from demcal.analyse.noise import pooled_noise, replicates_for, seed_correlation
+from demcal.analyse.surrogate import (IMPLAUSIBILITY_CUT, U_STOP, NoisySurrogate, Prior, next_points,
                                posterior, recommend, space_filling)
 from demcal.errors import AnalysisError, InputError
 
 #: Stage numbers of the seed streams (never reorder: they define which seeds a campaign uses).
-SEED_STREAMS = {"noise": 1, "design": 2, "sequential": 3, "validation": 4, "surrogate": 5}
+SEED_STREAMS = {"noise": 1, "design": 2, "sequential": 3, "validation": 4, "surrogate": 5, "refine": 6}
 #: Prior samples kept in results.json for the plausible-set plots.
 KEPT_SAMPLES = 1500
 #: A design point's own replicate variance is shrunk toward the pooled one with this weight
@@ -76,7 +78,7 @@ def measured_prior(measurement, factors, constraints: dict | None = None) -> Pri
     """The prior of the seven contact parameters: each one's measured mean and sd, or, for a
     parameter in ``constraints`` (``analyse.twin_likelihood``), the mean and sd its lab test's
     twin gives it."""
-    from analyse.campaign import PARAMETER_BOUNDS
+    from demcal.analyse.campaign import PARAMETER_BOUNDS
 
     constraints = constraints or {}
     names, mean, sd, bounds, sources = [], [], [], [], []
@@ -120,7 +122,7 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
     fallbacks: list = []
     constraints = {}
     if config.likelihood == "joint":
-        from analyse.twin_likelihood import twin_constraints
+        from demcal.analyse.twin_likelihood import twin_constraints
 
         constraints = twin_constraints(measurement, base, factors, execute, run_refs)
     prior = measured_prior(measurement, factors, constraints)
@@ -206,10 +208,26 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
         model, pooled = fit()
 
     # 4. posterior, plausible set, recommended point --------------------------------------------
-    post = posterior(model, prior, target, target_var,
-                     discrepancy_var=config.discrepancy_sd ** 2,
-                     seed=np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 1]))
-    best = recommend(post, model)
+    def calibrated():
+        post = posterior(model, prior, target, target_var,
+                         discrepancy_var=config.discrepancy_sd ** 2,
+                         seed=np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 1]))
+        return post, recommend(post, model)
+
+    post, best = calibrated()
+    # the validation runs at the recommended point, so the surrogate's mean there decides it:
+    # pin it down with runs of its own, refit, and let the recommended point move
+    refinements = []
+    for r in range(1, config.refine_rounds + 1):
+        x_r = np.array([best["values"][n] for n in names])
+        ss = seeds.take("refine", config.refine_runs)
+        (y,), records = run(f"refine {r}", [x_r], [ss])
+        add(f"refine {r}", [x_r], [ss], [y], records)
+        model, pooled = fit()
+        refinements.append({"round": r, "runs": len(ss), "predicted": best["predicted"],
+                            "predicted_sd": best["predicted_sd"], "mean": float(y.mean()),
+                            "sd": float(y.std(ddof=1)) if y.size > 1 else None})
+        post, best = calibrated()
     parameters = _parameter_table(post, best)
     heap_only = None
     if constraints:
@@ -274,7 +292,8 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
                                "responses": p["responses"].tolist(), "mean": float(p["responses"].mean()),
                                "seeds": p["seeds"], "runs": p["runs"]} for p in design],
                    "replicates": k, "initial_points": int(n0), "batch": config.batch,
-                   "budget_runs": config.budget_runs, "rounds": rounds, "stopped_because": stopped},
+                   "budget_runs": config.budget_runs, "rounds": rounds, "stopped_because": stopped,
+                   "refinements": refinements},
         "surrogate": {"kernel": str(model.kernel), "length_scales": dict(zip(names, model.length_scales().tolist())),
                       "leave_one_out": loo, "noise_model": "pooled" if pooled.constant else "per point, shrunk to pooled"},
         "calibration": {

@@ -7,7 +7,7 @@ Like every table of the report they are pure functions of the stored results (``
 
 from __future__ import annotations
 
-from report.tables import Campaign, Table, _results_source, _wall, parameter_label
+from demcal.report.tables import Campaign, Table, _results_source, _wall, parameter_label
 
 
 def _names(r: dict) -> list[str]:
@@ -128,7 +128,8 @@ def table_design_runs(c: Campaign) -> Table:
         sd = (sum((y - p["mean"]) ** 2 for y in ys) / (len(ys) - 1)) ** 0.5 if len(ys) > 1 else None
         rows.append((i, p["stage"], *[p["settings"][n] for n in names], len(ys), p["mean"], sd))
     d = r["design"]
-    return Table("P3", "Design points: noise pair, space-filling design and sequential rounds",
+    return Table("P3", "Design points: noise pair, space-filling design, sequential rounds, and runs at "
+                 "the recommended point",
                  ("#", "Stage", *[sym[n] for n in names], "Runs", "Mean angle", "Run SD"),
                  ("", "", *[""] * len(names), "", "deg", "deg"), tuple(rows),
                  notes=(f"{d['initial_points']} points of a Latin hypercube through the prior's quantiles, then "
