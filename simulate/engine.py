@@ -80,8 +80,8 @@ from demcal.errors import InputError, SimulationError
 from demcal.simulate._jit import kernel
 from demcal.simulate.clump import ClumpTemplate
 from demcal.simulate.contact.hertz_mindlin import impact_damping, normal_force, tangential_force
-from demcal.simulate.contact.rolling import (EPSD, LIGGGHTS_REFF, contact_rolling, kick_mode,
-                                             lever_index, rolling_lever)
+from demcal.simulate.contact.rolling import (EPSD, LIGGGHTS_REFF, constant_torque, epsd_torque,
+                                             kick_mode, lever_index, rolling_lever)
 from demcal.simulate.integrate import (drift, half_kick, matrix_from_quat, pair_rolling_scale,
                                        quat_from_matrix, quat_multiply, refresh_rotation)
 from demcal.simulate.materials import MaterialTable
@@ -98,9 +98,6 @@ from demcal.units import GRAVITY
 #: spring torque [N m] (spring-dashpot rolling). The rows are only as wide as the hooks in use
 #: need (``history_width``), so the default path carries 3 columns as before.
 HIST_TANGENTIAL, HIST_IMPACT_SPEED, HIST_ROLLING = 0, 3, 4
-#: Moment of inertia about the contact point of a sphere of the clump's mass and the touching
-#: sphere's radius, over m R^2 (2/5 + 1): the I_r of the spring-dashpot rolling damping.
-SPHERE_CONTACT_INERTIA = 1.4
 
 
 def history_width(velocity_restitution: bool, rolling_model: int) -> int:
@@ -159,7 +156,6 @@ def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, n_bodies, bx,
     opposite pair, capped over the step ``dt`` for both bodies alike; wall contacts sum theirs
     into ``brv``, ``brm`` and ``brn`` (normals weighted by magnitude) for the kick's static stop.
     """
-    relative = rolling_model != EPSD and lever_mode == LIGGGHTS_REFF
     pw = ph.shape[1]
     ww = wh.shape[1]
     store = hist_dt > 0.0
@@ -258,19 +254,26 @@ def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, n_bodies, bx,
         bt[bj, 2] -= ajx * fy - ajy * fx
         mr = mu_r[mi, mj]
         if mr > 0.0:
-            lever_i = rolling_lever(lever_mode, aix, aiy, aiz, a, r_star)
-            lever_j = rolling_lever(lever_mode, ajx, ajy, ajz, rj - 0.5 * overlap, r_star)
-            i_ri = SPHERE_CONTACT_INERTIA * ri * ri / binvm[bi]
-            i_rj = SPHERE_CONTACT_INERTIA * rj * rj / binvm[bj]
-            tx, ty, tz, m_i, m_j = contact_rolling(
-                rolling_model, lever_mode, mr, f_el, e_star[mi, mj], sqrt_rd, r_star, lever_i,
-                lever_j, i_ri * i_rj / (i_ri + i_rj), eta_r, ph, k, HIST_ROLLING,
-                wxi - wxj, wyi - wyj, wzi - wzj, nx, ny, nz, hist_dt)
-            if relative:
+            wrx = wxi - wxj
+            wry = wyi - wyj
+            wrz = wzi - wzj
+            if rolling_model == EPSD:
+                tx, ty, tz, m_max = epsd_torque(mr, f_el, e_star[mi, mj], sqrt_rd, r_star, ri, rj,
+                                                binvm[bi], binvm[bj], eta_r, ph, k, HIST_ROLLING,
+                                                wrx, wry, wrz, nx, ny, nz, hist_dt)
+                brv[bi, 0] += tx
+                brv[bi, 1] += ty
+                brv[bi, 2] += tz
+                brv[bj, 0] -= tx
+                brv[bj, 1] -= ty
+                brv[bj, 2] -= tz
+                brm[bi] += m_max
+                brm[bj] += m_max
+            elif lever_mode == LIGGGHTS_REFF:
                 # resists only the rolling relative to the neighbour (a body turning with its
-                # neighbours keeps turning): an ordinary pair torque, no static stop
-                s = pair_rolling_scale(bR, binvi, bi, bj, tx, ty, tz, wxi - wxj, wyi - wyj,
-                                       wzi - wzj, dt)
+                # neighbours keeps turning): an ordinary pair torque, capped alike for both
+                tx, ty, tz, m = constant_torque(mr, f_el, r_star, wrx, wry, wrz, nx, ny, nz)
+                s = pair_rolling_scale(bR, binvi, bi, bj, tx, ty, tz, m, wrx, wry, wrz, dt)
                 bt[bi, 0] += s * tx
                 bt[bi, 1] += s * ty
                 bt[bi, 2] += s * tz
@@ -278,14 +281,8 @@ def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, n_bodies, bx,
                 bt[bj, 1] -= s * ty
                 bt[bj, 2] -= s * tz
             else:
-                brv[bi, 0] += tx
-                brv[bi, 1] += ty
-                brv[bi, 2] += tz
-                brv[bj, 0] -= tx
-                brv[bj, 1] -= ty
-                brv[bj, 2] -= tz
-                brm[bi] += m_i
-                brm[bj] += m_j
+                brm[bi] += mr * f_el * rolling_lever(lever_mode, aix, aiy, aiz, a, r_star)
+                brm[bj] += mr * f_el * rolling_lever(lever_mode, ajx, ajy, ajz, rj - 0.5 * overlap, r_star)
     # ---- sphere-wall
     for q in range(ws.shape[0]):
         i = ws[q]
@@ -341,18 +338,22 @@ def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, n_bodies, bx,
         mr = mu_r[mi, mk]
         if mr > 0.0:
             # a wall neither turns nor moves under the torque: R_r and I_r are the sphere's
-            tx, ty, tz, m_i, _ = contact_rolling(
-                rolling_model, lever_mode, mr, f_el, e_star[mi, mk], sqrt_rd, ri,
-                rolling_lever(lever_mode, aix, aiy, aiz, a, ri), 0.0,
-                SPHERE_CONTACT_INERTIA * ri * ri / binvm[bi], eta_r, wh, q, HIST_ROLLING,
-                wxi, wyi, wzi, nx, ny, nz, hist_dt)
+            if rolling_model == EPSD:
+                tx, ty, tz, m = epsd_torque(mr, f_el, e_star[mi, mk], sqrt_rd, ri, ri, ri, binvm[bi],
+                                            0.0, eta_r, wh, q, HIST_ROLLING, wxi, wyi, wzi, nx, ny, nz,
+                                            hist_dt)
+            elif lever_mode == LIGGGHTS_REFF:
+                tx, ty, tz, m = constant_torque(mr, f_el, ri, wxi, wyi, wzi, nx, ny, nz)
+            else:
+                tx = ty = tz = 0.0
+                m = mr * f_el * rolling_lever(lever_mode, aix, aiy, aiz, a, ri)
             brv[bi, 0] += tx
             brv[bi, 1] += ty
             brv[bi, 2] += tz
-            brm[bi] += m_i
-            brn[bi, 0] += m_i * nx
-            brn[bi, 1] += m_i * ny
-            brn[bi, 2] += m_i * nz
+            brm[bi] += m
+            brn[bi, 0] += m * nx
+            brn[bi, 1] += m * ny
+            brn[bi, 2] += m * nz
 
 
 @kernel

@@ -82,12 +82,24 @@ def apply_inertia(R, b, inv_i, wx, wy, wz):
 
 
 @evaluator
-def pair_rolling_scale(R, inv_i, bi, bj, tx, ty, tz, wrx, wry, wrz, dt):
-    """Fraction in [0, 1] of a pair rolling torque (``t`` on body i, ``-t`` on body j) to apply
-    over ``dt`` so that its impulse does not reverse the relative angular velocity
-    ``w_r = w_i - w_j``; both bodies receive the same fraction, so angular momentum is kept."""
-    dix, diy, diz = apply_inverse_inertia(R, bi, inv_i, tx * dt, ty * dt, tz * dt)
-    djx, djy, djz = apply_inverse_inertia(R, bj, inv_i, tx * dt, ty * dt, tz * dt)
+def pair_rolling_scale(R, inv_i, bi, bj, tx, ty, tz, magnitude, wrx, wry, wrz, dt):
+    """Fraction in [0, 1] of a pair rolling torque (``t`` on body i, ``-t`` on body j, of length
+    ``magnitude``) to apply over ``dt`` so that its impulse does not reverse the relative angular
+    velocity ``w_r = w_i - w_j``; both bodies receive the same fraction, so angular momentum is
+    kept."""
+    # the impulse changes w_r by at most |t| dt (max 1/I_i + max 1/I_j): usually far less than w_r
+    bound = magnitude * dt * (max(inv_i[bi, 0], inv_i[bi, 1], inv_i[bi, 2])
+                              + max(inv_i[bj, 0], inv_i[bj, 1], inv_i[bj, 2]))
+    if bound * bound < wrx * wrx + wry * wry + wrz * wrz:
+        return 1.0
+    return _pair_rolling_scale_exact(R, inv_i, bi, bj, tx * dt, ty * dt, tz * dt, wrx, wry, wrz)
+
+
+@kernel
+def _pair_rolling_scale_exact(R, inv_i, bi, bj, jx, jy, jz, wrx, wry, wrz):
+    """``pair_rolling_scale`` for an impulse ``j`` that may reverse ``w_r`` (rare, not inlined)."""
+    dix, diy, diz = apply_inverse_inertia(R, bi, inv_i, jx, jy, jz)
+    djx, djy, djz = apply_inverse_inertia(R, bj, inv_i, jx, jy, jz)
     return cap_rolling_impulse(wrx, wry, wrz, dix + djx, diy + djy, diz + djz)
 
 
@@ -149,16 +161,13 @@ def half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, brn, binvm, bi
         lz += brv[b, 2] * h
         wx, wy, wz = apply_inverse_inertia(bR, b, binvi, lx, ly, lz)
     else:
+        wx, wy, wz = apply_inverse_inertia(bR, b, binvi, lx, ly, lz)
         stops = False
-        wx = wy = wz = 0.0
         if m > 0.0:
-            stops, sx, sy, sz, wx, wy, wz = rolling_stop(b, m, m * h, lx, ly, lz, bR, binvi, brn, mode)
-            if stops:
-                lx = sx
-                ly = sy
-                lz = sz
+            stops, lx, ly, lz, wx, wy, wz = rolling_stop(b, m, m * h, lx, ly, lz, wx, wy, wz, bR, binvi,
+                                                         brn, mode)
         if not stops:
-            lx, ly, lz, wx, wy, wz = _rolling_kick(b, h, m, lx, ly, lz, bR, binvi, brv, mode)
+            lx, ly, lz, wx, wy, wz = _rolling_kick(b, h, m, lx, ly, lz, wx, wy, wz, bR, binvi, brv, mode)
     bL[b, 0] = lx
     bL[b, 1] = ly
     bL[b, 2] = lz
@@ -168,50 +177,58 @@ def half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, brn, binvm, bi
 
 
 @evaluator
-def rolling_stop(b, m, impulse, lx, ly, lz, bR, binvi, brn, mode):
+def rolling_stop(b, m, impulse, lx, ly, lz, wx, wy, wz, bR, binvi, brn, mode):
     """The static stop of the rolling of body ``b``.
 
-    ``l`` is the body's angular momentum after its other torques, ``m`` its summed rolling
-    resistance and ``impulse`` that over the half step. The rolling part of ``l`` is all of it,
-    except with the LIGGGHTS convention when every wall contact of the body shares one normal
-    (``brn[b]``, the normals weighted by their magnitudes, is then ``m`` long): the spin about
-    that normal is twist, which the rolling torque does not resist, and is kept.
+    ``l`` and ``w`` are the body's angular momentum and velocity after its other torques, ``m``
+    its summed rolling resistance and ``impulse`` that over the half step. The rolling part of
+    the rotation is all of it, except with the LIGGGHTS convention when every wall contact of
+    the body shares one normal (``brn[b]``, the normals weighted by their magnitudes, is then
+    ``m`` long): the spin about that normal is twist, which the rolling torque does not resist,
+    and is kept.
 
     Returns
     -------
     (stops, lx, ly, lz, wx, wy, wz)
-        Whether ``impulse`` absorbs the rolling part; if so, the angular momentum and velocity
-        that remain (the twist, or zero).
+        Whether ``impulse`` absorbs the angular momentum of the rolling part; the angular
+        momentum and velocity that remain (the twist, or zero), or ``l`` and ``w`` unchanged.
     """
     tx = 0.0
     ty = 0.0
     tz = 0.0
+    twist = False
     if mode == KICK_RELATIVE:
         nx = brn[b, 0]
         ny = brn[b, 1]
         nz = brn[b, 2]
-        nm = math.sqrt(nx * nx + ny * ny + nz * nz)
-        if nm > 0.0 and nm >= (1.0 - 1e-9) * m:
-            wx, wy, wz = apply_inverse_inertia(bR, b, binvi, lx, ly, lz)
-            wn = (wx * nx + wy * ny + wz * nz) / (nm * nm)
+        n2 = nx * nx + ny * ny + nz * nz
+        if n2 > 0.0 and n2 >= ((1.0 - 1e-9) * m) ** 2:
+            wn = (wx * nx + wy * ny + wz * nz) / n2
             tx = wn * nx
             ty = wn * ny
             tz = wn * nz
-    kx, ky, kz = apply_inertia(bR, b, binvi, tx, ty, tz)
-    rx = lx - kx
-    ry = ly - ky
-    rz = lz - kz
-    if rx * rx + ry * ry + rz * rz <= impulse * impulse:
-        return True, kx, ky, kz, tx, ty, tz
-    return False, lx, ly, lz, 0.0, 0.0, 0.0
+            twist = True
+    rx = wx - tx
+    ry = wy - ty
+    rz = wz - tz
+    # |I w_r| >= |w_r| / max(1/I): most bodies are rejected here without the inertia product
+    inv_max = max(binvi[b, 0], binvi[b, 1], binvi[b, 2])
+    if rx * rx + ry * ry + rz * rz > (impulse * inv_max) ** 2:
+        return False, lx, ly, lz, wx, wy, wz
+    if twist:
+        kx, ky, kz = apply_inertia(bR, b, binvi, rx, ry, rz)
+    else:
+        kx, ky, kz = lx, ly, lz
+    if kx * kx + ky * ky + kz * kz <= impulse * impulse:
+        return True, lx - kx, ly - ky, lz - kz, tx, ty, tz
+    return False, lx, ly, lz, wx, wy, wz
 
 
 @evaluator
-def _rolling_kick(b, h, m, lx, ly, lz, bR, binvi, brv, mode):
+def _rolling_kick(b, h, m, lx, ly, lz, wx, wy, wz, bR, binvi, brv, mode):
     """The rolling torque of body ``b`` over ``h`` when it does not stop the rolling: the wall
     torque vector (LIGGGHTS convention) or ``m`` against the spin (EDEM), capped so that it
     never reverses the spin about the current axis. Returns the new L and w."""
-    wx, wy, wz = apply_inverse_inertia(bR, b, binvi, lx, ly, lz)
     tx = 0.0
     ty = 0.0
     tz = 0.0

@@ -1,8 +1,10 @@
 """Rolling resistance: the constant directional torque model (EDEM "type A", LIGGGHTS ``cdt``)
 and the elastic-plastic spring-dashpot model (Ai et al. 2011 "type C", LIGGGHTS ``epsd``).
 
-Each model is one evaluator, ``contact_rolling``, called alike by the engine's sphere-sphere
-and sphere-wall loops (as ``hertz_mindlin`` is for the contact force).
+Each model is one evaluator called alike by the engine's sphere-sphere and sphere-wall loops
+(as ``hertz_mindlin`` is for the contact force): ``constant_torque`` (LIGGGHTS lever),
+``rolling_lever`` (the lever of each convention; the EDEM torque is applied by the kick against
+the body's spin) and ``epsd_torque``.
 
 The model is chosen by name (``ROLLING_MODELS``): ``"constant_torque"`` (default) or ``"epsd"``.
 
@@ -124,6 +126,10 @@ KICK_DIRECTIONAL, KICK_RELATIVE, KICK_ELASTIC = 0, 1, 2
 
 #: Rolling damping ratio eta_r of the spring-dashpot model recommended by Ai et al. (2011) [-].
 EPSD_DAMPING_RATIO = 0.3
+
+#: Moment of inertia about the contact point of a sphere of the body's mass and the touching
+#: sphere's radius, over m R^2 (2/5 + 1): the I_r of the spring-dashpot rolling damping.
+SPHERE_CONTACT_INERTIA = 1.4
 
 
 def lever_index(name: str) -> int:
@@ -268,28 +274,37 @@ def rolling_lever(lever, ax, ay, az, sphere_lever, r_eff):
 
 
 @evaluator
-def contact_rolling(model, lever, mu_r, f_el, e_star, sqrt_rd, r_roll, lever_i, lever_j,
-                    inertia_r, eta_r, hist, row, col, wrx, wry, wrz, nx, ny, nz, dt):
-    """The rolling resistance of one contact.
+def constant_torque(mu_r, f_el, r_eff, wrx, wry, wrz, nx, ny, nz):
+    """Constant directional torque with the LIGGGHTS lever (``cdt``): the torque on body i
+    (body j receives the opposite) and its magnitude mu_r F_n R_eff [N m]; ``w_r`` the relative
+    angular velocity w_i - w_j (w_i against a wall), ``n`` the unit normal. With the EDEM levers
+    the torque is the magnitude mu_r F_n R_lever against each body's own spin, applied by the
+    kick (``rolling_lever`` gives the lever)."""
+    tx, ty, tz = relative_rolling_torque(mu_r, f_el, r_eff, wrx, wry, wrz, nx, ny, nz)
+    return -tx, -ty, -tz, mu_r * f_el * r_eff
+
+
+@evaluator
+def epsd_torque(mu_r, f_el, e_star, sqrt_rd, r_roll, r_i, r_j, inv_m_i, inv_m_j, eta_r, hist, row,
+                col, wrx, wry, wrz, nx, ny, nz, dt):
+    """Elastic-plastic spring-dashpot rolling torque of one contact (LIGGGHTS ``epsd``).
 
     Parameters
     ----------
-    model, lever : int
-        ``ROLLING_MODELS`` and ``ROLLING_LEVERS`` indices.
     mu_r, f_el : float
         Rolling friction coefficient [-] and elastic (Hertz) normal force [N].
     e_star, sqrt_rd : float
-        Effective Young's modulus [Pa] and sqrt(R* d_n) [m] (spring-dashpot stiffness).
+        Effective Young's modulus [Pa] and sqrt(R* d_n) [m]: k_n = 4/3 E* sqrt(R* d_n).
     r_roll : float
         Rolling radius R_eff (the sphere radius against a wall) [m].
-    lever_i, lever_j : float
-        Lever arms of the constant torque on bodies i and j (``rolling_lever``) [m].
-    inertia_r : float
-        Moment of inertia about the contact point of the spring-dashpot damping [kg m^2].
+    r_i, r_j, inv_m_i, inv_m_j : float
+        Radii of the touching spheres [m] and inverse masses of their bodies [1/kg] (0 for a
+        wall): the damping's moment of inertia about the contact point, 1/I_r = 1/I_i + 1/I_j
+        with I = 7/5 m r^2 (the sphere-of-body-mass value, as LIGGGHTS).
     eta_r : float
-        Spring-dashpot damping ratio [-].
+        Damping ratio [-].
     hist, row, col : array, int, int
-        Contact history; the spring-dashpot keeps its spring torque in ``hist[row, col:col+3]``.
+        Contact history; the spring torque is kept in ``hist[row, col:col+3]``.
     wrx, wry, wrz : float
         Relative angular velocity w_i - w_j (w_i against a wall) [rad/s].
     nx, ny, nz : float
@@ -299,25 +314,17 @@ def contact_rolling(model, lever, mu_r, f_el, e_star, sqrt_rd, r_roll, lever_i, 
 
     Returns
     -------
-    (tx, ty, tz, m_i, m_j)
-        Torque vector on body i [N m] (body j receives the opposite; zero with the EDEM levers,
-        whose torque the kick applies against each body's own spin) and the magnitudes
-        mu_r F_n R_lever [N m] of bodies i and j (the limit mu_r F_n R_r with ``epsd``).
+    (tx, ty, tz, m_max)
+        Torque on body i [N m] (body j receives the opposite) and the limit mu_r F_n R_r [N m].
     """
-    if model == EPSD:
-        k_r = 2.25 * (4.0 / 3.0 * e_star * sqrt_rd) * mu_r * mu_r * r_roll * r_roll
-        c_r = eta_r * 2.0 * math.sqrt(inertia_r * k_r)
-        m_max = mu_r * f_el * r_roll
-        sx, sy, sz, tx, ty, tz = epsd_rolling_torque(hist[row, col], hist[row, col + 1],
-                                                     hist[row, col + 2], wrx, wry, wrz,
-                                                     nx, ny, nz, k_r, c_r, m_max, dt)
-        if dt > 0.0:
-            hist[row, col] = sx
-            hist[row, col + 1] = sy
-            hist[row, col + 2] = sz
-        return tx, ty, tz, m_max, m_max
-    if lever == LIGGGHTS_REFF:
-        tx, ty, tz = relative_rolling_torque(mu_r, f_el, r_roll, wrx, wry, wrz, nx, ny, nz)
-        m = mu_r * f_el * r_roll
-        return -tx, -ty, -tz, m, m
-    return 0.0, 0.0, 0.0, mu_r * f_el * lever_i, mu_r * f_el * lever_j
+    k_r = 2.25 * (4.0 / 3.0 * e_star * sqrt_rd) * mu_r * mu_r * r_roll * r_roll
+    inertia_r = SPHERE_CONTACT_INERTIA / (inv_m_i / (r_i * r_i) + inv_m_j / (r_j * r_j))
+    c_r = eta_r * 2.0 * math.sqrt(inertia_r * k_r)
+    m_max = mu_r * f_el * r_roll
+    sx, sy, sz, tx, ty, tz = epsd_rolling_torque(hist[row, col], hist[row, col + 1], hist[row, col + 2],
+                                                 wrx, wry, wrz, nx, ny, nz, k_r, c_r, m_max, dt)
+    if dt > 0.0:
+        hist[row, col] = sx
+        hist[row, col + 1] = sy
+        hist[row, col + 2] = sz
+    return tx, ty, tz, m_max

@@ -21,7 +21,7 @@ import pytest
 from demcal.simulate import DEMParameters
 from demcal.simulate.clump import segment_template
 from demcal.simulate.contact.hertz_mindlin import tangential_force
-from demcal.simulate.contact.rolling import CONSTANT_TORQUE, EPSD, LIGGGHTS_REFF, contact_rolling
+from demcal.simulate.contact.rolling import constant_torque, epsd_torque
 from tests.simulate.helpers import R, floor, simulation, sphere_template
 
 E_P = 2 * 1e7 * 1.25            # Young's modulus of the segment material, E = 2 G (1 + nu)
@@ -39,9 +39,8 @@ def test_epsd_spring_slope_is_liggghts_epsd():
     mu_r, r_eff, overlap, dt = 0.3, R / 2, 4e-5, 1e-6
     hist = np.zeros((1, 7))
     w = 2.0
-    tx, ty, tz, m_i, _ = contact_rolling(EPSD, LIGGGHTS_REFF, mu_r, 10.0, E_STAR_PP,
-                                         math.sqrt(r_eff * overlap), r_eff, 0.0, 0.0, 1e-9, 0.0,
-                                         hist, 0, 4, 0.0, 0.0, w, 1.0, 0.0, 0.0, dt)
+    tx, ty, tz, m_i = epsd_torque(mu_r, 10.0, E_STAR_PP, math.sqrt(r_eff * overlap), r_eff, R, R,
+                                  1e3, 1e3, 0.0, hist, 0, 4, 0.0, 0.0, w, 1.0, 0.0, 0.0, dt)
     k_r = _liggghts_epsd_kr(E_STAR_PP, r_eff, overlap, mu_r)
     assert hist[0, 6] == pytest.approx(-k_r * w * dt, rel=1e-12)
     assert (tx, ty, tz) == pytest.approx((0.0, 0.0, -k_r * w * dt), rel=1e-12)
@@ -134,12 +133,9 @@ def test_force_evaluation_without_a_step_leaves_the_history_alone():
     np.testing.assert_array_equal(hist, before)
     rolling = np.array([[0.0, 0.0, 0.0, 0.0, 1e-5, -2e-5, 3e-5]])
     kept = rolling.copy()
-    contact_rolling(EPSD, LIGGGHTS_REFF, 0.3, 1e-3, E_STAR_PP, 1e-4, R / 2, 0.0, 0.0, 1e-9, 0.3,
-                    rolling, 0, 4, 1.0, 2.0, 3.0, *n, 0.0)
+    epsd_torque(0.3, 1e-3, E_STAR_PP, 1e-4, R / 2, R, R, 1e3, 1e3, 0.3, rolling, 0, 4, 1.0, 2.0, 3.0,
+                *n, 0.0)
     np.testing.assert_array_equal(rolling, kept)
-    # and constant torque carries no history
-    assert contact_rolling(CONSTANT_TORQUE, LIGGGHTS_REFF, 0.3, 1.0, E_STAR_PP, 1e-4, R / 2, 0.0,
-                           0.0, 1e-9, 0.3, rolling, 0, 4, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0)[3] > 0
 
 
 def test_tangential_history_increments_then_projects_as_liggghts():
@@ -151,3 +147,12 @@ def test_tangential_history_increments_then_projects_as_liggghts():
     shear = np.array([1e-6, 2e-6, 0.0]) + v * dt     # increment ...
     shear -= (shear @ n) * n                         # ... then project, length not restored
     np.testing.assert_allclose(hist[0], shear, rtol=1e-12, atol=1e-20)
+
+
+def test_constant_torque_resists_only_the_tangential_relative_rotation():
+    # w_r = (0, 1, 1) rad/s with the normal along z: LIGGGHTS' cdt torque mu_r F_n R w_r/|w_r|
+    # with its normal component removed, on body i against the rotation
+    mu_r, f_el, r_eff = 0.3, 2.0, R / 2
+    tx, ty, tz, m = constant_torque(mu_r, f_el, r_eff, 0.0, 1.0, 1.0, 0.0, 0.0, 1.0)
+    assert (tx, ty, tz) == pytest.approx((0.0, -mu_r * f_el * r_eff / math.sqrt(2.0), 0.0), rel=1e-12)
+    assert m == pytest.approx(mu_r * f_el * r_eff, rel=1e-12)
