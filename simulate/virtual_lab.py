@@ -71,7 +71,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from demcal.errors import InputError
+from demcal.errors import DemcalError, InputError, SimulationError
 from demcal.jsonio import read_json, write_json
 from demcal.provenance import Provenance
 from demcal.simulate.params import DEMParameters
@@ -644,6 +644,8 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
             raise InputError(f"block_effect in the repose sheet: covariate must be operator or date, "
                              f"got {e.covariate!r}")
     spread = _by_day(effects, "repose")
+    seeds = iter(range(seed_base, seed_base + 100 * n))
+    discarded: list = []
     for i in range(n):
         row = {"photo_id": f"P{i + 1}", "operator": ops[i % len(ops)],
                "date": str(rng.choice(list(truth.days))) if spread else day}
@@ -657,14 +659,10 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
             x, z = heap_profile(angle + flank, angle - flank, height_m=0.10, floor_m=0.04,
                                 roughness_m=0.002, rng=rng)
             side = "both"
+            img = heap_photo(x, z, rng=rng, camera_roll_deg=float(np.clip(roll, -15, 15)), light=light,
+                             noise_sd=4.0, blur_px=1.0, jpeg_quality=int(rng.integers(75, 93)))
         else:
-            from demcal.simulate.rigs import run_rig
-            res = run_rig("repose", truth.params, seed_base + i, profile="quick", geometry=geometry)
-            x = np.asarray(res.record["profile_x"], float)
-            z = np.asarray(res.record["profile_z"], float)
-            side = "right"
-        img = heap_photo(x, z, rng=rng, camera_roll_deg=float(np.clip(roll, -15, 15)), light=light,
-                         noise_sd=4.0, blur_px=1.0, jpeg_quality=int(rng.integers(75, 93)))
+            img, side = _dem_heap_photo(truth, rng, roll, light, seeds, discarded, geometry)
         name = f"photos/heap_{i + 1}.jpg"
         cv2.imwrite(str(root / name), img, [cv2.IMWRITE_JPEG_QUALITY, 95])
         rows.append({"photo_id": row["photo_id"], "file": name, "side": side, "operator": row["operator"],
@@ -682,7 +680,41 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
         expected.append({"kind": e.kind, "sheet": "repose", "quantity": "repose_angle_deg",
                          "covariate": e.covariate, "true_effect": _block_range(frame[e.covariate], offs),
                          "unit": "deg (range of level means)"})
-    return frame, expected
+    return frame, expected, discarded
+
+
+#: Pours of the repose twin per photo before the virtual lab gives up on a geometry.
+MAX_POURS = 5
+
+
+def _dem_heap_photo(truth: Truth, rng, roll, light, seeds, discarded: list, geometry):
+    """The side photo of a repose-twin heap, poured again (next seed) when the photo method
+    cannot read it, as a lab pours again a heap it cannot measure; the seeds of the discarded
+    heaps are appended to ``discarded``. Returns the image and the flank measured."""
+    import cv2
+
+    from demcal.measure.repose import angle_from_photo
+    from demcal.simulate.render import heap_photo
+    from demcal.simulate.rigs import run_rig
+
+    for _ in range(MAX_POURS):
+        seed = next(seeds)
+        res = run_rig("repose", truth.params, seed, profile="quick", geometry=geometry)
+        x = np.asarray(res.record["profile_x"], float)
+        z = np.asarray(res.record["profile_z"], float)
+        img = heap_photo(x, z, rng=rng, camera_roll_deg=float(np.clip(roll, -15, 15)), light=light,
+                         noise_sd=4.0, blur_px=1.0, jpeg_quality=int(rng.integers(75, 93)))
+        # read it back as the workbook will hold it (the JPEG written by _photos)
+        stored = cv2.imdecode(cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 95])[1], cv2.IMREAD_COLOR)
+        try:
+            angle_from_photo(stored, side="right")
+        except DemcalError as exc:
+            discarded.append({"seed": seed, "reason": str(exc)})
+            continue
+        return img, "right"
+    raise SimulationError(f"{MAX_POURS} repose-twin heaps in a row could not be read from their photos "
+                          f"(last: {discarded[-1]['reason']}); the carton geometry or the truth gives no "
+                          "measurable flank")
 
 
 def _meta(truth: Truth, effects, geometry=None) -> pd.DataFrame:
@@ -796,9 +828,11 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
         expected += exp
     if n_compression:
         sheets["compression"] = _compression(truth, rng, specimens, n_compression, root)
+    discarded_heaps: list = []
     if photos != "none" and n_photos:
-        sheets["repose"], exp = _photos(truth, rng, effects, n_photos, root, photos,
-                                        seed_base=int(rng.integers(0, 2**31)), geometry=geometry)
+        sheets["repose"], exp, discarded_heaps = _photos(truth, rng, effects, n_photos, root, photos,
+                                                         seed_base=int(rng.integers(0, 2**31)),
+                                                         geometry=geometry)
         expected += exp
     for e in effects:
         if e.sheet not in sheets or not any(x["kind"] == e.kind for x in expected):
@@ -809,6 +843,7 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
                "drop_heights_mm": list(drop_heights_mm), "n_drop": n_drop,
                "orientation_range_deg": [lo, hi], "n_tracks": n_tracks, "surfaces": list(surfaces),
                "n_incline": n_incline, "n_compression": n_compression, "n_photos": n_photos,
+               "discarded_heaps": discarded_heaps,
                "geometry": None if geometry is None else geometry.to_dict()}
     result = VirtualWorkbook(path=path, truth=truth, effects=effects, expected=tuple(expected), seed=seed,
                              provenance=Provenance(seed=seed, options=options))
