@@ -194,6 +194,7 @@ def cap_rolling_impulse(wx, wy, wz, dwx, dwy, dwz):
 # elastic-plastic spring-dashpot (Ai et al. 2011, type C)
 
 
+@evaluator
 def epsd_stiffness(normal_stiffness: float, mu_r: float, rolling_radius: float) -> float:
     """Rolling stiffness k_r = 2.25 k_n mu_r^2 R_r^2 [N m/rad] (Ai et al. 2011, eq. 15, after
     Iwashita & Oda 1998), from the normal stiffness k_n [N/m], the rolling friction mu_r [-]
@@ -201,6 +202,7 @@ def epsd_stiffness(normal_stiffness: float, mu_r: float, rolling_radius: float) 
     return 2.25 * normal_stiffness * mu_r ** 2 * rolling_radius ** 2
 
 
+@evaluator
 def epsd_damping(rolling_stiffness: float, inertia: float, damping_ratio: float = EPSD_DAMPING_RATIO) -> float:
     """Rolling viscous damping C_r = eta_r 2 sqrt(I_r k_r) [N m s/rad] (Ai et al. 2011, eq. 16;
     eta_r = 0.3 recommended), I_r the moment of inertia about the contact point [kg m^2]."""
@@ -317,9 +319,9 @@ def epsd_torque(mu_r, f_el, e_star, sqrt_rd, r_roll, r_i, r_j, inv_m_i, inv_m_j,
     (tx, ty, tz, m_max)
         Torque on body i [N m] (body j receives the opposite) and the limit mu_r F_n R_r [N m].
     """
-    k_r = 2.25 * (4.0 / 3.0 * e_star * sqrt_rd) * mu_r * mu_r * r_roll * r_roll
+    k_r = epsd_stiffness(4.0 / 3.0 * e_star * sqrt_rd, mu_r, r_roll)
     inertia_r = SPHERE_CONTACT_INERTIA / (inv_m_i / (r_i * r_i) + inv_m_j / (r_j * r_j))
-    c_r = eta_r * 2.0 * math.sqrt(inertia_r * k_r)
+    c_r = epsd_damping(k_r, inertia_r, eta_r)
     m_max = mu_r * f_el * r_roll
     sx, sy, sz, tx, ty, tz = epsd_rolling_torque(hist[row, col], hist[row, col + 1], hist[row, col + 2],
                                                  wrx, wry, wrz, nx, ny, nz, k_r, c_r, m_max, dt)
