@@ -21,11 +21,13 @@ says what the lab data pin down, instead of picking one optimum of one noisy sur
    ``joint`` likelihood (default) what each one's lab test says through its twin (drops for
    the restitutions, the incline for the frictions; ``analyse.twin_likelihood``), with
    ``heap`` the measured means and sds read directly; the lab target with its own uncertainty
-   as the datum; per parameter a 95 % interval and posterior sd / prior sd; the recommended
-   point is the posterior mode. It is then refined: ``refine_rounds`` times, ``refine_runs``
-   runs at the recommended point join the surrogate and the posterior is computed again, so
-   that the mean angle where the validation runs is measured, not only extrapolated. A joint
-   campaign also reports the heap-only posterior on the same surrogate, for comparison.
+   as the datum; per parameter a 95 % interval and posterior sd / prior sd. Then
+   ``refine_rounds`` times, ``refine_runs`` runs at the posterior mode join the surrogate and
+   the posterior is computed again. The recommended point is the refined point of highest
+   posterior density, so that the mean angle where the validation runs is measured, not only
+   extrapolated (a last refit may move the mode to where no run was made, and the surrogate
+   is least reliable there); without refinement it is the mode. A joint campaign also reports
+   the heap-only posterior on the same surrogate, for comparison.
 6. **Validation that can fail.** Fresh runs at the recommended point: a first batch sized by
    power (the runs the test needs for 80 % power at the predicted bias, at least
    ``validation_first``), then ``validation_step`` more at a time up to ``validation_cap``,
@@ -48,7 +50,7 @@ from demcal.analyse.equivalence import (default_tolerance, lab_heaps_for_power, 
                                  sequential_equivalence, tost_power)
 from demcal.analyse.noise import pooled_noise, replicates_for, seed_correlation
 from demcal.analyse.surrogate import (IMPLAUSIBILITY_CUT, U_STOP, NoisySurrogate, Prior, next_points,
-                               posterior, recommend, space_filling)
+                               posterior, recommend, recommend_among, space_filling)
 from demcal.errors import AnalysisError, InputError
 
 #: Stage numbers of the seed streams (never reorder: they define which seeds a campaign uses).
@@ -228,6 +230,19 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
                             "predicted_sd": best["predicted_sd"], "mean": float(y.mean()),
                             "sd": float(y.std(ddof=1)) if y.size > 1 else None})
         post, best = calibrated()
+    mode = best
+    if refinements:
+        # the surrogate is least sure where no run has been made: the validation goes to the
+        # refined point (its mean angle measured by refine_runs runs) the posterior rates
+        # highest, not to a mode the last refit may have moved to unmeasured ground
+        refined = [p["x"] for p in design if p["stage"].startswith("refine")]
+        best = recommend_among(post, model, refined)
+        best["chosen"] = f"refined point of round {best.pop('index') + 1}"
+        for i, ref in enumerate(refinements):
+            m, s = model.predict(refined[i][None, :])
+            ref.update(final_predicted=float(m[0]), final_predicted_sd=float(s[0]))
+    else:
+        best["chosen"] = "posterior mode"
     parameters = _parameter_table(post, best)
     heap_only = None
     if constraints:
@@ -300,14 +315,15 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
             "method": ("posterior of the measured-mean-and-sd prior given the lab's angle of repose, by "
                        "importance sampling on a stochastic-kriging surrogate of the mean heap angle; "
                        f"plausible set: implausibility < {IMPLAUSIBILITY_CUT:g} (history matching); "
-                       "recommended point: the posterior mode; "
+                       + ("recommended point: the refined point of highest posterior density; "
+                          if refinements else "recommended point: the posterior mode; ")
                        + ("joint: the drop and incline twins constrain the restitutions and frictions "
                           "first (analyse.twin_likelihood)" if constraints else "heap only")),
             "likelihood": config.likelihood,
             "twins": {n: c.to_dict() for n, c in constraints.items()},
             "heap_only": heap_only,
             "parameters": parameters,
-            "recommended": best, "recommended_inside_ci95": inside,
+            "recommended": best, "posterior_mode": mode, "recommended_inside_ci95": inside,
             "target_deg": target, "target_sd_deg": lab_sd, "target_n": lab_n, "target_var": target_var,
             "discrepancy_sd_deg": config.discrepancy_sd,
             "plausible": {"cut": IMPLAUSIBILITY_CUT, "share_of_prior": float(np.mean(post.plausible)),

@@ -332,6 +332,25 @@ def posterior(surrogate: NoisySurrogate, prior: Prior, target: float, target_var
                      float(target_var), float(discrepancy_var))
 
 
+def log_posterior(post: Posterior, surrogate: NoisySurrogate, x, log_likelihood=None) -> np.ndarray:
+    """Log prior + log likelihood of the lab target at the points ``x`` (n, dim), the surrogate's
+    own variance added to the target's and the discrepancy's (unnormalised)."""
+    x = np.atleast_2d(np.asarray(x, dtype=float))
+    m, s = surrogate.predict(x)
+    var = s ** 2 + post.target_var + post.discrepancy_var
+    val = post.prior.logpdf(x) - 0.5 * (post.target - m) ** 2 / var - 0.5 * np.log(var)
+    if log_likelihood is not None:
+        val = val + np.asarray(log_likelihood(x), dtype=float)
+    return val
+
+
+def _at(post: Posterior, surrogate: NoisySurrogate, x, log_post: float) -> dict:
+    m, s = surrogate.predict(np.asarray(x, dtype=float)[None, :])
+    imp = abs(post.target - m[0]) / math.sqrt(s[0] ** 2 + post.target_var + post.discrepancy_var)
+    return {"values": {n: float(v) for n, v in zip(post.prior.names, x)}, "predicted": float(m[0]),
+            "predicted_sd": float(s[0]), "implausibility": float(imp), "log_posterior": float(log_post)}
+
+
 def recommend(post: Posterior, surrogate: NoisySurrogate, log_likelihood=None, starts: int = 5) -> dict:
     """The posterior mode: bounded quasi-Newton steps on log prior + log likelihood from the
     ``starts`` best-weighted samples.
@@ -339,14 +358,9 @@ def recommend(post: Posterior, surrogate: NoisySurrogate, log_likelihood=None, s
     Returns ``{"values": {name: value}, "predicted", "predicted_sd", "implausibility",
     "log_posterior"}``."""
     prior = post.prior
-    tv = post.target_var + post.discrepancy_var
 
     def neg_log_post(x):
-        m, s = surrogate.predict(x[None, :])
-        var = s[0] ** 2 + tv
-        val = prior.logpdf(x[None, :])[0] - 0.5 * (post.target - m[0]) ** 2 / var - 0.5 * math.log(var)
-        if log_likelihood is not None:
-            val += float(np.asarray(log_likelihood(x[None, :]))[0])
+        val = log_posterior(post, surrogate, x[None, :], log_likelihood)[0]
         return -val if np.isfinite(val) else 1e30
 
     # the prior's logpdf is -inf on its boundary: stay a hair inside
@@ -357,11 +371,16 @@ def recommend(post: Posterior, surrogate: NoisySurrogate, log_likelihood=None, s
         res = optimize.minimize(neg_log_post, post.samples[i], method="L-BFGS-B", bounds=bounds)
         if best is None or res.fun < best.fun:
             best = res
-    x = best.x
-    m, s = surrogate.predict(x[None, :])
-    imp = abs(post.target - m[0]) / math.sqrt(s[0] ** 2 + tv)
-    return {"values": {n: float(v) for n, v in zip(prior.names, x)}, "predicted": float(m[0]),
-            "predicted_sd": float(s[0]), "implausibility": float(imp), "log_posterior": float(-best.fun)}
+    return _at(post, surrogate, best.x, -best.fun)
+
+
+def recommend_among(post: Posterior, surrogate: NoisySurrogate, points, log_likelihood=None) -> dict:
+    """Of ``points`` (n, dim), e.g. the points whose mean angle was measured by replicates, the
+    one with the highest posterior density; same keys as ``recommend`` plus ``index``."""
+    points = np.atleast_2d(np.asarray(points, dtype=float))
+    lp = log_posterior(post, surrogate, points, log_likelihood)
+    i = int(np.argmax(lp))
+    return {**_at(post, surrogate, points[i], lp[i]), "index": i}
 
 
 # ----------------------------------------------------------------------------------------------

@@ -179,7 +179,7 @@ def table_identifiability(c: Campaign) -> Table:
                         f"(SD of its mean {cal['target_var'] ** 0.5:.3g}°), by importance sampling on the "
                         f"surrogate (effective sample size {cal['ess']:.0f}). A ratio near 1: the heap does not "
                         "identify the parameter; its value then rests on its own measurement.",
-                        f"Recommended point: the posterior mode; predicted mean angle {rec['predicted']:.4g} ± "
+                        f"Recommended point: the {rec.get('chosen', 'posterior mode')}; predicted mean angle {rec['predicted']:.4g} ± "
                         f"{rec['predicted_sd']:.2g}° (surrogate SD), implausibility {rec['implausibility']:.2g}. "
                         f"{100 * pl['share_of_prior']:.0f} % of the prior is plausible (implausibility < {pl['cut']:g}).",),
                  sources=(_results_source("calibration"),),

@@ -34,6 +34,11 @@ def test_noise_is_measured_and_sizes_the_replicates(campaign):
     refine = [p for p in points if p["stage"].startswith("refine")]
     assert [p["stage"] for p in refine] == ["refine 1", "refine 2"]
     assert all(len(p["responses"]) == 8 for p in refine)
+    # the validation runs where the mean angle was measured: at one of the refined points
+    rec = res["calibration"]["recommended"]
+    assert rec["values"] in [p["settings"] for p in refine]
+    assert rec["chosen"].startswith("refined point of round")
+    assert res["validation"]["settings"] == rec["values"]
     assert -1.0 <= noise["seed_correlation"]["r"] <= 1.0
 
 

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from demcal.analyse.surrogate import NoisySurrogate, Prior, next_points, posterior, recommend, space_filling
+from demcal.analyse.surrogate import (NoisySurrogate, Prior, next_points, posterior, recommend, recommend_among,
+                                      space_filling)
 
 
 def prior_2d():
@@ -90,6 +91,13 @@ def test_posterior_matches_the_conjugate_normal():
     rec = recommend(post, LinearModel())
     assert rec["values"]["a"] == pytest.approx(mean, abs=1e-3)   # the mode of a normal is its mean
     assert rec["values"]["b"] == pytest.approx(0.3, abs=1e-3)
+    # among given points: the normal posterior density by hand (b at its prior mean throughout)
+    pts = np.array([[mean - 0.02, 0.3], [mean + 0.005, 0.3], [mean + 0.03, 0.3]])
+    among = recommend_among(post, LinearModel(), pts)
+    assert among["index"] == 1 and among["values"]["a"] == pytest.approx(mean + 0.005)
+    hand = -0.5 * prec * (pts[:, 0] - mean) ** 2
+    lp = [recommend_among(post, LinearModel(), p[None, :])["log_posterior"] for p in pts]
+    assert np.diff(lp) == pytest.approx(np.diff(hand), rel=1e-6)
 
 
 def test_next_points_go_where_the_sign_is_uncertain():
