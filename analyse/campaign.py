@@ -51,6 +51,7 @@ from demcal.analyse.equivalence import default_tolerance, equivalence_test
 from demcal.analyse.optimise import (canonical_analysis, confirmation_interval, optimise_to_target,
                               steepest_climb_analysis, steepest_climb_plan, validate_repeats)
 from demcal.analyse.regression import fit_response_surface
+from demcal.analyse.results import CampaignResult, Validation
 from demcal.analyse.runs import RunStore, run_all, run_key
 from demcal.analyse.screening import plackett_burman_screening
 from demcal.errors import AnalysisError, InputError
@@ -150,8 +151,8 @@ class CampaignConfig:
     noise_repeats: int = 6
     initial_points: int = 18
     batch: int = 4
-    budget_runs: int = 72
-    refine_rounds: int = 2
+    budget_runs: int = 56
+    refine_rounds: int = 4
     refine_runs: int = 8
     validation_first: int = 10
     validation_step: int = 10
@@ -391,7 +392,7 @@ def _run_refs(records) -> list[dict]:
 
 
 def calibrate(workbook, out_dir, config: CampaignConfig | None = None, *, runner=None,
-              measurement=None) -> dict:
+              measurement=None) -> CampaignResult:
     """Run the whole calibration campaign and write ``out_dir/results.json``.
 
     Parameters
@@ -410,8 +411,8 @@ def calibrate(workbook, out_dir, config: CampaignConfig | None = None, *, runner
 
     Returns
     -------
-    dict
-        The content of ``results.json``.
+    CampaignResult
+        What ``results.json`` holds (``to_dict()``).
     """
     from demcal.measure.pipeline import measure_workbook
 
@@ -423,14 +424,14 @@ def calibrate(workbook, out_dir, config: CampaignConfig | None = None, *, runner
         measurement = measure_workbook(workbook, annotate_dir=out / "annotated")
     write_json(out / "measure.json", measurement.to_dict())
     runner = runner or campaign_runner
-    results = _derive(measurement, config, _Runner(config, RunStore(out / "runs"), runner))
-    results["runner"] = f"{getattr(runner, '__module__', '?')}.{getattr(runner, '__qualname__', repr(runner))}"
-    results["wall_s"] = time.perf_counter() - t_start
-    write_json(out / "results.json", results)
+    results = _derive(measurement, config, _Runner(config, RunStore(out / "runs"), runner)).with_(
+        runner=f"{getattr(runner, '__module__', '?')}.{getattr(runner, '__qualname__', repr(runner))}",
+        wall_s=time.perf_counter() - t_start)
+    write_json(out / "results.json", results.to_dict())
     return results
 
 
-def derive_results(measurement, config: CampaignConfig, store_dir) -> dict:
+def derive_results(measurement, config: CampaignConfig, store_dir) -> CampaignResult:
     """Replay a campaign's analysis from its stored DEM runs, running no DEM.
 
     Every step of :func:`calibrate` after the measurement is redone with the same code; each
@@ -448,7 +449,7 @@ def derive_results(measurement, config: CampaignConfig, store_dir) -> dict:
 
     Returns
     -------
-    dict
+    CampaignResult
         What ``results.json`` holds, without ``runner`` and ``wall_s``.
 
     Raises
@@ -463,7 +464,7 @@ def derive_results(measurement, config: CampaignConfig, store_dir) -> dict:
     return _derive(measurement, config, _StoredRuns(RunStore(store_dir)))
 
 
-def _derive(measurement, config: CampaignConfig, execute) -> dict:
+def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
     """The campaign after the measurement; ``execute(stage, tasks) -> records`` supplies the DEM
     runs. The workflow's results plus what every campaign records."""
     if "repose_angle_deg" not in measurement.quantities:
@@ -481,26 +482,28 @@ def _derive(measurement, config: CampaignConfig, execute) -> dict:
     else:
         results = _derive_design_expert(measurement, config, execute, factors, base, geometry)
         fallbacks = results.pop("fallback_runs")
-    return {
-        "workflow": config.workflow,
-        "response": {"name": RESPONSE, "fallbacks": list(FALLBACK_RESPONSES),
-                     "fallback_runs": fallbacks,
-                     "note": (f"{len(fallbacks)} run(s) left no slope for the photo method (e.g. the "
-                              f"heap spread flat); their response is the fallback named per run"
-                              if fallbacks else "")},
-        "material": measurement.material,
-        "target_angle_deg": float(measurement.quantities["repose_angle_deg"].value),
-        "config": {k_: (list(v) if isinstance(v, tuple) else v) for k_, v in config.__dict__.items()},
-        "measurement": measurement.to_dict(),
-        "factors": factors,
-        "base_parameters": base.to_dict(),
-        "geometry": geometry,
+    if not isinstance(results["validation"], Validation):
+        results["validation"] = Validation.from_dict(results["validation"])
+    return CampaignResult(
+        workflow=config.workflow,
+        response={"name": RESPONSE, "fallbacks": list(FALLBACK_RESPONSES),
+                  "fallback_runs": fallbacks,
+                  "note": (f"{len(fallbacks)} run(s) left no slope for the photo method (e.g. the "
+                           f"heap spread flat); their response is the fallback named per run"
+                           if fallbacks else "")},
+        material=measurement.material,
+        target_angle_deg=float(measurement.quantities["repose_angle_deg"].value),
+        config={k_: (list(v) if isinstance(v, tuple) else v) for k_, v in config.__dict__.items()},
+        measurement=measurement.to_dict(),
+        factors=factors,
+        base_parameters=base.to_dict(),
+        geometry=geometry,
         **results,
-        "stages": list(execute.log),
-        "provenance": Provenance(inputs=dict(measurement.provenance.inputs), seed=config.seed,
-                                 options={"profile": config.profile, "levels": config.levels,
-                                          "workflow": config.workflow}).to_dict(),
-    }
+        stages=list(execute.log),
+        provenance=Provenance(inputs=dict(measurement.provenance.inputs), seed=config.seed,
+                              options={"profile": config.profile, "levels": config.levels,
+                                       "workflow": config.workflow}),
+    )
 
 
 def _derive_design_expert(measurement, config: CampaignConfig, execute, factors, base, geometry) -> dict:

@@ -49,6 +49,7 @@ import numpy as np
 from demcal.analyse.equivalence import (default_tolerance, lab_heaps_for_power, runs_for_power,
                                  sequential_equivalence, tost_power)
 from demcal.analyse.noise import pooled_noise, replicates_for, seed_correlation
+from demcal.analyse.results import Calibration, HeapOnly, ParameterEstimate, Point, Validation
 from demcal.analyse.surrogate import (IMPLAUSIBILITY_CUT, U_STOP, NoisySurrogate, Prior, next_points,
                                posterior, recommend, recommend_among, space_filling)
 from demcal.errors import AnalysisError, InputError
@@ -249,8 +250,8 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
         hp = posterior(model, heap_prior, target, target_var, discrepancy_var=config.discrepancy_sd ** 2,
                        seed=np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 3]))
         hb = recommend(hp, model)
-        heap_only = {"parameters": _parameter_table(hp, hb), "recommended": hb, "ess": hp.ess}
-    inside = {n: bool(parameters[n]["ci95"][0] <= best["values"][n] <= parameters[n]["ci95"][1]) for n in names}
+        heap_only = HeapOnly(parameters=_parameter_table(hp, hb), recommended=Point(**hb), ess=hp.ess)
+    inside = {n: bool(parameters[n].ci95[0] <= best["values"][n] <= parameters[n].ci95[1]) for n in names}
 
     # 5. validation by equivalence ---------------------------------------------------------------
     x_best = np.array([best["values"][n] for n in names])
@@ -279,12 +280,12 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
     needed = runs_for_power(0.0, pooled.sd, tolerance, 0.8, lab_sd, lab_n, config.alpha, n_max=1000)
     needed_exact = runs_for_power(0.0, pooled.sd, tolerance, 0.8, alpha=config.alpha, n_max=1000)
     heaps = lab_heaps_for_power(pooled.sd, config.validation_cap, tolerance, lab_sd) if lab_sd else None
-    validation = {"verdict": vdict["verdict"], "mean_deg": vdict["mean_deg"], "ci95": vdict["ci95"],
-                  "tolerance_deg": tolerance, "target_deg": target, "n_runs": vdict["n_runs"],
-                  "detectable_bias_deg": vdict["detectable_bias_deg"], "settings": best["values"],
-                  "power_if_on_target": power, "runs_for_power": needed,
-                  "runs_for_power_exact_target": needed_exact, "lab_heaps_for_power": heaps,
-                  "test": vdict, **val}
+    validation = Validation(verdict=vdict["verdict"], mean_deg=vdict["mean_deg"], ci95=tuple(vdict["ci95"]),
+                            tolerance_deg=tolerance, target_deg=target, n_runs=vdict["n_runs"],
+                            detectable_bias_deg=vdict["detectable_bias_deg"], settings=best["values"],
+                            power_if_on_target=power, runs_for_power=needed,
+                            runs_for_power_exact_target=needed_exact, lab_heaps_for_power=heaps,
+                            test=vdict, **val)
 
     # what is kept for plots and the audit
     keep = np.random.default_rng(np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 2]))
@@ -300,7 +301,6 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
                        "a_responses": ya.tolist(), "b_responses": yb.tolist()}}
     loo = model.leave_one_out()
     return {
-        "workflow": "plausible",
         "prior": prior.to_dict(),
         "noise": noise,
         "design": {"points": [{"stage": p["stage"], "settings": dict(zip(names, p["x"].tolist())),
@@ -311,29 +311,28 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
                    "refinements": refinements},
         "surrogate": {"kernel": str(model.kernel), "length_scales": dict(zip(names, model.length_scales().tolist())),
                       "leave_one_out": loo, "noise_model": "pooled" if pooled.constant else "per point, shrunk to pooled"},
-        "calibration": {
-            "method": ("posterior of the measured-mean-and-sd prior given the lab's angle of repose, by "
-                       "importance sampling on a stochastic-kriging surrogate of the mean heap angle; "
-                       f"plausible set: implausibility < {IMPLAUSIBILITY_CUT:g} (history matching); "
-                       + ("recommended point: the refined point of highest posterior density; "
-                          if refinements else "recommended point: the posterior mode; ")
-                       + ("joint: the drop and incline twins constrain the restitutions and frictions "
-                          "first (analyse.twin_likelihood)" if constraints else "heap only")),
-            "likelihood": config.likelihood,
-            "twins": {n: c.to_dict() for n, c in constraints.items()},
-            "heap_only": heap_only,
-            "parameters": parameters,
-            "recommended": best, "posterior_mode": mode, "recommended_inside_ci95": inside,
-            "target_deg": target, "target_sd_deg": lab_sd, "target_n": lab_n, "target_var": target_var,
-            "discrepancy_sd_deg": config.discrepancy_sd,
-            "plausible": {"cut": IMPLAUSIBILITY_CUT, "share_of_prior": float(np.mean(post.plausible)),
-                          "box": post.plausible_box()},
-            "ess": post.ess,
-            "samples": {"names": list(names),
-                        "prior": post.samples[:KEPT_SAMPLES].tolist(),
-                        "prior_implausibility": post.implausibility[:KEPT_SAMPLES].tolist(),
-                        "posterior": post.samples[draws].tolist()},
-        },
+        "calibration": Calibration(
+            method=("posterior of the measured-mean-and-sd prior given the lab's angle of repose, by "
+                    "importance sampling on a stochastic-kriging surrogate of the mean heap angle; "
+                    f"plausible set: implausibility < {IMPLAUSIBILITY_CUT:g} (history matching); "
+                    + ("recommended point: the refined point of highest posterior density; "
+                       if refinements else "recommended point: the posterior mode; ")
+                    + ("joint: the drop and incline twins constrain the restitutions and frictions "
+                       "first (analyse.twin_likelihood)" if constraints else "heap only")),
+            likelihood=config.likelihood,
+            twins={n: c.to_dict() for n, c in constraints.items()},
+            heap_only=heap_only,
+            parameters=parameters,
+            recommended=Point(**best), posterior_mode=Point(**mode), recommended_inside_ci95=inside,
+            target_deg=target, target_sd_deg=lab_sd, target_n=lab_n, target_var=target_var,
+            discrepancy_sd_deg=config.discrepancy_sd,
+            plausible={"cut": IMPLAUSIBILITY_CUT, "share_of_prior": float(np.mean(post.plausible)),
+                       "box": post.plausible_box()},
+            ess=post.ess,
+            samples={"names": list(names),
+                     "prior": post.samples[:KEPT_SAMPLES].tolist(),
+                     "prior_implausibility": post.implausibility[:KEPT_SAMPLES].tolist(),
+                     "posterior": post.samples[draws].tolist()}),
         "validation": validation,
         "calibrated_parameters": base.with_(**best["values"]).to_dict(),
         "fallback_runs": fallbacks,
@@ -342,11 +341,11 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
 
 def _parameter_table(post, best) -> dict:
     """Per parameter: the recommended value, the 95 % interval, prior and posterior mean and sd,
-    their ratio and what the heap says about it (``results["calibration"]["parameters"]``)."""
+    their ratio and what the heap says about it."""
     summary = post.summary()
-    return {n: {"value": best["values"][n], "ci95": s["ci95"], "prior_mean": s["prior_mean"],
-                "prior_sd": s["prior_sd"], "sd_ratio": s["sd_ratio"], "posterior_mean": s["mean"],
-                "posterior_sd": s["sd"], "identifiability": s["identifiability"], "source": s["source"]}
+    return {n: ParameterEstimate(value=best["values"][n], ci95=tuple(s["ci95"]), prior_mean=s["prior_mean"],
+                                 prior_sd=s["prior_sd"], sd_ratio=s["sd_ratio"], posterior_mean=s["mean"],
+                                 posterior_sd=s["sd"], identifiability=s["identifiability"], source=s["source"])
             for n, s in summary.items()}
 
 

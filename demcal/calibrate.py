@@ -56,40 +56,6 @@ def register(subparsers) -> None:
     cal.set_defaults(handler=_run_calibrate)
 
 
-def calibration_summary(results: dict) -> str:
-    """The headline of a campaign: calibrated values (with the plausible set's 95 % intervals)
-    and the validation verdict."""
-    v = results["validation"]
-    lines = [f"target angle {results['target_angle_deg']:.2f} deg ({results['workflow']} workflow)"]
-    cal = results.get("calibration")
-    if cal:
-        for name, p in cal["parameters"].items():
-            lines.append(f"  {name:14s} {p['value']:.4g}  95 % set [{p['ci95'][0]:.4g}, {p['ci95'][1]:.4g}]"
-                         f"  posterior/prior sd {p['sd_ratio']:.2f} ({p['identifiability']})")
-        rec = cal["recommended"]
-        lines.append(f"  predicted mean angle at the recommended point {rec['predicted']:.2f} "
-                     f"+- {rec['predicted_sd']:.2f} deg")
-    else:
-        lines.append("calibrated " + ", ".join(f"{k} = {x:.4g}" for k, x in v["settings"].items()))
-    ci = v.get("ci95") or [float("nan")] * 2
-    lines.append(f"validation: {v['verdict']} (tolerance {v['tolerance_deg']:.2f} deg): mean "
-                 f"{v['mean_deg']:.2f} deg over {v['n_runs']} runs, 95 % CI [{ci[0]:.2f}, {ci[1]:.2f}], "
-                 f"target {v['target_deg']:.2f}; smallest bias it would detect {v['detectable_bias_deg']:.2f} deg")
-    if v.get("power_if_on_target") is not None and v["power_if_on_target"] < 0.8:
-        def n(x):
-            return "more than 1000" if x is None else str(x)
-        lines.append(f"  power to show equivalence even exactly on target: {v['power_if_on_target']:.2f}; "
-                     f"80 % would take {n(v.get('runs_for_power'))} runs against this lab target, "
-                     f"{n(v.get('runs_for_power_exact_target'))} against an exactly known one")
-    conf = v.get("confirmation")
-    if conf:
-        lo, hi = conf["pi95"]
-        lines.append(f"Design-Expert confirmation: predicted {conf['predicted']:.2f} deg, 95 % PI of the "
-                     f"mean of {v['n_runs']} runs [{lo:.2f}, {hi:.2f}]: the target lies "
-                     + ("inside" if conf["target_inside"] else "outside"))
-    return "\n".join(lines)
-
-
 def _run_calibrate(args) -> int:
     from demcal.analyse.campaign import CampaignConfig, calibrate
     from demcal.measure.pipeline import measure_workbook
@@ -109,7 +75,7 @@ def _run_calibrate(args) -> int:
     # measure first: a bad workbook stops before any DEM run
     measurement = measure_workbook(workbook, annotate_dir=args.out / "annotated")
     results = calibrate(workbook, args.out, config, measurement=measurement)
-    print(calibration_summary(results))
+    print(results.summary())
     print(f"results: {args.out / 'results.json'}")
     if not args.no_report:
         paths = build_report(args.out)

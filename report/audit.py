@@ -35,6 +35,7 @@ from difflib import SequenceMatcher
 from html.parser import HTMLParser
 from pathlib import Path
 
+from demcal.analyse.results import CampaignResult
 from demcal.errors import DemcalError, InputError
 from demcal.jsonio import read_json, to_jsonable
 from demcal.provenance import sha256_file
@@ -513,13 +514,14 @@ def check_artefacts(out: Path, campaign: Campaign, derived_tables: list[dict],
         return [ArtefactCheck(name, "not checked", reason=why)
                 for name in ("results.json", "report.html", "report.pdf")]
     stored = read_json(out / "results.json")
-    checks = [_check("results.json", compare_results(stored, campaign.results))]
+    derived = campaign.results.to_dict()
+    checks = [_check("results.json", compare_results(stored, derived))]
     html_path, pdf_path = out / "report.html", out / "report.pdf"
     if not html_path.is_file():
         return checks + [ArtefactCheck("report.html", "missing", reason=f"{html_path} not found"),
                          ArtefactCheck("report.pdf", "not checked", reason="no report.html")]
-    results = with_run_record(to_jsonable(campaign.results), stored)
-    rendered = replace(campaign, results=results, measurement=results.get("measurement") or campaign.measurement)
+    results = CampaignResult.from_dict(with_run_record(derived, stored))
+    rendered = replace(campaign, results=results, measurement=results.measurement or campaign.measurement)
     with tempfile.TemporaryDirectory(prefix="demcal-audit-") as tmp:
         html_text = render_html(rendered, derived_tables, make_figures(rendered, Path(tmp) / "figures"))
         checks.append(_check("report.html", compare_html(html_path.read_text(encoding="utf-8"), html_text)))
@@ -575,7 +577,7 @@ def rederive(out_dir) -> tuple[Campaign | None, list[str]]:
     except DemcalError as exc:
         problems.append(f"analysis not replayed: {exc}")
     runs = {}
-    for key in run_keys(derived or {}):
+    for key in (run_keys(derived) if derived is not None else []):
         p = out / "runs" / f"{key}.json"
         runs[key] = read_json(p)
     paper, paper_source = load_paper()

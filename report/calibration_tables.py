@@ -7,11 +7,12 @@ Like every table of the report they are pure functions of the stored results (``
 
 from __future__ import annotations
 
+from demcal.analyse.results import CampaignResult
 from demcal.report.tables import Campaign, Table, _results_source, _wall, parameter_label
 
 
-def _names(r: dict) -> list[str]:
-    return list(r["prior"])
+def _names(r: CampaignResult) -> list[str]:
+    return list(r.prior)
 
 
 def _symbols(c: Campaign) -> dict:
@@ -24,7 +25,7 @@ def table_prior(c: Campaign) -> Table:
     r = c.results
     wall = _wall(c.measurement)
     rows = []
-    for name, p in r["prior"].items():
+    for name, p in r.prior.items():
         label, symbol = parameter_label(name, wall)
         rows.append((label, symbol, p["source"], p["mean"], p["sd"], p["low"], p["high"]))
     return Table("P1", "Prior of the contact parameters: the lab's measured mean and sd of each",
@@ -41,7 +42,7 @@ def table_prior(c: Campaign) -> Table:
 def table_twins(c: Campaign) -> Table | None:
     """Table P1a: what each lab test's twin says about its parameter (joint calibration)."""
     r = c.results
-    twins = r["calibration"].get("twins") or {}
+    twins = r.calibration.twins
     if not twins:
         return None
     wall = _wall(c.measurement)
@@ -67,16 +68,15 @@ def table_twins(c: Campaign) -> Table | None:
 def table_joint_vs_heap(c: Campaign) -> Table | None:
     """Table P5a: the joint calibration beside the heap-only one, on the same surrogate."""
     r = c.results
-    cal = r["calibration"]
-    heap = cal.get("heap_only")
+    cal = r.calibration
+    heap = cal.heap_only
     if not heap:
         return None
     wall = _wall(c.measurement)
     rows = []
-    for name, p in cal["parameters"].items():
-        h = heap["parameters"][name]
-        rows.append((parameter_label(name, wall)[0], p["value"], p["ci95"], p["sd_ratio"],
-                     h["value"], h["ci95"], h["sd_ratio"]))
+    for name, p in cal.parameters.items():
+        h = heap.parameters[name]
+        rows.append((parameter_label(name, wall)[0], p.value, p.ci95, p.sd_ratio, h.value, h.ci95, h.sd_ratio))
     return Table("P5a", "Joint calibration (every lab test's twin) beside the heap alone",
                  ("Parameter", "Joint: recommended", "Joint: 95 % interval", "Joint: posterior/prior SD",
                   "Heap only: recommended", "Heap only: 95 % interval", "Heap only: posterior/prior SD"),
@@ -92,7 +92,7 @@ def table_joint_vs_heap(c: Campaign) -> Table | None:
 def table_noise_study(c: Campaign) -> Table:
     """Table P2: the seed-to-seed noise, its constancy and the seed correlation."""
     r = c.results
-    n = r["noise"]
+    n = r.noise
     pairs = n["pairs"]
     rows = [("Runs at the prior mean (seeds shared with the next row)", " / ".join(f"{a:.4g}" for a in pairs["a_responses"]), None, None),
             ("Runs half a prior SD higher in every parameter", " / ".join(f"{a:.4g}" for a in pairs["b_responses"]), None, None)]
@@ -112,7 +112,7 @@ def table_noise_study(c: Campaign) -> Table:
                  ("Item", "Value", "95 % interval", "Note"), ("", "deg", "deg", ""), tuple(rows),
                  notes=("Every run is an independent draw of the heap: a design point's angle is the mean "
                         "of its runs, and the surrogate carries each point's noise over its number of runs.",),
-                 sources=({"kind": "runs", "keys": [run["key"] for p in r["design"]["points"][:2] for run in p["runs"]]},
+                 sources=({"kind": "runs", "keys": [run["key"] for p in r.design["points"][:2] for run in p["runs"]]},
                           _results_source("noise")),
                  formats=("", ".4g", ".3g", ""))
 
@@ -123,11 +123,11 @@ def table_design_runs(c: Campaign) -> Table:
     names = _names(r)
     sym = _symbols(c)
     rows = []
-    for i, p in enumerate(r["design"]["points"], 1):
+    for i, p in enumerate(r.design["points"], 1):
         ys = p["responses"]
         sd = (sum((y - p["mean"]) ** 2 for y in ys) / (len(ys) - 1)) ** 0.5 if len(ys) > 1 else None
         rows.append((i, p["stage"], *[p["settings"][n] for n in names], len(ys), p["mean"], sd))
-    d = r["design"]
+    d = r.design
     return Table("P3", "Design points: noise pair, space-filling design, sequential rounds, and runs at "
                  "the recommended point",
                  ("#", "Stage", *[sym[n] for n in names], "Runs", "Mean angle", "Run SD"),
@@ -144,7 +144,7 @@ def table_design_runs(c: Campaign) -> Table:
 def table_surrogate(c: Campaign) -> Table:
     """Table P4: the surrogate's length scales and its leave-one-out check."""
     r = c.results
-    s = r["surrogate"]
+    s = r.surrogate
     sym = _symbols(c)
     rows = [(f"Length scale, {sym[n]}", v, "fraction of the prior range: large = the angle hardly depends on it")
             for n, v in s["length_scales"].items()]
@@ -162,25 +162,25 @@ def table_identifiability(c: Campaign) -> Table:
     """Table P5: what the heap identifies: per parameter the 95 % interval, the ratio of
     posterior to prior SD and the recommended value."""
     r = c.results
-    cal = r["calibration"]
+    cal = r.calibration
     wall = _wall(c.measurement)
     rows = []
-    for name, p in cal["parameters"].items():
+    for name, p in cal.parameters.items():
         label, symbol = parameter_label(name, wall)
-        rows.append((label, symbol, p["prior_mean"], p["prior_sd"], p["posterior_mean"], p["ci95"],
-                     p["sd_ratio"], p["identifiability"], p["value"]))
-    rec = cal["recommended"]
-    pl = cal["plausible"]
+        rows.append((label, symbol, p.prior_mean, p.prior_sd, p.posterior_mean, p.ci95, p.sd_ratio,
+                     p.identifiability, p.value))
+    rec = cal.recommended
+    pl = cal.plausible
     return Table("P5", "Calibrated parameters: the set consistent with the measured angle of repose",
                  ("Parameter", "Symbol", "Prior mean", "Prior SD", "Posterior mean", "95 % interval",
                   "Posterior/prior SD", "The heap", "Recommended"),
                  ("", "", "", "", "", "", "", "", ""), tuple(rows),
-                 notes=(f"Posterior of the prior (Table P1) given the lab's angle {cal['target_deg']:.4g}° "
-                        f"(SD of its mean {cal['target_var'] ** 0.5:.3g}°), by importance sampling on the "
-                        f"surrogate (effective sample size {cal['ess']:.0f}). A ratio near 1: the heap does not "
+                 notes=(f"Posterior of the prior (Table P1) given the lab's angle {cal.target_deg:.4g}° "
+                        f"(SD of its mean {cal.target_var ** 0.5:.3g}°), by importance sampling on the "
+                        f"surrogate (effective sample size {cal.ess:.0f}). A ratio near 1: the heap does not "
                         "identify the parameter; its value then rests on its own measurement.",
-                        f"Recommended point: the {rec.get('chosen', 'posterior mode')}; predicted mean angle {rec['predicted']:.4g} ± "
-                        f"{rec['predicted_sd']:.2g}° (surrogate SD), implausibility {rec['implausibility']:.2g}. "
+                        f"Recommended point: the {rec.chosen}; predicted mean angle {rec.predicted:.4g} ± "
+                        f"{rec.predicted_sd:.2g}° (surrogate SD), implausibility {rec.implausibility:.2g}. "
                         f"{100 * pl['share_of_prior']:.0f} % of the prior is plausible (implausibility < {pl['cut']:g}).",),
                  sources=(_results_source("calibration"),),
                  formats=("", "", ".4g", ".3g", ".4g", ".4g", ".2f", "", ".4g"))
@@ -189,23 +189,23 @@ def table_identifiability(c: Campaign) -> Table:
 def table_equivalence(c: Campaign) -> Table:
     """Table P6: the validation, an equivalence test with the lab that can fail."""
     r = c.results
-    v = r["validation"]
-    t = v["test"]
+    v = r.validation
+    t = v.test
     rows = [(f"Look after {look['n_runs']} runs", look["verdict"], look["difference_ci90"], look["p_tost"])
             for look in t["looks"]]
-    rows += [("Simulated mean angle (95 % CI)", v["mean_deg"], v["ci95"], None),
-             ("Lab target (SD of one heap, heaps)", v["target_deg"], None,
+    rows += [("Simulated mean angle (95 % CI)", v.mean_deg, v.ci95, None),
+             ("Lab target (SD of one heap, heaps)", v.target_deg, None,
               None if t.get("target_sd_deg") is None else t["target_sd_deg"]),
              ("Difference simulated - lab", t["difference_deg"], t["difference_ci90"], t["p_tost"]),
-             ("Tolerance", v["tolerance_deg"], None, None),
-             ("Smallest bias detected with 80 % power", v["detectable_bias_deg"], None, None),
-             (f"Power to show equivalence with {r['config']['validation_cap']} runs if exactly on target",
-              v["power_if_on_target"], None, None),
+             ("Tolerance", v.tolerance_deg, None, None),
+             ("Smallest bias detected with 80 % power", v.detectable_bias_deg, None, None),
+             (f"Power to show equivalence with {r.config['validation_cap']} runs if exactly on target",
+              v.power_if_on_target, None, None),
              ("Runs that would give 80 % power (this lab target; an exact one)",
-              [v["runs_for_power"], v["runs_for_power_exact_target"]], None, None),
-             (f"Lab heaps that would give 80 % power with {r['config']['validation_cap']} runs",
-              v["lab_heaps_for_power"], None, None),
-             ("Verdict", v["verdict"], None, None)]
+              [v.runs_for_power, v.runs_for_power_exact_target], None, None),
+             (f"Lab heaps that would give 80 % power with {r.config['validation_cap']} runs",
+              v.lab_heaps_for_power, None, None),
+             ("Verdict", v.verdict, None, None)]
     return Table("P6", "Validation at the recommended point: equivalence with the lab (two one-sided tests)",
                  ("Item", "Value", "Interval", "p (TOST) / SD"), ("", "deg", "deg", ""), tuple(rows),
                  notes=(t["note"],
@@ -213,7 +213,7 @@ def table_equivalence(c: Campaign) -> Table:
                         "entirely beyond it; otherwise undecided. Runs are added until the verdict is decided "
                         "or the cap is reached. The power rows say whether this validation could have "
                         "shown equivalence at all (none: not within 1000 runs, or 50 heaps)."),
-                 sources=({"kind": "runs", "keys": [run["key"] for run in v["runs"]]}, _results_source("validation")),
+                 sources=({"kind": "runs", "keys": [run["key"] for run in v.runs]}, _results_source("validation")),
                  formats=("", ".4g", ".4g", ".3g"))
 
 

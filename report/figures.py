@@ -18,6 +18,7 @@ import numpy as np
 from matplotlib.figure import Figure as _MplFigure
 from matplotlib.image import imread
 
+from demcal.analyse.results import CampaignResult
 from demcal.report.tables import parameter_label
 
 #: Resolution of every PNG [dots per inch].
@@ -80,10 +81,10 @@ def heap_photos(measurement: dict, path: Path) -> Path | None:
     return _save(fig, path)
 
 
-def pareto_chart(results: dict, path: Path) -> Path | None:
+def pareto_chart(results: CampaignResult, path: Path) -> Path | None:
     """Pareto chart of the Plackett-Burman effects: |t| of each factor, sorted, with the
     t-value and Bonferroni limits (Design-Expert's chart)."""
-    p = results.get("plackett_burman", {}).get("screening", {}).get("pareto")
+    p = (results.plackett_burman or {}).get("screening", {}).get("pareto")
     if not p:
         return None
     names, t, signs = p["names"], np.abs(p["t_values"]), p["signs"]
@@ -122,7 +123,7 @@ def polynomial(coefficients: dict, x: dict):
     return sum(b * _term_value(term, x) for term, b in coefficients.items())
 
 
-def response_surfaces(results: dict, path: Path, target: float | None = None,
+def response_surfaces(results: CampaignResult, path: Path, target: float | None = None,
                       labels: dict | None = None) -> Path | None:
     """Contours of the fitted quadratic over each pair of Box-Behnken factors, in actual
     units, the remaining factors held at the preferred solution (at their centre when there is
@@ -131,7 +132,7 @@ def response_surfaces(results: dict, path: Path, target: float | None = None,
 
     ``labels`` maps a screening letter to its axis label (e.g. its symbol).
     """
-    b = results.get("box_behnken")
+    b = results.box_behnken
     if not b or not b.get("fit"):
         return None
     fit = b["fit"]
@@ -147,7 +148,7 @@ def response_surfaces(results: dict, path: Path, target: float | None = None,
     fig = _new(2.35 * ncol + 0.3, 2.35 * nrow + 0.2)
     axes = np.atleast_1d(fig.subplots(nrow, ncol, squeeze=False).ravel())
     g = np.linspace(-1.0, 1.0, 81)
-    pref = results.get("optimisation", {}).get("preferred", {}).get("coded", {})
+    pref = (results.optimisation or {}).get("preferred", {}).get("coded", {})
     held = {c: float(pref.get(c, 0.0)) for c in codes}
     design = np.asarray(b["design_coded"], float)
 
@@ -181,10 +182,10 @@ def response_surfaces(results: dict, path: Path, target: float | None = None,
     return _save(fig, path)
 
 
-def climb_curve(results: dict, path: Path) -> Path | None:
+def climb_curve(results: CampaignResult, path: Path) -> Path | None:
     """Relative error of the simulated angle along the steepest climb, the chosen centre and
     its neighbours marked."""
-    sc = results.get("steepest_climb")
+    sc = results.steepest_climb
     if not sc:
         return None
     err = np.asarray(sc["result"]["relative_error_pct"], float)
@@ -240,18 +241,19 @@ def _flank_midpoint(x: np.ndarray, z: np.ndarray) -> tuple[float, float, int]:
     return float(x[k] + t * (x[nxt] - x[k])), zmax / 2, side
 
 
-def validation_heaps(results: dict, runs: dict, measurement: dict, path: Path) -> Path | None:
+def validation_heaps(results: CampaignResult, runs: dict, measurement: dict, path: Path,
+                     paper: dict | None = None) -> Path | None:
     """Simulated heap profiles of the validation runs against the photographed heap: one
     annotated photo, the profiles with the photo's mean angle drawn through their flank, and
     the simulated angles against the measured one (the paper's values beside)."""
-    v = results.get("validation")
-    if not v:
+    v = results.validation
+    if not v.runs:
         return None
-    records = [runs.get(r["key"], {}) for r in v["runs"]]
+    records = [runs.get(r["key"], {}) for r in v.runs]
     profiles = [heap_profile(rec) for rec in records]
     photo_rows = [r for r in measurement.get("per_row", {}).get("repose_angle_deg", [])
                   if r.get("annotated") and Path(r["annotated"]).exists()]
-    target = float(v["result"]["target"])
+    target = float(v.result["target"]) if v.result else float(v.target_deg)
     est = measurement.get("quantities", {}).get("repose_angle_deg", {})
     sd = est.get("sd")
     panels = (1 if photo_rows else 0) + (1 if any(profiles) else 0) + 1
@@ -264,7 +266,7 @@ def validation_heaps(results: dict, runs: dict, measurement: dict, path: Path) -
         ax.set_axis_off()
     if any(profiles):
         ax = axes.pop(0)
-        for k, (prof, run) in enumerate(zip(profiles, v["runs"])):
+        for k, (prof, run) in enumerate(zip(profiles, v.runs)):
             if not prof:
                 continue
             ax.plot(prof["x"] * 1e3, prof["z"] * 1e3, lw=1.1, label=f"seed {run['seed']}")
@@ -286,12 +288,12 @@ def validation_heaps(results: dict, runs: dict, measurement: dict, path: Path) -
         ax.legend(fontsize=6, frameon=False)
         ax.set_title("simulated heap profiles", fontsize=7)
     ax = axes.pop(0)
-    ys = np.asarray(v["responses"], float)
+    ys = np.asarray(v.responses, float)
     ax.plot(np.arange(1, ys.size + 1), ys, "o", color=_BLUE, label="ours")
     ax.axhline(target, color=_BLUE, lw=0.9, label=f"measured {target:.2f}°")
     if sd is not None and math.isfinite(sd):
         ax.axhspan(target - sd, target + sd, color=_BLUE, alpha=0.12, lw=0)
-    paper = (results.get("_paper") or {}).get("validation", {})
+    paper = (paper or {}).get("validation", {})
     if paper.get("runs_deg"):
         pr = np.asarray(paper["runs_deg"], float)
         ax.plot(np.arange(1, pr.size + 1) + 0.15, pr, "^", mfc="none", color=_RED, label="paper")
@@ -304,10 +306,10 @@ def validation_heaps(results: dict, runs: dict, measurement: dict, path: Path) -
     return _save(fig, path)
 
 
-def noise_panels(results: dict, path: Path) -> Path | None:
+def noise_panels(results: CampaignResult, path: Path) -> Path | None:
     """Plausible workflow: the same-seed pairs of the noise measurement, and every design
     point's runs around its mean against the pooled noise."""
-    n = results.get("noise", {})
+    n = results.noise or {}
     pairs = n.get("pairs")
     if not pairs:
         return None
@@ -321,7 +323,7 @@ def noise_panels(results: dict, path: Path) -> Path | None:
     ax1.set_title(f"same seed at two nearby points: r = {sc['r']:.2f}", fontsize=7)
     ax1.set_xlabel("angle at the prior mean [deg]", fontsize=7)
     ax1.set_ylabel("angle half a prior SD higher [deg]", fontsize=7)
-    resid = np.concatenate([np.asarray(p["responses"]) - p["mean"] for p in results["design"]["points"]
+    resid = np.concatenate([np.asarray(p["responses"]) - p["mean"] for p in results.design["points"]
                             if len(p["responses"]) > 1])
     sd = n["all_points"]["sd"]
     ax2.hist(resid, bins=15, density=True, color=_BLUE, alpha=0.5)
@@ -337,21 +339,21 @@ def noise_panels(results: dict, path: Path) -> Path | None:
     return _save(fig, path)
 
 
-def plausible_set(results: dict, path: Path, labels: dict, panels: int = 4) -> Path | None:
+def plausible_set(results: CampaignResult, path: Path, labels: dict, panels: int = 4) -> Path | None:
     """Plausible workflow: pairwise panels of the ``panels`` parameters the heap narrows most:
     prior samples (grey), the plausible ones (light blue, implausibility < 3), posterior draws
     (blue), the prior mean (+) and the recommended point (red star)."""
-    cal = results.get("calibration")
+    cal = results.calibration
     if not cal:
         return None
-    smp = cal["samples"]
+    smp = cal.samples
     names = smp["names"]
-    order = sorted(names, key=lambda n: cal["parameters"][n]["sd_ratio"])[:panels]
+    order = sorted(names, key=lambda n: cal.parameters[n].sd_ratio)[:panels]
     idx = [names.index(n) for n in order]
     prior = np.asarray(smp["prior"])
     imp = np.asarray(smp["prior_implausibility"])
     post = np.asarray(smp["posterior"])
-    rec = cal["recommended"]["values"]
+    rec = cal.recommended.values
     pairs = list(combinations(range(len(order)), 2))
     cols = 3 if len(pairs) > 3 else len(pairs)
     rows = math.ceil(len(pairs) / cols)
@@ -360,10 +362,10 @@ def plausible_set(results: dict, path: Path, labels: dict, panels: int = 4) -> P
     for ax, (i, j) in zip(axes, pairs):
         a, b = idx[i], idx[j]
         ax.plot(prior[:, a], prior[:, b], ".", color=_GREY, ms=1.5, alpha=0.4)
-        keep = imp < cal["plausible"]["cut"]
+        keep = imp < cal.plausible["cut"]
         ax.plot(prior[keep, a], prior[keep, b], ".", color="#9ecae1", ms=1.5)
         ax.plot(post[:, a], post[:, b], ".", color=_BLUE, ms=1.2, alpha=0.5)
-        ax.plot(cal["parameters"][order[i]]["prior_mean"], cal["parameters"][order[j]]["prior_mean"], "+",
+        ax.plot(cal.parameters[order[i]].prior_mean, cal.parameters[order[j]].prior_mean, "+",
                 color="k", ms=8)
         ax.plot(rec[order[i]], rec[order[j]], "*", color=_RED, ms=9)
         ax.set_xlabel(labels.get(order[i], order[i]), fontsize=7)
@@ -374,14 +376,14 @@ def plausible_set(results: dict, path: Path, labels: dict, panels: int = 4) -> P
     return _save(fig, path)
 
 
-def validation_runs(results: dict, path: Path) -> Path | None:
+def validation_runs(results: CampaignResult, path: Path) -> Path | None:
     """Plausible workflow: every validation run, the running mean with the interval of each
     look, the target and the tolerance band."""
-    v = results.get("validation")
-    if not v or "test" not in v or not v.get("responses"):
+    v = results.validation
+    if not v.test or not v.responses:
         return None
-    ys = np.asarray(v["responses"], float)
-    target, tol = v["target_deg"], v["tolerance_deg"]
+    ys = np.asarray(v.responses, float)
+    target, tol = v.target_deg, v.tolerance_deg
     fig = _new(6.0, 2.4)
     ax = fig.subplots()
     ax.plot(np.arange(1, ys.size + 1), ys, "o", color=_BLUE, ms=3, alpha=0.6, label="runs")
@@ -389,14 +391,14 @@ def validation_runs(results: dict, path: Path) -> Path | None:
             label="running mean")
     ax.axhline(target, color="k", lw=0.9, label=f"lab {target:.2f}°")
     ax.axhspan(target - tol, target + tol, color=_GREEN, alpha=0.12, lw=0, label=f"± tolerance {tol:.2g}°")
-    for look in v["test"]["looks"]:
+    for look in v.test["looks"]:
         lo, hi = look["difference_ci90"]
         ax.errorbar(look["n_runs"], target + 0.5 * (lo + hi), yerr=0.5 * (hi - lo), fmt="s", color=_RED,
                     ms=3, capsize=2, lw=0.9)
     ax.plot([], [], "s", color=_RED, ms=3, label="look: interval of the difference")
     ax.set_xlabel("validation run", fontsize=7)
     ax.set_ylabel("angle of repose [deg]", fontsize=7)
-    ax.set_title(f"verdict: {v['verdict']}", fontsize=7)
+    ax.set_title(f"verdict: {v.verdict}", fontsize=7)
     ax.tick_params(labelsize=6)
     ax.legend(fontsize=6, frameon=False, ncol=3)
     return _save(fig, path)
@@ -405,8 +407,8 @@ def validation_runs(results: dict, path: Path) -> Path | None:
 def make_figures(campaign, fig_dir) -> list[Figure]:
     """Draw every figure the stored results allow into ``fig_dir``; return them in order."""
     fig_dir = Path(fig_dir)
-    m, r = campaign.measurement, campaign.results or {}
-    target = r.get("target_angle_deg")
+    m, r = campaign.measurement, campaign.results
+    target = r.target_angle_deg if r else None
     out = []
 
     def add(fid, path, caption):
@@ -417,8 +419,8 @@ def make_figures(campaign, fig_dir) -> list[Figure]:
         "Image processing of the heap photos: heap boundary, floor line and the straight line fitted "
         "to each measured flank (measure stage, annotated images).")
     wall = str(m.get("meta", {}).get("contact_material", "steel")).lower()
-    if r.get("workflow") == "plausible":
-        labels = {n: parameter_label(n, wall)[1] for n in r.get("prior", {})}
+    if r and r.workflow == "plausible":
+        labels = {n: parameter_label(n, wall)[1] for n in r.prior}
         add("noise", noise_panels(r, fig_dir / "noise.png"),
             "Seed-to-seed noise: runs with the same seed at two nearby points (dotted: equal angles), "
             "and every design point's runs about their mean with the pooled noise (red).")
@@ -437,13 +439,12 @@ def make_figures(campaign, fig_dir) -> list[Figure]:
         add("climb", climb_curve(r, fig_dir / "steepest_climb.png"),
             "Steepest climb: relative error between simulated and measured angle at each level "
             "(circle: the Box-Behnken centre, dotted: its -1/+1 neighbours).")
-        labels = {f: parameter_label(v["parameter"], wall)[1] for f, v in r.get("factors", {}).items()}
+        labels = {f: parameter_label(v["parameter"], wall)[1] for f, v in r.factors.items()}
         add("surfaces", response_surfaces(r, fig_dir / "response_surfaces.png", target, labels),
             "Response surfaces of the fitted quadratic model for each factor pair, the remaining "
             "factor held at the preferred solution (dashed red: the measured angle; star: the "
             "preferred solution; circles: Box-Behnken runs of the plane through the centre).")
-        add("validation", validation_heaps({**r, "_paper": campaign.paper}, campaign.runs, m,
-                                           fig_dir / "validation.png"),
+        add("validation", validation_heaps(r, campaign.runs, m, fig_dir / "validation.png", campaign.paper),
             "Validation: the photographed heap, the simulated heap profiles of the validation runs "
             "with the photos' mean angle (± SD, dotted) drawn through their flank (grey dotted: the "
             "carton's end plate, when recorded), and the "

@@ -19,6 +19,7 @@ from pathlib import Path
 import jinja2
 from markupsafe import Markup
 
+from demcal.analyse.results import CampaignResult
 from demcal.errors import InputError
 from demcal.jsonio import read_json, write_json
 from demcal.provenance import sha256_file
@@ -172,10 +173,10 @@ def _signed_terms(coefs: dict, names: dict) -> str:
 def equations(c: Campaign) -> dict:
     """The fitted model as equations in coded and actual terms, and the paper's eq. (5)."""
     r = c.results
-    fit = r["box_behnken"]["fit"]
+    fit = r.box_behnken["fit"]
     wall = str(c.measurement.get("meta", {}).get("contact_material", "steel")).lower()
     codes = fit["factors"]
-    symbol = {code: parameter_label(r["factors"][letter]["parameter"], wall)[1]
+    symbol = {code: parameter_label(r.factors[letter]["parameter"], wall)[1]
               for code, letter in codes.items()}
 
     def coded_name(term):
@@ -199,8 +200,8 @@ def equations(c: Campaign) -> dict:
     return out
 
 
-def _runner_text(r: dict) -> tuple[str, bool]:
-    runner = r.get("runner")
+def _runner_text(r: CampaignResult) -> tuple[str, bool]:
+    runner = r.runner
     if runner is None:
         return "The DEM runner of this campaign is not recorded in results.json.", True
     # Campaigns stored before the demcal namespace name the runner without the prefix.
@@ -215,10 +216,10 @@ def _runner_text(r: dict) -> tuple[str, bool]:
 
 def differences(c: Campaign) -> list[str]:
     """Where this campaign's procedure differs from the paper's, from the stored settings."""
-    if c.results.get("workflow") == "plausible":
+    if c.results.workflow == "plausible":
         return differences_plausible(c)
     r, m, p = c.results, c.measurement, c.paper
-    cfg = r.get("config", {})
+    cfg = r.config
     q = m["quantities"]
     out = [_runner_text(r)[0]]
     sim = p.get("simulation", {})
@@ -227,7 +228,7 @@ def differences(c: Campaign) -> list[str]:
                    f"(profile 'paper': {sim.get('segments', 500)} segments generated in the first "
                    f"{sim.get('generation_time_s', 1):g} s, plate withdrawn at "
                    f"{sim.get('plate_withdrawn_at_s', 4):g} s, {sim.get('total_time_s', 10):g} s in all).")
-    base = r.get("base_parameters", {})
+    base = r.base_parameters
     if base:
         out.append(f"Segment model: {base.get('spheres_per_clump')} spheres of radius "
                    f"{1e3 * base.get('segment_diameter_m', float('nan')) / 2:.4g} mm along a "
@@ -255,18 +256,18 @@ def differences(c: Campaign) -> list[str]:
     out.append("Screening levels: " + ("the measured minimum and maximum, as the paper."
                                        if cfg.get("levels") == "minmax"
                                        else "measured mean -+ one SD (the paper used min/max)."))
-    n = r.get("noise", {})
+    n = r.noise or {}
     out.append(f"Seed-to-seed noise, not measured by the paper: the screening centre run with "
                f"{len(n.get('seeds', []))} seeds (SD {_f(n.get('sd'), '.3g')}°) and the Box-Behnken "
                f"centre points with different seeds (SD {_f(n.get('bbd_centre_sd'), '.3g')}°).")
-    flagged = r.get("significant", {}).get("flagged", [])
+    flagged = (r.significant or {}).get("flagged", [])
     paper_sig = p.get("screening", {}).get("significant", [])
     if paper_sig and sorted(flagged) != sorted(paper_sig):
         out.append(f"Significant factors: {', '.join(flagged) or 'none'} here, "
                    f"{', '.join(paper_sig)} in the paper.")
-    if r.get("significant", {}).get("note"):
-        out.append("Factors carried forward: " + r["significant"]["note"] + ".")
-    sc = r.get("steepest_climb", {})
+    if (r.significant or {}).get("note"):
+        out.append("Factors carried forward: " + r.significant["note"] + ".")
+    sc = r.steepest_climb or {}
     out.append(f"Steepest climb with {cfg.get('climb_levels')} levels in equal steps across the measured "
                f"range of each significant factor; level {sc.get('result', {}).get('best_level')} was best "
                "(the paper's number of levels is not in its text; it used its level 4).")
@@ -286,18 +287,18 @@ def differences(c: Campaign) -> list[str]:
 
 def abstract(c: Campaign) -> dict:
     """Key numbers for the abstract and the conclusions (stored values, formatted)."""
-    if c.results.get("workflow") == "plausible":
+    if c.results.workflow == "plausible":
         return abstract_plausible(c)
     r, m, p = c.results, c.measurement, c.paper
     q = m["quantities"]
     wall = str(m.get("meta", {}).get("contact_material", "steel")).lower()
     rep = q.get("repose_angle_deg", {})
-    fit = r["box_behnken"]["fit"]["fit"]
-    val = r["validation"]["result"]
-    settings = r["validation"]["settings"]
-    chosen = r["box_behnken"]["factors"]
-    cal = ", ".join(f"{parameter_label(r['factors'][f]['parameter'], wall)[0].lower()} "
-                    f"{settings[r['factors'][f]['parameter']]:.3g}" for f in chosen)
+    fit = r.box_behnken["fit"]["fit"]
+    val = r.validation.result
+    settings = r.validation.settings
+    chosen = r.box_behnken["factors"]
+    cal = ", ".join(f"{parameter_label(r.factors[f]['parameter'], wall)[0].lower()} "
+                    f"{settings[r.factors[f]['parameter']]:.3g}" for f in chosen)
     pv = p.get("validation", {})
     pf = (p.get("regression") or {}).get("fit", {})
     text = (f"The physical and contact parameters of {m.get('material')} were measured "
@@ -305,7 +306,7 @@ def abstract(c: Campaign) -> dict:
             f"{_f(q.get('length_mm', {}).get('value'))} mm × {_f(q.get('diameter_mm', {}).get('value'))} mm). "
             f"The angle of repose of the heap, {_f(rep.get('value'), '.4g')}° "
             f"(n = {rep.get('n')}), is the calibration target. A Plackett-Burman test of the seven "
-            f"contact parameters found {', '.join(r['significant']['flagged']) or 'no factor'} significant; "
+            f"contact parameters found {', '.join(r.significant['flagged']) or 'no factor'} significant; "
             f"a steepest climb and a Box-Behnken test of {', '.join(chosen)} gave a quadratic model with "
             f"R² = {fit['r2']:.4f}, adjusted R² = {fit['adj_r2']:.4f}, Adeq Precision = "
             f"{fit['adeq_precision']:.4g} and C.V. = {fit['cv_pct']:.3g} %. Optimised to the measured angle, "
@@ -327,17 +328,17 @@ def abstract_plausible(c: Campaign) -> dict:
     q = m["quantities"]
     wall = str(m.get("meta", {}).get("contact_material", "steel")).lower()
     rep = q.get("repose_angle_deg", {})
-    cal, v, noise = r["calibration"], r["validation"], r["noise"]
+    cal, v, noise = r.calibration, r.validation, r.noise
 
     def names(kind):
-        return [parameter_label(n, wall)[0].lower() for n, p in cal["parameters"].items()
-                if p["identifiability"] == kind]
+        return [parameter_label(n, wall)[0].lower() for n, p in cal.parameters.items()
+                if p.identifiability == kind]
 
     ident, partly, not_ident = names("identified"), names("partly identified"), names("not identified")
-    runs = sum(len(p["runs"]) for p in r["design"]["points"])
+    runs = sum(len(p["runs"]) for p in r.design["points"])
     # the lab readings the twins translate into other DEM values (beyond a reading's spread)
     moved = [f"{parameter_label(n, wall)[0].lower()} {t['mean']:.3g} where the lab reads {t['measured_mean']:.3g}"
-             for n, t in (cal.get("twins") or {}).items()
+             for n, t in cal.twins.items()
              if abs(t["mean"] - t["measured_mean"]) > t["measured_sd"]]
     twins = (" The twins of the drop and incline tests put " + "; ".join(moved)
              + ": the lab's reading is not the DEM's parameter there." if moved else "")
@@ -353,10 +354,10 @@ def abstract_plausible(c: Campaign) -> dict:
             + (f"it narrows {', '.join(partly)}; " if partly else "")
             + (f"it does not identify {', '.join(not_ident)}, whose values rest on their own "
                "measurements. " if not_ident else "")
-            + f"At the recommended point the mean angle is predicted at {cal['recommended']['predicted']:.4g} ± "
-            f"{cal['recommended']['predicted_sd']:.2g}°. Validated with {v['n_runs']} fresh heaps, the mean is "
-            f"{v['mean_deg']:.4g}° against the measured {v['target_deg']:.4g}°: {v['verdict']} at a tolerance "
-            f"of {v['tolerance_deg']:.3g}° (the validation would detect a bias of {v['detectable_bias_deg']:.2g}°).")
+            + f"At the recommended point the mean angle is predicted at {cal.recommended.predicted:.4g} ± "
+            f"{cal.recommended.predicted_sd:.2g}°. Validated with {v.n_runs} fresh heaps, the mean is "
+            f"{v.mean_deg:.4g}° against the measured {v.target_deg:.4g}°: {v.verdict} at a tolerance "
+            f"of {v.tolerance_deg:.3g}° (the validation would detect a bias of {v.detectable_bias_deg:.2g}°).")
     return {"text": text, "paper": ""}
 
 
@@ -364,17 +365,17 @@ def differences_plausible(c: Campaign) -> list[str]:
     """Where the plausible workflow differs from the paper's procedure."""
     r = c.results
     out = [_runner_text(r)[0]]
-    cfg = r.get("config", {})
+    cfg = r.config
     if cfg.get("profile") != "paper":
         out.append(f"Repose rig profile '{cfg.get('profile')}', not the paper-fidelity case.")
     out.append("No Plackett-Burman screening, steepest climb or Box-Behnken design: with a simulated "
-               f"angle that scatters by {r['noise']['all_points']['sd']:.2g}° from seed to seed, effects of the "
+               f"angle that scatters by {r.noise['all_points']['sd']:.2g}° from seed to seed, effects of the "
                "size being screened are not distinguishable run by run. All runs feed one surrogate "
                "instead (--profile paper keeps the paper's procedure and its Tables 3-9).")
     out.append("Every run has its own seed; a design point's angle is the mean of "
-               f"{r['noise']['replicates']} runs; the paper ran each point once.")
+               f"{r.noise['replicates']} runs; the paper ran each point once.")
     out.append("The answer is a set of parameters with intervals, not one optimum; the recommended point "
-               "is the posterior mode.")
+               f"is the {r.calibration.recommended.chosen}.")
     out.append("Validation by an equivalence test at a stated tolerance, with runs added until decided, "
                "instead of the relative error of three runs.")
     return out
@@ -391,22 +392,22 @@ def rig_text(c: Campaign) -> str:
         parts.append(f"{int(float(meta['fill_count']))} segments are poured in")
     if meta.get("plate_lift_speed_mm_s") not in (None, ""):
         parts.append(f"the side plate is lifted at {float(meta['plate_lift_speed_mm_s']):g} mm/s")
-    profile = (c.results or {}).get("config", {}).get("profile")
+    profile = c.results.config.get("profile") if c.results else None
     text = "; ".join(parts) + " (workbook meta)" if parts else "the rig geometry comes from the workbook meta"
     return text + (f"; rig profile '{profile}'." if profile else ".")
 
 
 def provenance(c: Campaign) -> dict:
     r = c.results
-    prov = r.get("provenance", {})
-    code = prov.get("code", {})
+    prov = r.provenance
+    code = prov.code
     mp = c.measurement.get("provenance", {})
-    return {"created": prov.get("created"), "demcal": code.get("demcal"), "git_sha": code.get("git_sha"),
-            "python": code.get("python"), "platform": code.get("platform"), "seed": prov.get("seed"),
-            "options": prov.get("options", {}), "runner": r.get("runner"),
-            "wall_s": r.get("wall_s"), "measure_options": mp.get("options", {}),
+    return {"created": prov.created, "demcal": code.get("demcal"), "git_sha": code.get("git_sha"),
+            "python": code.get("python"), "platform": code.get("platform"), "seed": prov.seed,
+            "options": prov.options, "runner": r.runner,
+            "wall_s": r.wall_s, "measure_options": mp.get("options", {}),
             "workbook": c.measurement.get("workbook", {}).get("source"),
-            "stages": r.get("stages", [])}
+            "stages": r.stages}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -534,7 +535,7 @@ def render_html(c: Campaign, tables: list[dict], figures: list) -> str:
     context = {
         "material": c.measurement.get("material", ""), "css": css, "t": by_id, "fig": figs,
         "tables": tables, "abstract": abstract(c),
-        "equations": equations(c) if r.get("workflow") != "plausible" else {},
+        "equations": equations(c) if r.workflow != "plausible" else {},
         "differences": differences(c), "rig": rig_text(c), "runner_text": runner_text,
         "runner_warn": runner_warn,
         "synthetic": c.measurement.get("meta", {}).get("synthetic"),

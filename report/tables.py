@@ -23,6 +23,7 @@ import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from demcal.analyse.results import CampaignResult, Validation
 from demcal.errors import InputError
 from demcal.jsonio import read_json, to_jsonable
 from demcal.provenance import sha256_file
@@ -59,11 +60,9 @@ _PARAMETERS = {
     "mu_r_pw": ("Rolling friction coefficient, segment-{wall}", "μr_pw"),
 }
 
-_RUN_STAGES = (("Plackett-Burman", ("plackett_burman", "runs")),
-               ("noise", ("noise", "runs")),
-               ("steepest climb", ("steepest_climb", "runs")),
-               ("Box-Behnken", ("box_behnken", "runs")),
-               ("validation", ("validation", "runs")))
+_RUN_STAGES = (("Plackett-Burman", "plackett_burman"), ("noise", "noise"),
+               ("steepest climb", "steepest_climb"), ("Box-Behnken", "box_behnken"),
+               ("validation", "validation"))
 
 
 @dataclass(frozen=True)
@@ -139,7 +138,7 @@ class Campaign:
     ----------
     measurement : dict
         ``measure.pipeline.Measurement.to_dict()`` (stored in ``measure.json``, or measured again).
-    results : dict or None
+    results : CampaignResult or None
         ``results.json`` (stored, or replayed by ``analyse.campaign.derive_results``); None when
         the analysis could not be derived: only the measurement tables are built then.
     runs : dict
@@ -155,7 +154,7 @@ class Campaign:
     """
 
     measurement: dict
-    results: dict | None
+    results: CampaignResult | None
     runs: dict = field(default_factory=dict)
     paper: dict = field(default_factory=dict)
     paper_source: dict = field(default_factory=dict)
@@ -170,18 +169,26 @@ def load_paper() -> tuple[dict, dict]:
     return read_json(PAPER_FILE), {"file": str(PAPER_FILE), "sha256": sha256_file(PAPER_FILE)}
 
 
-def run_stages(results: dict) -> list[tuple[str, list]]:
+def run_stages(results: CampaignResult) -> list[tuple[str, list]]:
     """(stage, run references) of every stage of the campaign, in campaign order."""
-    if results.get("workflow") == "plausible":
+    if results.workflow == "plausible":
         stages: dict = {f"{t['rig']} twins, {name}": t["runs"]
-                        for name, t in (results["calibration"].get("twins") or {}).items()}
-        for p in results["design"]["points"]:
+                        for name, t in results.calibration.twins.items()}
+        for p in results.design["points"]:
             stages.setdefault(p["stage"], []).extend(p["runs"])
-        return list(stages.items()) + [("validation", results["validation"]["runs"])]
-    return [(stage, results.get(part, {}).get(name, [])) for stage, (part, name) in _RUN_STAGES]
+        return list(stages.items()) + [("validation", results.validation.runs)]
+    return [(stage, _part_runs(results, part)) for stage, part in _RUN_STAGES]
 
 
-def run_keys(results: dict) -> list[str]:
+def _part_runs(results: CampaignResult, part: str) -> list:
+    """The run references of one part of the paper's procedure (``plackett_burman``, ...)."""
+    x = getattr(results, part)
+    if x is None:
+        return []
+    return x.runs if isinstance(x, Validation) else x.get("runs", [])
+
+
+def run_keys(results: CampaignResult | None) -> list[str]:
     """Every run key the results name, in campaign order (first occurrence)."""
     return list(dict.fromkeys(r["key"] for _, runs in run_stages(results) for r in runs))
 
@@ -198,8 +205,8 @@ def load_campaign(out_dir) -> Campaign:
     res_path = out / "results.json"
     if not res_path.exists():
         raise InputError(f"{out} holds no results.json: run 'demcal calibrate WORKBOOK --out {out}' first")
-    results = read_json(res_path)
-    measurement = results.get("measurement") or read_json(out / "measure.json")
+    results = CampaignResult.from_dict(read_json(res_path), str(res_path))
+    measurement = results.measurement or read_json(out / "measure.json")
     runs = {}
     for key in run_keys(results):
         p = out / "runs" / f"{key}.json"
@@ -291,16 +298,20 @@ def _reference_source(campaign: Campaign, path: str) -> list[dict]:
     return [{"kind": "reference", **campaign.paper_source, "path": path}]
 
 
-def _runs_source(results: dict, part: str) -> dict:
-    return {"kind": "runs", "keys": [r["key"] for r in results[part]["runs"]]}
+def _runs_source(results: CampaignResult, part: str) -> dict:
+    return {"kind": "runs", "keys": [r["key"] for r in _part_runs(results, part)]}
 
 
-def _replicates(results: dict, part: str) -> tuple[int, list, list]:
+def _replicates(results: CampaignResult, part: str) -> tuple[int, list, list]:
     """Replicates per design point, and per point its runs and its replicate angles (a campaign
     runs each point with several seeds and takes the median, ``analyse.campaign``)."""
-    k = int(results.get("config", {}).get("replicates", 1))
-    runs = results[part]["runs"]
-    angles = results[part].get("replicate_responses") or [[y] for y in results[part]["response"]]
+    k = int(results.config.get("replicates", 1))
+    runs = _part_runs(results, part)
+    x = getattr(results, part)
+    if isinstance(x, Validation):
+        angles = x.replicate_responses or [[y] for y in x.responses]
+    else:
+        angles = x.get("replicate_responses") or [[y] for y in x["response"]]
     return k, [runs[i:i + k] for i in range(0, len(runs), k)], angles
 
 
@@ -481,7 +492,7 @@ def table_pb_levels(c: Campaign) -> Table:
     r, m = c.results, c.measurement
     wall = _wall(m)
     rows, sources = [], []
-    for letter, f in r["factors"].items():
+    for letter, f in r.factors.items():
         name, symbol = parameter_label(f["parameter"], wall)
         pv, ps = _paper_measured(c, f["quantity"])
         if f["quantity"] == "poisson_ratio":
@@ -502,7 +513,7 @@ def table_pb_levels(c: Campaign) -> Table:
 
 def table_pb_design(c: Campaign) -> Table:
     """Table 4: the 12-run Plackett-Burman design (coded) and the simulated angle."""
-    pb = c.results["plackett_burman"]
+    pb = c.results.plackett_burman
     cols = list(pb["columns"])
     shown = ["d" + col.split("_")[-1] if col.startswith("dummy") else col for col in cols]
     k, point_runs, angles = _replicates(c.results, "plackett_burman")
@@ -541,8 +552,8 @@ def _anova_rows(anova, effects=None, extra=None):
 def table_pb_anova(c: Campaign) -> Table:
     """Table 5: Type III ANOVA of the Plackett-Burman test, with effects and contributions."""
     r = c.results
-    s = r["plackett_burman"]["screening"]
-    noise = r["plackett_burman"].get("effects_vs_noise", {})
+    s = r.plackett_burman["screening"]
+    noise = r.plackett_burman.get("effects_vs_noise", {})
     rows = []
     for row in _anova_rows(s["anova"], s["effects"], s["contribution_pct"]):
         ratio = _get(noise, row[0], "ratio")
@@ -557,9 +568,9 @@ def table_pb_anova(c: Campaign) -> Table:
              f"Lenth's method over all contrasts: PSE {_number(_get(s, 'lenth', 'pse'))} deg, "
              f"ME {_number(_get(s, 'lenth', 'me'))} deg, active: "
              f"{', '.join(_get(s, 'lenth', 'active', default=None) or []) or 'none'}."]
-    note = _get(r, "significant", "note")
+    note = _get(r.significant, "note")
     if note:
-        notes.append(f"Carried forward: {', '.join(r['significant']['carried_forward'])} ({note}).")
+        notes.append(f"Carried forward: {', '.join(r.significant['carried_forward'])} ({note}).")
     return Table("5", "Analysis of variance of the Plackett-Burman test",
                  ("Source", "Sum of squares", "df", "Mean square", "F value", "p-value", "Sig.",
                   "Effect", "Contribution", "Effect/noise"),
@@ -574,7 +585,7 @@ def table_pb_anova(c: Campaign) -> Table:
 def table_noise(c: Campaign) -> Table:
     """Table 5a: seed-to-seed noise of the DEM at the screening centre."""
     r = c.results
-    n = r["noise"]
+    n = r.noise
     k, point_runs, angles = _replicates(r, "noise")
     cells = [_replicate_cells(runs, ys) for runs, ys in zip(point_runs, angles)]
     rows = [(f"centre point {i}, seeds {seeds}", y, reps)
@@ -582,11 +593,11 @@ def table_noise(c: Campaign) -> Table:
     rows.append(("SD between centre points (n - 1)", n["sd"], ""))
     if k > 1 and n.get("sd_single_run") is not None:
         rows.append(("SD of a single run (all replicates)", n["sd_single_run"], ""))
-    se = next(iter(r["plackett_burman"].get("effects_vs_noise", {}).values()), {}).get("se_noise")
+    se = next(iter(r.plackett_burman.get("effects_vs_noise", {}).values()), {}).get("se_noise")
     rows.append(("Standard error of a screening effect from that noise", se, ""))
     rows.append(("SD of the Box-Behnken centre points", n.get("bbd_centre_sd"), ""))
     _, bbd_runs, _ = _replicates(r, "box_behnken")
-    bbd_keys = [run["key"] for runs, coded in zip(bbd_runs, r["box_behnken"]["design_coded"])
+    bbd_keys = [run["key"] for runs, coded in zip(bbd_runs, r.box_behnken["design_coded"])
                 if not any(coded) for run in runs]
     return Table("5a", "Seed-to-seed noise of the simulated angle of repose",
                  ("Item", "Angle of repose", "Replicates"), ("", "deg", "deg"), tuple(rows),
@@ -604,7 +615,7 @@ def table_noise(c: Campaign) -> Table:
 def table_climb(c: Campaign) -> Table:
     """Table 6: steepest climb of the significant factors, relative error per level."""
     r = c.results
-    sc = r["steepest_climb"]
+    sc = r.steepest_climb
     plan, res = sc["plan"], sc["result"]
     stepped = list(plan["stepped"])
     best = int(res["best_level"])
@@ -621,7 +632,7 @@ def table_climb(c: Campaign) -> Table:
         fit = (smoothed[i - 1],) if smoothed is not None else ()
         rows.append((i, *[lv[f] for f in stepped], y, " / ".join(f"{a:.4g}" for a in ys), *fit, err, role))
     wall = _wall(c.measurement)
-    names = [parameter_label(r["factors"][f]["parameter"], wall)[1] for f in stepped]
+    names = [parameter_label(r.factors[f]["parameter"], wall)[1] for f in stepped]
     fixed = [f for f in plan["factors"] if f not in stepped]
     paper_lv = _get(c.paper, "screening", "steepest_climb", default={})
     notes = [res.get("note", ""),
@@ -655,19 +666,19 @@ def table_climb(c: Campaign) -> Table:
 # ----------------------------------------------------------------------------------------------
 # Tables 7-9b: Box-Behnken
 
-def _bbd_letters(r: dict) -> list[tuple[str, str]]:
+def _bbd_letters(r: CampaignResult) -> list[tuple[str, str]]:
     """(coded letter of the fit, screening letter) pairs, in the fit's order."""
-    return list(_get(r, "box_behnken", "fit", "factors", default={}).items())
+    return list(_get(r.box_behnken, "fit", "factors", default={}).items())
 
 
 def table_bbd_levels(c: Campaign) -> Table:
     """Table 7: Box-Behnken factors and their -1/0/+1 levels (from the steepest climb)."""
     r = c.results
-    b = r["box_behnken"]
+    b = r.box_behnken
     wall = _wall(c.measurement)
     rows = []
     for j, (code, letter) in enumerate(_bbd_letters(r)):
-        name, symbol = parameter_label(r["factors"][letter]["parameter"], wall)
+        name, symbol = parameter_label(r.factors[letter]["parameter"], wall)
         rows.append((code, letter, name, symbol, b["low"][j], b["centre"][j], b["high"][j]))
     fixed = ", ".join(f"{f} = {v:.4g}" for f, v in b["fixed"].items())
     return Table("7", "Box-Behnken test: factors and level codes",
@@ -684,7 +695,7 @@ def table_bbd_levels(c: Campaign) -> Table:
 def table_bbd_design(c: Campaign) -> Table:
     """Table 8: the 17-run Box-Behnken design, actual levels and simulated angle."""
     r = c.results
-    b = r["box_behnken"]
+    b = r.box_behnken
     letters = _bbd_letters(r)
     k, point_runs, angles = _replicates(r, "box_behnken")
     rows = []
@@ -706,7 +717,7 @@ def table_bbd_design(c: Campaign) -> Table:
 def table_bbd_anova(c: Campaign) -> Table:
     """Table 9: ANOVA of the quadratic Box-Behnken model (Design-Expert layout)."""
     r = c.results
-    fit = r["box_behnken"]["fit"]
+    fit = r.box_behnken["fit"]
     key = ", ".join(f"{code} = {letter}" for code, letter in _bbd_letters(r))
     return Table("9", "Analysis of variance of the quadratic regression model (Box-Behnken test)",
                  ("Source", "Sum of squares", "df", "Mean square", "F value", "p-value", "Sig."),
@@ -719,7 +730,7 @@ def table_bbd_anova(c: Campaign) -> Table:
 def table_fit_statistics(c: Campaign) -> Table:
     """Table 9a: fit statistics beside the paper's."""
     r = c.results
-    fit = r["box_behnken"]["fit"]
+    fit = r.box_behnken["fit"]
     st = fit["fit"]
     paper = _get(c.paper, "regression", "fit", default={})
     model_p = next((a["p"] for a in fit["anova"] if a["source"] == "Model"), None)
@@ -771,10 +782,10 @@ def _actual_term(term: str, code_to_letter: dict) -> str:
 def table_coefficients(c: Campaign) -> Table:
     """Table 9b: regression coefficients in coded and actual terms, eq. (5) of the paper beside."""
     r = c.results
-    fit = r["box_behnken"]["fit"]
+    fit = r.box_behnken["fit"]
     code_to_letter = dict(_bbd_letters(r))
     wall = _wall(c.measurement)
-    to_quantity = {code: r["factors"][letter]["quantity"].replace(f"-{wall}", "-steel")
+    to_quantity = {code: r.factors[letter]["quantity"].replace(f"-{wall}", "-steel")
                    .replace(f".{wall}", ".steel") for code, letter in code_to_letter.items()}
     rows = []
     for term, coef in fit["coefficients"].items():
@@ -785,7 +796,7 @@ def table_coefficients(c: Campaign) -> Table:
     pf = _get(c.paper, "regression", "factors", default={})
     notes = ["Coded: each factor scaled to -1/+1 over its Box-Behnken range (Table 7); actual: "
              "the factors in their own units (" + ", ".join(
-                 f"{letter} = {parameter_label(r['factors'][letter]['parameter'], wall)[1]}"
+                 f"{letter} = {parameter_label(r.factors[letter]['parameter'], wall)[1]}"
                  for letter in code_to_letter.values()) + ")."]
     if pf:
         notes.append("Paper eq. (5) is matched term by term through the measured quantity of each "
@@ -808,7 +819,7 @@ def table_coefficients(c: Campaign) -> Table:
 def table_solutions(c: Campaign) -> Table:
     """Table 10: settings whose predicted angle equals the target (they all tie)."""
     r = c.results
-    o = r["optimisation"]
+    o = r.optimisation
     letters = _bbd_letters(r)
     rows = []
     for i, s in enumerate(o["solutions"], 1):
@@ -829,11 +840,11 @@ def table_calibrated(c: Campaign) -> Table:
     """Table 11: calibrated contact parameters, the measured means and the paper's beside."""
     r = c.results
     wall = _wall(c.measurement)
-    settings = r["validation"]["settings"]
-    chosen = set(r["box_behnken"]["factors"])
+    settings = r.validation.settings
+    chosen = set(r.box_behnken["factors"])
     paper_cal = _get(c.paper, "calibrated", default={})
     rows = []
-    for letter, f in r["factors"].items():
+    for letter, f in r.factors.items():
         name, symbol = parameter_label(f["parameter"], wall)
         pq = f["quantity"].replace(f"-{wall}", "-steel").replace(f".{wall}", ".steel")
         pm, _ = _paper_measured(c, f["quantity"])
@@ -865,15 +876,15 @@ def _observable_columns(records) -> list[str]:
 def table_validation(c: Campaign) -> Table:
     """Table 12: validation runs at the calibrated parameters, the paper's beside."""
     r = c.results
-    v = r["validation"]
-    res = v["result"]
-    records = [c.runs.get(run["key"], {}) for run in v["runs"]]
+    v = r.validation
+    res = v.result
+    records = [c.runs.get(run["key"], {}) for run in v.runs]
     extra = [k for k in _observable_columns(records) if k != "angle_deg"]
     paper = _get(c.paper, "validation", default={})
     paper_runs = list(paper.get("runs_deg", []))
     k, point_runs, angles = _replicates(r, "validation")
     rows = []
-    for i, (runs, y, ys) in enumerate(zip(point_runs, v["responses"], angles)):
+    for i, (runs, y, ys) in enumerate(zip(point_runs, v.responses, angles)):
         obs = [[_get(c.runs.get(run["key"], {}), "result", "observable", name) for run in runs]
                for name in extra]
         # other angles: the median over the replicates too, as the compared one
@@ -899,7 +910,7 @@ def table_validation(c: Campaign) -> Table:
     if ci[0] is not None:
         notes.append(f"The interval is t-based with the seed-to-seed sd of a design point's angle "
                      f"pooled over the screening centre and the Box-Behnken centre points "
-                     f"({_number(v.get('noise_sd'))} deg, {v.get('noise_df')} degrees of freedom). The target "
+                     f"({_number(v.noise_sd)} deg, {v.noise_df} degrees of freedom). The target "
                      + ("lies inside it: these runs cannot tell the calibrated heap from the measured one."
                         if res.get("target_in_ci") else "lies outside it: the calibrated heap differs "
                         "from the measured one by more than the DEM's seed noise."))
@@ -1103,7 +1114,7 @@ def build_tables(c: Campaign) -> list[Table]:
     are built.
     """
     tables = [table_dimensions(c), table_physical(c), table_methods(c)]
-    if c.results is not None and c.results.get("workflow") == "plausible":
+    if c.results is not None and c.results.workflow == "plausible":
         from demcal.report.calibration_tables import PLAUSIBLE_TABLES
 
         tables += [t for t in (f(c) for f in PLAUSIBLE_TABLES) if t is not None]

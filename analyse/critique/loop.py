@@ -44,6 +44,7 @@ from demcal.analyse.critique.twins import (TwinRunner, constant_discrepancy, dro
                                     incline_twin_runner, independent_discrepancy, paired_discrepancy,
                                     repose_validation_angles, rig_pair, run_drop_twins, twin_parameters,
                                     wall_of)
+from demcal.analyse.results import CampaignResult
 from demcal.errors import InputError
 from demcal.jsonio import read_json
 from demcal.provenance import Provenance
@@ -109,11 +110,11 @@ def load_source(source):
 
     path = Path(source)
     if path.is_dir() and (path / "results.json").is_file():
-        results = read_json(path / "results.json")
+        results = CampaignResult.from_dict(read_json(path / "results.json"), str(path / "results.json"))
         if (path / "measure.json").is_file():
             measurement = Measurement.from_dict(read_json(path / "measure.json"))
-        elif results.get("measurement"):
-            measurement = Measurement.from_dict(results["measurement"])
+        elif results.measurement:
+            measurement = Measurement.from_dict(results.measurement)
         else:
             raise InputError(f"campaign {path}: neither measure.json nor a measurement in results.json")
         wb_path = measurement.workbook.get("source")

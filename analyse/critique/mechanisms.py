@@ -280,38 +280,39 @@ def _missing_reason(mech: str) -> str:
 # ill-conditioned parameters (from a campaign)
 
 
-def _ill_conditioned_from_posterior(results: dict) -> list:
+def _ill_conditioned_from_posterior(results) -> list:
     """Plausible workflow: a parameter is ill-conditioned when the heap leaves its posterior
     as wide as its prior (posterior sd / prior sd above ``NOT_IDENTIFIED_ABOVE``). The effect
     reported is that ratio, with the parameter's 95 % interval in the evidence."""
     from demcal.analyse.surrogate import NOT_IDENTIFIED_ABOVE
 
     mech = "ill_conditioned_parameter"
-    params = (results.get("calibration") or {}).get("parameters") or {}
+    params = results.calibration.parameters if results.calibration else {}
     if not params:
         return [Finding(mech, "not_testable", evidence="the campaign has no posterior of its parameters")]
     out = []
     for name, p in params.items():
-        if p["sd_ratio"] > NOT_IDENTIFIED_ABOVE:
-            lo, hi = p["ci95"]
+        if p.sd_ratio > NOT_IDENTIFIED_ABOVE:
+            lo, hi = p.ci95
             out.append(Finding(mech, "found", sheet="campaign", covariate=name, quantity="angle_deg",
-                               source="campaign", effect=float(p["sd_ratio"]), ci95=[float(lo), float(hi)],
+                               source="campaign", effect=float(p.sd_ratio), ci95=[float(lo), float(hi)],
                                effect_unit="posterior sd / prior sd",
-                               evidence=f"{name}: posterior sd {_fmt(p['posterior_sd'])} is "
-                               f"{_fmt(p['sd_ratio'])} of its prior sd {_fmt(p['prior_sd'])}; 95 % interval "
+                               evidence=f"{name}: posterior sd {_fmt(p.posterior_sd)} is "
+                               f"{_fmt(p.sd_ratio)} of its prior sd {_fmt(p.prior_sd)}; 95 % interval "
                                f"[{_fmt(lo)}, {_fmt(hi)}]: the repose angle cannot identify it"))
     if out:
         return out
-    name, p = min(params.items(), key=lambda kv: -kv[1]["sd_ratio"])
+    name, p = min(params.items(), key=lambda kv: -kv[1].sd_ratio)
     return [Finding(mech, "ruled_out", sheet="campaign", covariate=name, quantity="angle_deg",
-                    source="campaign", effect=float(p["sd_ratio"]), ci95=list(p["ci95"]),
+                    source="campaign", effect=float(p.sd_ratio), ci95=list(p.ci95),
                     effect_unit="posterior sd / prior sd",
                     evidence=f"the heap narrows every parameter; least: {name}, posterior/prior sd "
-                    f"{_fmt(p['sd_ratio'])}")]
+                    f"{_fmt(p.sd_ratio)}")]
 
 
-def ill_conditioned(results: dict | None) -> list:
-    """Verdict on ``ill_conditioned_parameter`` from a campaign's ``results.json``.
+def ill_conditioned(results) -> list:
+    """Verdict on ``ill_conditioned_parameter`` from a campaign's result
+    (``analyse.results.CampaignResult``, or None without a campaign).
 
     A parameter carried into the Box-Behnken design is ill-conditioned when none of its terms
     (linear, interactions, quadratic) exceeds twice its standard error under the seed-to-seed
@@ -325,13 +326,13 @@ def ill_conditioned(results: dict | None) -> list:
     if not results:
         return [Finding(mech, "not_testable", evidence="no calibration campaign given (pass the "
                         "campaign folder holding results.json)")]
-    if results.get("workflow") == "plausible":
+    if results.workflow == "plausible":
         return _ill_conditioned_from_posterior(results)
-    factors = results.get("factors", {})
-    bbd = results.get("box_behnken", {})
-    carried = list(bbd.get("factors") or results.get("significant", {}).get("carried_forward", []))
+    factors = results.factors
+    bbd = results.box_behnken or {}
+    carried = list(bbd.get("factors") or (results.significant or {}).get("carried_forward", []))
     terms = bbd.get("terms_vs_noise") or {}
-    pb = (results.get("plackett_burman") or {}).get("effects_vs_noise") or {}
+    pb = (results.plackett_burman or {}).get("effects_vs_noise") or {}
     if not carried or not (terms or pb):
         return [Finding(mech, "not_testable", evidence="the campaign has no noise comparison of its terms")]
     # the response surface names its factors A, B, C... in the order carried (fit "factors")

@@ -60,10 +60,10 @@ def wall_of(meta: dict) -> str:
     return str(meta.get("contact_material") or "steel").strip().lower() or "steel"
 
 
-def twin_parameters(measurement, results: dict | None = None):
+def twin_parameters(measurement, results=None):
     """The parameters the twins use, and where they come from.
 
-    With a campaign's ``results.json``: its ``calibrated_parameters``. Otherwise the measured
+    With a campaign's result (``analyse.results.CampaignResult``): its ``calibrated_parameters``. Otherwise the measured
     means fed directly to the DEM, as the paper's first step does: measured shape, density and
     materials (``analyse.campaign.base_parameters``) and each contact parameter at the mean of
     its test.
@@ -75,8 +75,8 @@ def twin_parameters(measurement, results: dict | None = None):
     from demcal.analyse.campaign import PARAMETER_BOUNDS, base_parameters
     from demcal.simulate.params import DEMParameters
 
-    if results and results.get("calibrated_parameters"):
-        return DEMParameters(**results["calibrated_parameters"]), "calibrated (campaign results.json)"
+    if results and results.calibrated_parameters:
+        return DEMParameters(**results.calibrated_parameters), "calibrated (campaign results.json)"
     params = base_parameters(measurement)
     wall = wall_of(measurement.meta)
     changes = {}
@@ -388,9 +388,9 @@ def constant_discrepancy(observable: str, sheet: str, measured, simulated: float
                        int(y.size), 1, note)
 
 
-def repose_validation_angles(campaign_dir, results: dict) -> tuple[list, str]:
-    """Angles (``angle_deg``) of the campaign's validation runs, from ``DIR/runs``."""
-    runs = (results.get("validation") or {}).get("runs") or []
+def repose_validation_angles(campaign_dir, results) -> tuple[list, str]:
+    """Angles (``angle_deg``) of the campaign's validation runs (``CampaignResult``), from ``DIR/runs``."""
+    runs = results.validation.runs
     store = RunStore(Path(campaign_dir) / "runs")
     angles, missing = [], []
     for ref in runs:
@@ -400,7 +400,7 @@ def repose_validation_angles(campaign_dir, results: dict) -> tuple[list, str]:
             continue
         angles.append(float(rec["result"]["observable"]["angle_deg"]))
     if not angles:
-        responses = (results.get("validation") or {}).get("responses") or []
+        responses = results.validation.responses
         note = "validation responses from results.json (run records not found)" if responses else \
             "the campaign has no validation runs"
         return [float(v) for v in responses], note

@@ -24,27 +24,27 @@ def test_levels_are_the_measured_extremes(measurement):
 def test_campaign_finds_the_active_factors_and_the_target(measurement, tmp_path):
     config = CampaignConfig(workers=1, progress=False, workflow="design-expert")
     res = calibrate(EXAMPLE, tmp_path, config, runner=standin_runner, measurement=measurement)
-    assert set(res["significant"]["carried_forward"]) == {"B", "E", "F"}
-    assert set(res["plackett_burman"]["screening"]["significant"]) == {"B", "E", "F"}
+    assert set(res.significant["carried_forward"]) == {"B", "E", "F"}
+    assert set(res.plackett_burman["screening"]["significant"]) == {"B", "E", "F"}
     # the noise repeats measure the stand-in's noise (4 seeds: loose bound)
-    assert 0.02 < res["noise"]["sd"] < 0.5
+    assert 0.02 < res.noise["sd"] < 0.5
     # optimisation: the preferred solution sits on the target surface of the fitted model
-    opt = res["optimisation"]
+    opt = res.optimisation
     assert opt["reached"]
-    assert opt["preferred"]["predicted"] == pytest.approx(res["target_angle_deg"], abs=1e-3)
+    assert opt["preferred"]["predicted"] == pytest.approx(res.target_angle_deg, abs=1e-3)
     # validation with fresh seeds: the true response at the solution is the target within noise
-    settings = res["validation"]["settings"]
-    base = res["calibrated_parameters"]
-    assert standin_angle({**base, **settings}) == pytest.approx(res["target_angle_deg"], abs=0.5)
-    assert res["validation"]["result"]["relative_error_pct"] < 2.0
+    settings = res.validation.settings
+    base = res.calibrated_parameters
+    assert standin_angle({**base, **settings}) == pytest.approx(res.target_angle_deg, abs=0.5)
+    assert res.validation.result["relative_error_pct"] < 2.0
     # Design-Expert's confirmation: the prediction interval of the mean of the validation runs
-    conf = res["validation"]["confirmation"]
+    conf = res.validation.confirmation
     assert conf["pi95"][0] < conf["predicted"] < conf["pi95"][1]
-    assert res["validation"]["verdict"] in ("equivalent", "different", "undecided")
+    assert res.validation.verdict in ("equivalent", "different", "undecided")
     # every run is in the store and the rerun reuses them all
     again = calibrate(EXAMPLE, tmp_path, config, runner=standin_runner, measurement=measurement)
-    assert all(stage["ran"] == 0 for stage in again["stages"])
-    assert again["box_behnken"]["response"] == res["box_behnken"]["response"]
+    assert all(stage["ran"] == 0 for stage in again.stages)
+    assert again.box_behnken["response"] == res.box_behnken["response"]
 
 
 def test_response_falls_back_to_the_profile_fit_when_the_photo_method_finds_no_slope():

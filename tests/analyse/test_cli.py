@@ -130,18 +130,21 @@ def test_calibrate_passes_its_options_and_prints_the_validation(tmp_path, capsys
     import demcal.analyse.campaign as campaign
     from pathlib import Path
 
+    from demcal.analyse.results import CampaignResult, Validation
+    from demcal.provenance import Provenance
+
     seen = {}
 
     def fake_calibrate(workbook, out, config, measurement=None):
         seen.update(workbook=Path(workbook), config=config, measurement=measurement)
-        return {"target_angle_deg": 36.1, "workflow": config.workflow,
-                "config": {"replicates": config.replicates},
-                "validation": {"settings": {"mu_s_pw": 0.19}, "verdict": "undecided",
-                               "tolerance_deg": 1.0, "mean_deg": 36.5, "n_runs": 3,
-                               "ci95": [33.02, 39.99], "target_deg": 36.1,
-                               "detectable_bias_deg": 4.2,
-                               "confirmation": {"predicted": 36.2, "pi95": [33.1, 39.3],
-                                                "target_inside": True}}}
+        validation = Validation(settings={"mu_s_pw": 0.19}, verdict="undecided", tolerance_deg=1.0,
+                                mean_deg=36.5, n_runs=3, ci95=(33.02, 39.99), target_deg=36.1,
+                                detectable_bias_deg=4.2, responses=[], seeds=[], runs=[],
+                                confirmation={"predicted": 36.2, "pi95": [33.1, 39.3], "target_inside": True})
+        return CampaignResult(workflow=config.workflow, response={}, material="", target_angle_deg=36.1,
+                              config={"replicates": config.replicates}, measurement={}, factors={},
+                              base_parameters={}, geometry={}, validation=validation,
+                              calibrated_parameters={}, stages=[], provenance=Provenance())
 
     monkeypatch.setattr(campaign, "calibrate", fake_calibrate)
     root = Path(__file__).resolve().parents[2] / "data" / "astragalus"

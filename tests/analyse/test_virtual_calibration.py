@@ -29,11 +29,11 @@ def virtual_campaign(root, geometry, config, **lab):
 
 
 def check_truth_and_verdict(res):
-    params = res["calibration"]["parameters"]
+    params = res.calibration.parameters
     for name, p in params.items():
         truth = getattr(TRUTH, name)
-        assert p["ci95"][0] <= truth <= p["ci95"][1], (name, truth, p["ci95"])
-    assert res["validation"]["verdict"] == "equivalent", res["validation"]["test"]["note"]
+        assert p.ci95[0] <= truth <= p.ci95[1], (name, truth, p.ci95)
+    assert res.validation.verdict == "equivalent", res.validation.test["note"]
 
 
 def test_small_carton_virtual_lab(tmp_path):
@@ -44,7 +44,7 @@ def test_small_carton_virtual_lab(tmp_path):
     res = virtual_campaign(tmp_path, SMALL, config, n_drop=2, n_incline=6, n_photos=30, n_tracks=0,
                            n_specimens=10, n_compression=3)
     # a heap of 60 segments scatters by several degrees: the lab's own heaps set the tolerance
-    assert res["validation"]["tolerance_deg"] > 3.0
+    assert res.validation.tolerance_deg > 3.0
     check_truth_and_verdict(res)
 
 
