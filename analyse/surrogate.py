@@ -151,7 +151,15 @@ class NoisySurrogate:
     noise-weighted mean of the points. ``alpha`` (the noise variance of each point's mean) goes
     on the kernel's diagonal in the response's own units: the process is fitted without
     scikit-learn's ``normalize_y``, which would rescale the noise.
+
+    The kernel is c0 + s^2 Matern(5/2): the fixed, wide constant term c0 is a diffuse prior on
+    the level of the mean, so that its uncertainty enters every prediction (ordinary kriging,
+    [Rasmussen2006]_ 2.7). Without it, a surface the data cannot tell from flat (s^2 at its
+    lower bound) would be predicted to a tenth of a degree from runs that scatter by ten.
     """
+
+    #: c0 over the spread of the point means: wide enough to be diffuse.
+    LEVEL_PRIOR = 100.0
 
     def __init__(self, low, high, seed: int = 0, restarts: int = 4):
         self.low, self.high = np.asarray(low, dtype=float), np.asarray(high, dtype=float)
@@ -175,7 +183,8 @@ class NoisySurrogate:
         self.offset = float(np.sum(w * y) / np.sum(w))
         spread = max(float(np.var(y)), 1.0)
         if kernel is None:
-            kernel = (ConstantKernel(spread, (1e-2, 1e2 * spread))
+            kernel = (ConstantKernel(self.LEVEL_PRIOR * spread, "fixed")
+                      + ConstantKernel(spread, (1e-2, 1e2 * spread))
                       * Matern(length_scale=np.full(x.shape[1], 0.5), length_scale_bounds=(0.05, 50.0), nu=2.5))
             optimizer, restarts = "fmin_l_bfgs_b", self.restarts
         else:
@@ -201,7 +210,7 @@ class NoisySurrogate:
 
     def length_scales(self) -> np.ndarray:
         """Fitted length scales, as fractions of each parameter's prior box."""
-        return np.atleast_1d(self.gp.kernel_.k2.length_scale).astype(float)
+        return np.atleast_1d(self.gp.kernel_.k2.k2.length_scale).astype(float)
 
     def leave_one_out(self) -> dict:
         """Leave-one-out prediction of every point from the others, in closed form

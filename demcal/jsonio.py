@@ -35,6 +35,12 @@ def to_jsonable(obj):
     return obj
 
 
+def restore_nan(d: dict, *names) -> dict:
+    """``d`` with the fields ``names`` that JSON holds as None (``to_jsonable`` writes NaN so)
+    back to NaN, for reading a float field that is never legitimately absent."""
+    return {**d, **{n: math.nan for n in names if d.get(n, 0) is None}}
+
+
 def write_json(path, obj, indent: int = 2) -> Path:
     """Write ``obj`` as JSON to ``path`` atomically (temporary file in the same folder, then rename)."""
     path = Path(path)

@@ -76,7 +76,6 @@ def critique_command(args) -> int:
         written.append(write_json(args.json, doc))
     if campaign and not (args.json and Path(args.json).resolve() == (source / "critique.json").resolve()):
         written.append(write_json(source / "critique.json", doc))
-    for line in result.summary:
-        print(line)
+    print(result.summary())
     print("wrote " + ", ".join(str(p) for p in written))
     return 0

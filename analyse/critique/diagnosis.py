@@ -70,6 +70,7 @@ import numpy as np
 from scipy import stats
 
 from demcal.errors import InputError
+from demcal.jsonio import restore_nan
 
 #: Practical threshold of each quantity family [its unit]: the smallest change over the
 #: covariate's range that matters for a calibration. Restitution and friction: 0.03, about a
@@ -234,6 +235,13 @@ class CovariateTest:
         d["ci_selected"] = None if self.ci_selected is None else list(self.ci_selected)
         return d
 
+    @classmethod
+    def from_dict(cls, d: dict) -> "CovariateTest":
+        d = restore_nan(d, "effect", "practical", "threshold", "p_value", "se", "p_adjusted")
+        ci = d.get("ci95")
+        return cls(**{**d, "ci95": tuple(math.nan if c is None else c for c in ci),
+                      "ci_selected": None if d.get("ci_selected") is None else tuple(d["ci_selected"])})
+
 
 @dataclass(frozen=True)
 class Untestable:
@@ -248,6 +256,10 @@ class Untestable:
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Untestable":
+        return cls(**d)
 
 
 # ----------------------------------------------------------------------------------------------

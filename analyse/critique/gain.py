@@ -31,6 +31,7 @@ import numpy as np
 
 from demcal.analyse.critique.twins import run_drop_twins
 from demcal.errors import InputError
+from demcal.jsonio import restore_nan
 from demcal.simulate.extensions import (describe, fit_velocity_restitution, impact_speed, invert_drop_twin,
                                  restitution_parameter)
 
@@ -95,7 +96,15 @@ class ExtensionGain:
                 "note": self.note}
 
     def as_dict(self) -> dict:
+        """Every field (``critique.json``'s ``extension_records``), provenance included."""
         return asdict(self)
+
+    @classmethod
+    def from_dict(cls, record: dict) -> "ExtensionGain":
+        """From :meth:`as_dict` as JSON holds it."""
+        d = restore_nan(record, "before", "after", "gain")
+        return cls(**{**d, **{k: tuple(math.nan if x is None else x for x in d[k])
+                              for k in ("before_ci95", "after_ci95", "ci95")}})
 
 
 def discrepancy(residuals, measure: str) -> float:

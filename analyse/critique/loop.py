@@ -10,7 +10,8 @@
      "extensions": [{"name", "mechanism", "before", "after", "gain", "ci95", "measure",
                      "held_out", ...}],
      "summary": [str], "extension_records": [...], "tests": [...], "untestable": [...],
-     "catalogue": [...], "parameters": {...}, "twin_runs": [...], "provenance": {...}}
+     "catalogue": [...], "parameters": {...}, "twin_runs": [...], "provenance": {...},
+     "schema_version": 1}
 
 ``extensions`` holds flat rows for the report's table; ``extension_records`` the same with the
 provenance record of each extension (``simulate.extensions.describe``).
@@ -37,10 +38,12 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from demcal.analyse.critique.diagnosis import (CORRECTIONS, DEFAULT_ALPHA, PRACTICAL_THRESHOLDS, Series,
-                                        measured_series, run_tests)
-from demcal.analyse.critique.mechanisms import CATALOGUE, ill_conditioned, judge
-from demcal.analyse.critique.twins import (TwinRunner, constant_discrepancy, drop_trials, incline_groups,
+from demcal.analyse.critique.diagnosis import (CORRECTIONS, DEFAULT_ALPHA, PRACTICAL_THRESHOLDS, CovariateTest,
+                                        Series, Untestable, measured_series, run_tests)
+from demcal.analyse.critique.gain import ExtensionGain
+from demcal.analyse.critique.mechanisms import CATALOGUE, Finding, ill_conditioned, judge
+from demcal.analyse.critique.twins import (Discrepancy, TwinRunner, constant_discrepancy, drop_trials,
+                                    incline_groups,
                                     incline_twin_runner, independent_discrepancy, paired_discrepancy,
                                     repose_validation_angles, rig_pair, run_drop_twins, twin_parameters,
                                     wall_of)
@@ -52,6 +55,10 @@ from demcal.provenance import Provenance
 RIGS = ("drop", "incline", "repose")
 #: Extensions evaluated by default (the others need engine hooks or a new campaign).
 DEFAULT_EXTENSIONS = ("inverted_restitution", "velocity_dependent_restitution", "size_distribution")
+
+
+#: Version of the layout of ``critique.json`` (files without one have the layout of version 1).
+CRITIQUE_SCHEMA_VERSION = 1
 
 
 @dataclass(frozen=True)
@@ -66,8 +73,8 @@ class Critique:
     tests : list of CovariateTest
         Every test of the residual structure (adjusted).
     untestable : list of Untestable
-    summary : list of str
-        The conclusions in sentences, with numbers.
+    conclusions : list of str
+        The conclusions in sentences, with numbers (``critique.json``'s ``summary``).
     parameters : dict
         ``{"values": DEMParameters as dict, "source": str}``.
     twin_runs : list of dict
@@ -80,7 +87,7 @@ class Critique:
     extensions: list
     tests: list
     untestable: list
-    summary: list
+    conclusions: list
     parameters: dict
     twin_runs: list = field(default_factory=list)
     provenance: Provenance = field(default_factory=Provenance)
@@ -89,17 +96,55 @@ class Critique:
         """The findings with verdict ``found``."""
         return [f for f in self.findings if f.verdict == "found"]
 
+    def summary(self) -> str:
+        """The headline: what differs from the lab beyond its uncertainty, the mechanisms found,
+        each extension's gain, then the conclusions."""
+        lines = [f"critique of the model with {self.parameters.get('source', 'its')} parameters"]
+        off = [d for d in self.discrepancies if d.exceeds]
+        lines.append(f"  discrepancies beyond their 95 % interval: {len(off)} of {len(self.discrepancies)}")
+        for d in off:
+            lines.append(f"    {d.observable}: measured {_fmt(d.measured)}, simulated {_fmt(d.simulated)} "
+                         f"(difference {_fmt(d.difference)} +- {_fmt(d.combined_u95)})")
+        found = self.found()
+        lines.append(f"  mechanisms found: {len(found)} ("
+                     + (", ".join(sorted({f.mechanism for f in found})) or "none") + ")")
+        for e in self.extensions:
+            lines.append(f"  extension {e.name}: {e.measure} of {e.quantity} {_fmt(e.before)} -> {_fmt(e.after)}, "
+                         f"gain {_fmt(e.gain)} [{_fmt(e.ci95[0])}, {_fmt(e.ci95[1])}]")
+        return "\n".join(lines + list(self.conclusions))
+
     def to_dict(self) -> dict:
-        return {"discrepancies": [d.to_dict() for d in self.discrepancies],
+        return {"schema_version": CRITIQUE_SCHEMA_VERSION,
+                "discrepancies": [d.to_dict() for d in self.discrepancies],
                 "findings": [f.to_dict() for f in self.findings],
                 "extensions": [e.to_dict() for e in self.extensions],
-                "summary": list(self.summary),
+                "summary": list(self.conclusions),
                 "extension_records": [e.as_dict() for e in self.extensions],
                 "tests": [t.to_dict() for t in self.tests],
                 "untestable": [u.to_dict() for u in self.untestable],
                 "catalogue": [m.to_dict() for m in CATALOGUE],
                 "parameters": dict(self.parameters), "twin_runs": list(self.twin_runs),
                 "provenance": self.provenance.to_dict()}
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "critique.json") -> "Critique":
+        """Read ``critique.json`` back (``extensions`` and ``catalogue`` are derived: the
+        extensions come from ``extension_records``)."""
+        version = d.get("schema_version", CRITIQUE_SCHEMA_VERSION)
+        if not isinstance(version, int) or version > CRITIQUE_SCHEMA_VERSION:
+            raise InputError(f"{where}: schema version {version!r} is newer than this demcal reads "
+                             f"({CRITIQUE_SCHEMA_VERSION}); update demcal")
+        try:
+            return cls(discrepancies=[Discrepancy.from_dict(x) for x in d["discrepancies"]],
+                       findings=[Finding.from_dict(x) for x in d["findings"]],
+                       extensions=[ExtensionGain.from_dict(x) for x in d.get("extension_records", [])],
+                       tests=[CovariateTest.from_dict(x) for x in d.get("tests", [])],
+                       untestable=[Untestable.from_dict(x) for x in d.get("untestable", [])],
+                       conclusions=list(d.get("summary", [])), parameters=dict(d.get("parameters", {})),
+                       twin_runs=list(d.get("twin_runs", [])),
+                       provenance=Provenance(**d["provenance"]) if d.get("provenance") else Provenance())
+        except (KeyError, TypeError) as exc:
+            raise InputError(f"{where}: not a critique of this layout ({type(exc).__name__}: {exc})") from None
 
 
 def load_source(source):
@@ -200,7 +245,7 @@ def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EX
     opts = {"twins": twins, "rigs": list(rigs), "extensions": list(extensions), "alpha": alpha,
             "correction": correction, "repose_seeds": repose_seeds, "source": str(source)}
     return Critique(discrepancies=discrepancies, findings=findings, extensions=gains, tests=tests,
-                    untestable=untestable, summary=summary,
+                    untestable=untestable, conclusions=summary,
                     parameters={"values": params.to_dict(), "source": param_source}, twin_runs=runs,
                     provenance=Provenance(inputs=dict(measurement.provenance.inputs), seed=seed, options=opts))
 

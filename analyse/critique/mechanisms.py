@@ -184,6 +184,10 @@ class Finding:
                 "p_adjusted": self.p_adjusted, "quantity": self.quantity, "source": self.source,
                 "effect_unit": self.effect_unit, "evidence": self.evidence}
 
+    @classmethod
+    def from_dict(cls, d: dict) -> "Finding":
+        return cls(**d)
+
 
 def _fmt(x, digits=3) -> str:
     return "nan" if x is None or not np.isfinite(x) else f"{x:.{digits}g}"

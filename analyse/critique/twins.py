@@ -42,6 +42,7 @@ from scipy import stats
 
 from demcal.analyse.runs import RunStore, run_all, run_key
 from demcal.errors import SimulationError
+from demcal.jsonio import restore_nan
 from demcal.units import GRAVITY
 
 
@@ -337,6 +338,13 @@ class Discrepancy:
                 "simulated_ci95": lst(self.simulated_ci95), "difference": self.difference,
                 "combined_u95": self.combined_u95, "exceeds": self.exceeds,
                 "n_measured": self.n_measured, "n_simulated": self.n_simulated, "note": self.note}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Discrepancy":
+        def tup(c):
+            return None if c is None else tuple(math.nan if x is None else x for x in c)
+        d = restore_nan(d, "measured")
+        return cls(**{**d, "measured_ci95": tup(d["measured_ci95"]), "simulated_ci95": tup(d["simulated_ci95"])})
 
 
 def paired_discrepancy(observable: str, sheet: str, measured, simulated, note: str = "") -> Discrepancy:

@@ -12,8 +12,10 @@ import pytest
 from demcal.analyse.campaign import CampaignConfig, calibrate
 from demcal.analyse.critique import run_critique
 from demcal.analyse.critique.cli import register
+from demcal.analyse.critique.loop import Critique
 from demcal.analyse.critique.twins import independent_discrepancy, paired_discrepancy
 from demcal.errors import InputError
+from demcal.jsonio import to_jsonable
 from demcal.measure.pipeline import measure_workbook
 from demcal.simulate.virtual_lab import Truth, write_virtual_workbook
 
@@ -57,13 +59,17 @@ def test_drop_and_incline_twins_of_a_clean_lab(tmp_path):
     # the twins run with the measured means; tan(slide angle) of the twin is its mu_s
     assert c.parameters["values"]["mu_s_pw"] == pytest.approx(slide.measured)
     assert slide.simulated == pytest.approx(slide.measured, abs=0.01) and not slide.exceeds
-    assert any("may feed the DEM directly" in s for s in c.summary)
+    assert any("may feed the DEM directly" in s for s in c.conclusions)
     assert not c.found()
     # a second critique reuses every twin run from the store
     again = run_critique(vw.path, rigs=("drop", "incline"), store_dir=tmp_path / "store")
     assert sum(r["ran"] for r in again.twin_runs) == 0
-    doc = json.loads(json.dumps(c.to_dict()))
-    assert {"discrepancies", "findings", "extensions", "summary", "tests"} <= set(doc)
+    doc = json.loads(json.dumps(to_jsonable(c.to_dict())))
+    assert {"discrepancies", "findings", "extensions", "summary", "tests", "schema_version"} <= set(doc)
+    # critique.json reads back into the same typed result
+    back = Critique.from_dict(doc)
+    assert json.loads(json.dumps(to_jsonable(back.to_dict()))) == doc
+    assert back.summary() == c.summary() and "discrepancies beyond their 95 % interval: 0 of" in c.summary()
 
 
 @pytest.fixture(scope="module")
@@ -140,7 +146,7 @@ def test_example_campaign_drop_twin_says_whether_sqrt_h2_h1_may_feed_the_dem(tmp
     assert steel.exceeds and steel.simulated < steel.measured            # the twin rebounds lower
     assert "may not feed the DEM directly" in steel.note
     assert any(s.startswith("restitution.particle-steel") and "may not feed the DEM directly" in s
-               and "contact restitution that reproduces the drops" in s for s in c.summary)
+               and "contact restitution that reproduces the drops" in s for s in c.conclusions)
     assert ("orientation_rotation", "twin") in {(f.mechanism, f.source) for f in c.found()}
     gain = next(g for g in c.extensions if g.name == "inverted_restitution" and g.quantity.endswith("steel"))
     assert gain.n_held_out == 20 and math.isfinite(gain.gain)

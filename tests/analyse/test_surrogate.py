@@ -109,3 +109,25 @@ def test_next_points_go_where_the_sign_is_uncertain():
     # the batch spreads out: no two chosen points coincide
     d = np.linalg.norm((pts[:, None] - pts[None]) / (prior.high - prior.low), axis=-1)
     assert d[np.triu_indices(4, 1)].min() > 1e-3
+
+
+def test_a_flat_surface_is_predicted_with_the_uncertainty_of_its_level():
+    # pure noise around a constant: the data cannot tell the surface from flat, and the
+    # prediction must still carry the uncertainty of the level (about the SE of the mean of
+    # all runs), not shrink to the kernel's lower bound. Coverage over repetitions, asserted by
+    # its Clopper-Pearson bounds.
+    prior = prior_2d()
+    reps, n, noise_var, covered, ratio = 300, 12, 9.0 / 2, 0, []
+    for rep in range(reps):
+        rng = np.random.default_rng(1000 + rep)
+        x = prior.sample(n, rng)
+        y = 40.0 + rng.normal(0.0, math.sqrt(noise_var), n)
+        model = NoisySurrogate(prior.low, prior.high, seed=rep, restarts=0).fit(x, y, np.full(n, noise_var))
+        m, s = model.predict(prior.sample(1, rng))
+        covered += abs(m[0] - 40.0) <= 1.96 * s[0]
+        ratio.append(s[0] / math.sqrt(noise_var / n))
+    lo = stats.beta.ppf(0.005, covered, reps - covered + 1)
+    hi = stats.beta.ppf(0.995, covered + 1, reps - covered)
+    assert lo > 0.85 and hi > 0.95, (covered, reps)
+    # near the SE of the mean of every run, never a tenth of it
+    assert 0.8 < np.median(ratio) < 2.0
