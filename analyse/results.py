@@ -16,7 +16,7 @@ import math
 from dataclasses import MISSING, dataclass, field, fields, replace
 
 from demcal.errors import InputError
-from demcal.jsonio import to_jsonable
+from demcal.jsonio import check_schema, restore_nan, to_jsonable
 from demcal.provenance import Provenance
 
 #: Version of the layout of ``results.json``; files without one were written before it was
@@ -260,9 +260,7 @@ class Validation(_Record):
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "validation") -> "Validation":
-        d = {**d, "ci95": tuple(d.get("ci95") or (math.nan, math.nan))}
-        if d.get("detectable_bias_deg") is None:
-            d["detectable_bias_deg"] = math.nan
+        d = restore_nan({**d, "ci95": tuple(d.get("ci95") or (math.nan, math.nan))}, "detectable_bias_deg")
         return _build(cls, d, where)
 
 
@@ -336,10 +334,7 @@ class CampaignResult(_Record):
     @classmethod
     def from_dict(cls, d: dict, where: str = "results.json") -> "CampaignResult":
         d = dict(d)
-        version = d.get("schema_version", SCHEMA_VERSION)
-        if not isinstance(version, int) or version > SCHEMA_VERSION:
-            raise InputError(f"{where}: schema version {version!r} is newer than this demcal reads "
-                             f"({SCHEMA_VERSION}); update demcal")
+        check_schema(d, SCHEMA_VERSION, where)
         d["validation"] = Validation.from_dict(d.get("validation", {}), f"{where}: validation")
         if d.get("calibration") is not None:
             d["calibration"] = Calibration.from_dict(d["calibration"], f"{where}: calibration")

@@ -41,6 +41,17 @@ def restore_nan(d: dict, *names) -> dict:
     return {**d, **{n: math.nan for n in names if d.get(n, 0) is None}}
 
 
+def check_schema(doc: dict, supported: int, where: str) -> None:
+    """Refuse a document written by a newer layout than this code reads (files without a
+    ``schema_version`` have the first layout)."""
+    from demcal.errors import InputError
+
+    version = doc.get("schema_version", 1)
+    if not isinstance(version, int) or version > supported:
+        raise InputError(f"{where}: schema version {version!r} is newer than this demcal reads "
+                         f"({supported}); update demcal")
+
+
 def write_json(path, obj, indent: int = 2) -> Path:
     """Write ``obj`` as JSON to ``path`` atomically (temporary file in the same folder, then rename)."""
     path = Path(path)

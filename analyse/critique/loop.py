@@ -49,7 +49,7 @@ from demcal.analyse.critique.twins import (Discrepancy, TwinRunner, constant_dis
                                     wall_of)
 from demcal.analyse.results import CampaignResult
 from demcal.errors import InputError
-from demcal.jsonio import read_json
+from demcal.jsonio import check_schema, read_json
 from demcal.provenance import Provenance
 
 RIGS = ("drop", "incline", "repose")
@@ -130,10 +130,7 @@ class Critique:
     def from_dict(cls, d: dict, where: str = "critique.json") -> "Critique":
         """Read ``critique.json`` back (``extensions`` and ``catalogue`` are derived: the
         extensions come from ``extension_records``)."""
-        version = d.get("schema_version", CRITIQUE_SCHEMA_VERSION)
-        if not isinstance(version, int) or version > CRITIQUE_SCHEMA_VERSION:
-            raise InputError(f"{where}: schema version {version!r} is newer than this demcal reads "
-                             f"({CRITIQUE_SCHEMA_VERSION}); update demcal")
+        check_schema(d, CRITIQUE_SCHEMA_VERSION, where)
         try:
             return cls(discrepancies=[Discrepancy.from_dict(x) for x in d["discrepancies"]],
                        findings=[Finding.from_dict(x) for x in d["findings"]],
