@@ -51,7 +51,7 @@ from demcal.analyse.equivalence import default_tolerance, equivalence_test
 from demcal.analyse.optimise import (canonical_analysis, confirmation_interval, optimise_to_target,
                               steepest_climb_analysis, steepest_climb_plan, validate_repeats)
 from demcal.analyse.regression import fit_response_surface
-from demcal.analyse.results import CampaignResult, Validation
+from demcal.analyse.results import CampaignResult
 from demcal.analyse.runs import RunStore, run_all, run_key
 from demcal.analyse.screening import plackett_burman_screening
 from demcal.errors import AnalysisError, InputError
@@ -482,9 +482,9 @@ def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
     else:
         results = _derive_design_expert(measurement, config, execute, factors, base, geometry)
         fallbacks = results.pop("fallback_runs")
-    if not isinstance(results["validation"], Validation):
-        results["validation"] = Validation.from_dict(results["validation"])
-    return CampaignResult(
+    # the sections come as their analyses' dictionaries; from_dict types them here, so that a
+    # renamed key fails where the result is made
+    return CampaignResult.from_dict(dict(
         workflow=config.workflow,
         response={"name": RESPONSE, "fallbacks": list(FALLBACK_RESPONSES),
                   "fallback_runs": fallbacks,
@@ -503,7 +503,7 @@ def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
         provenance=Provenance(inputs=dict(measurement.provenance.inputs), seed=config.seed,
                               options={"profile": config.profile, "levels": config.levels,
                                        "workflow": config.workflow}),
-    )
+    ), "campaign result")
 
 
 def _derive_design_expert(measurement, config: CampaignConfig, execute, factors, base, geometry) -> dict:

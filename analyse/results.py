@@ -4,19 +4,24 @@
 refusing unknown or missing keys by name, so that a renamed key fails where the result is made
 or read, not half-way through a report. ``SCHEMA_VERSION`` is recorded in the file.
 
-The headline (calibration and validation) is typed field by field. The workflows' working
-sections (the noise study, the design runs, the surrogate; the Plackett-Burman screening,
-steepest climb, Box-Behnken fit and optimisation of the paper's procedure) are carried as the
-dictionaries their analysis objects serialise to.
+Every section is a record whose fields are its keys: the headline (calibration and
+validation), the plausible workflow's prior, noise study, design runs and surrogate, and the
+paper procedure's screening, steepest climb, Box-Behnken fit and optimisation. Run references,
+logs and the analyses' small lookup tables (effects per factor, coefficients per term) stay
+dictionaries and lists.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import MISSING, dataclass, field, fields, replace
+from dataclasses import MISSING, dataclass, field, fields, is_dataclass, replace
+from types import UnionType
+from typing import Union, get_args, get_origin, get_type_hints
 
 from demcal.errors import InputError
 from demcal.jsonio import check_schema, restore_nan, to_jsonable
+from demcal.analyse.noise import NoiseSummary, SeedCorrelation
+from demcal.analyse.regression import AnovaRow, FitStatistics
 from demcal.provenance import Provenance
 
 #: Version of the layout of ``results.json``; files without one were written before it was
@@ -39,16 +44,72 @@ def _build(cls, d: dict, where: str):
     return cls(**d)
 
 
+def _typed(tp, value, where: str):
+    """``value`` (as JSON holds it) as the annotated type ``tp``: dataclasses (records, and the
+    analysis modules' ANOVA rows, fit statistics and noise summaries) are built from their keys,
+    tuples, lists and dicts of them element by element; anything else is kept as it is."""
+    if value is None:
+        return None
+    origin, args = get_origin(tp), get_args(tp)
+    if origin in (Union, UnionType):
+        kinds = [a for a in args if a is not type(None)]
+        return _typed(kinds[0], value, where) if len(kinds) == 1 else value
+    if isinstance(tp, type) and is_dataclass(tp):
+        if isinstance(value, tp):
+            return value
+        if issubclass(tp, _Record):
+            return tp.from_dict(value, where)
+        return _build(tp, value, where)
+    if tp is tuple:
+        return tuple(value)
+    if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
+        return tuple(_typed(args[0], v, f"{where}[{i}]") for i, v in enumerate(value))
+    if origin is tuple:
+        return tuple(value)
+    if origin is list and args:
+        return [_typed(args[0], v, f"{where}[{i}]") for i, v in enumerate(value)]
+    if origin is dict and len(args) == 2:
+        return {k: _typed(args[1], v, f"{where}.{k}") for k, v in value.items()}
+    return value
+
+
+def _plain(value):
+    """``value`` with every record replaced by its ``to_dict``."""
+    if isinstance(value, _Record):
+        return value.to_dict()
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
 class _Record:
-    """JSON round trip of a frozen dataclass whose fields are its keys."""
+    """JSON round trip of a frozen dataclass whose fields are its keys.
+
+    ``from_dict`` builds nested records from their annotations, refusing unknown or missing
+    keys by name; ``to_dict`` is the inverse.
+    """
 
     #: Fields left out of ``to_dict`` when they are None (sections of the other workflow).
     _omit_if_none: tuple = ()
+    #: Float fields JSON holds as None for NaN (``to_jsonable``), restored on reading.
+    _nan_fields: tuple = ()
 
     def to_dict(self) -> dict:
         d = {f.name: getattr(self, f.name) for f in fields(self)
              if not (f.name in self._omit_if_none and getattr(self, f.name) is None)}
-        return to_jsonable({k: v.to_dict() if isinstance(v, _Record) else v for k, v in d.items()})
+        return to_jsonable(_plain(d))
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str | None = None):
+        where = where or cls.__name__
+        if not isinstance(d, dict):
+            raise InputError(f"{where}: expected an object, got {type(d).__name__}")
+        hints = get_type_hints(cls)
+        d = restore_nan(d, *cls._nan_fields)
+        return _build(cls, {k: _typed(hints[k], v, f"{where}.{k}") if k in hints else v
+                            for k, v in d.items()}, where)
 
 
 @dataclass(frozen=True)
@@ -82,9 +143,6 @@ class ParameterEstimate(_Record):
     identifiability: str
     source: str
 
-    @classmethod
-    def from_dict(cls, d: dict, where: str = "parameter") -> "ParameterEstimate":
-        return _build(cls, {**d, "ci95": tuple(d.get("ci95") or ())}, where)
 
 
 @dataclass(frozen=True)
@@ -112,33 +170,15 @@ class Point(_Record):
     log_posterior: float
     chosen: str = "posterior mode"
 
-    @classmethod
-    def from_dict(cls, d: dict, where: str = "point") -> "Point":
-        return _build(cls, d, where)
-
-
-def _parameters(d: dict, where: str) -> dict:
-    return {n: ParameterEstimate.from_dict(p, f"{where}.{n}") for n, p in d.items()}
 
 
 @dataclass(frozen=True)
 class HeapOnly(_Record):
     """The heap-only posterior on the same surrogate, for comparison with a joint calibration."""
 
-    parameters: dict
+    parameters: dict[str, ParameterEstimate]
     recommended: Point
     ess: float
-
-    def to_dict(self) -> dict:
-        return to_jsonable({"parameters": {n: p.to_dict() for n, p in self.parameters.items()},
-                            "recommended": self.recommended.to_dict(), "ess": self.ess})
-
-    @classmethod
-    def from_dict(cls, d: dict, where: str = "heap_only") -> "HeapOnly":
-        d = dict(d)
-        d["parameters"] = _parameters(d.get("parameters", {}), f"{where}.parameters")
-        d["recommended"] = Point.from_dict(d.get("recommended", {}), f"{where}.recommended")
-        return _build(cls, d, where)
 
 
 @dataclass(frozen=True)
@@ -171,7 +211,7 @@ class Calibration(_Record):
 
     method: str
     likelihood: str
-    parameters: dict
+    parameters: dict[str, ParameterEstimate]
     recommended: Point
     recommended_inside_ci95: dict
     target_deg: float
@@ -185,22 +225,6 @@ class Calibration(_Record):
     heap_only: HeapOnly | None = None
     posterior_mode: Point | None = None
     samples: dict = field(default_factory=dict)
-
-    def to_dict(self) -> dict:
-        d = super().to_dict()
-        d["parameters"] = {n: p.to_dict() for n, p in self.parameters.items()}
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict, where: str = "calibration") -> "Calibration":
-        d = dict(d)
-        d["parameters"] = _parameters(d.get("parameters", {}), f"{where}.parameters")
-        d["recommended"] = Point.from_dict(d.get("recommended", {}), f"{where}.recommended")
-        if d.get("posterior_mode") is not None:
-            d["posterior_mode"] = Point.from_dict(d["posterior_mode"], f"{where}.posterior_mode")
-        if d.get("heap_only") is not None:
-            d["heap_only"] = HeapOnly.from_dict(d["heap_only"], f"{where}.heap_only")
-        return _build(cls, d, where)
 
 
 @dataclass(frozen=True)
@@ -258,10 +282,284 @@ class Validation(_Record):
                      "lab_heaps_for_power", "replicate_responses", "noise_sd", "noise_df", "result",
                      "confirmation")
 
+    _nan_fields = ("detectable_bias_deg",)
+
     @classmethod
     def from_dict(cls, d: dict, where: str = "validation") -> "Validation":
-        d = restore_nan({**d, "ci95": tuple(d.get("ci95") or (math.nan, math.nan))}, "detectable_bias_deg")
-        return _build(cls, d, where)
+        return super().from_dict({**d, "ci95": d.get("ci95") or (math.nan, math.nan)}, where)
+
+
+# --------------------------------------------------------------------------------------------
+# Working sections of the plausible workflow (``analyse.plausible``)
+
+@dataclass(frozen=True)
+class PriorMarginal(_Record):
+    """One parameter's prior: normal (mean, sd) truncated to [low, high], from its lab test."""
+
+    mean: float
+    sd: float
+    low: float
+    high: float
+    truncated_mean: float
+    truncated_sd: float
+    source: str | None
+
+
+@dataclass(frozen=True)
+class NoiseStudy(_Record):
+    """The seed-to-seed noise of the plausible workflow (``analyse.noise``).
+
+    Attributes
+    ----------
+    centre : NoiseSummary
+        From the same-seed pair of points.
+    design : NoiseSummary or None
+        From the replicates of the design points.
+    all_points : NoiseSummary
+        Pooled over every point; its ``sd`` is the noise the surrogate carries.
+    seed_correlation : SeedCorrelation
+        Of the same-seed pairs: whether common random numbers would pay off.
+    replicates : int
+        Runs per design point, and how that was chosen (``replicates_rule``).
+    pairs : dict
+        The pair's two points (``a``, ``b``), seeds and responses.
+    """
+
+    centre: NoiseSummary
+    design: NoiseSummary | None
+    all_points: NoiseSummary
+    seed_correlation: SeedCorrelation
+    replicates: int
+    replicates_rule: str
+    pairs: dict
+
+
+@dataclass(frozen=True)
+class DesignPoint(_Record):
+    """A design point's runs: its stage (``noise``, ``design``, ``sequential``, ``refine``),
+    settings, one response, seed and run reference per run, and their mean [deg]."""
+
+    stage: str
+    settings: dict
+    responses: list
+    mean: float
+    seeds: list
+    runs: list
+
+
+@dataclass(frozen=True)
+class DesignRuns(_Record):
+    """Every design point of the plausible workflow and how the sequence of rounds went.
+
+    ``rounds`` logs each sequential round, ``refinements`` each refinement at the posterior
+    mode, ``stopped_because`` why the design ended."""
+
+    points: tuple[DesignPoint, ...]
+    replicates: int
+    initial_points: int
+    batch: int
+    budget_runs: int
+    rounds: list
+    stopped_because: str
+    refinements: list
+
+
+@dataclass(frozen=True)
+class SurrogateSummary(_Record):
+    """The fitted surrogate: its kernel, length scales per parameter, leave-one-out check and
+    noise model (pooled, or per point shrunk to the pooled)."""
+
+    kernel: str
+    length_scales: dict
+    leave_one_out: dict
+    noise_model: str
+
+
+# --------------------------------------------------------------------------------------------
+# Working sections of the paper's procedure (``analyse.campaign``); the analysis summaries
+# are the ``to_dict`` of ``ResponseSurface``, ``PlackettBurmanScreening``, ``SteepestClimbPlan``,
+# ``SteepestClimbResult``, ``CanonicalAnalysis`` and ``TargetOptimum``.
+
+@dataclass(frozen=True)
+class SurfaceFit(_Record):
+    """A fitted response surface (``ResponseSurface.to_dict()``): coded coefficients, ANOVA
+    with lack of fit, Design-Expert's fit statistics, equations and stationary point."""
+
+    model: str
+    response: str
+    factors: dict
+    low: dict
+    high: dict
+    coefficients: dict
+    std_errors: dict
+    ci95: dict
+    block_effects: dict | None
+    anova: tuple[AnovaRow, ...]
+    fit: FitStatistics
+    equation_coded: str
+    equation_actual: str
+    coefficients_actual: dict
+    significant: list
+    stationary_point: dict | None
+
+    def anova_row(self, source: str) -> AnovaRow | None:
+        """The ANOVA row named ``source``, or None."""
+        return next((row for row in self.anova if row.source == source), None)
+
+
+@dataclass(frozen=True)
+class Screening(SurfaceFit):
+    """A Plackett-Burman screening (``PlackettBurmanScreening.to_dict()``): the first-order fit
+    plus effects, % contributions, ranking, the Pareto chart and Lenth's margins."""
+
+    effects: dict
+    dummy_effects: dict
+    contribution_pct: dict
+    ranking: list
+    alpha: float
+    pareto: dict | None
+    lenth: dict | None
+
+
+@dataclass(frozen=True)
+class ScreeningStage(_Record):
+    """Step 2: the Plackett-Burman runs, their screening, and each effect against the noise."""
+
+    design_coded: list
+    columns: list
+    design_actual: list
+    response: list
+    replicate_responses: list
+    runs: list
+    screening: Screening
+    effects_vs_noise: dict
+
+
+@dataclass(frozen=True)
+class CentreNoise(_Record):
+    """Step 3: the screening centre run with different seeds (``sd`` of a point's response,
+    ``sd_single_run`` of one run); the Box-Behnken centre points' sd for comparison."""
+
+    settings: dict
+    seeds: list
+    responses: list
+    replicate_responses: list
+    sd: float
+    sd_single_run: float
+    replicates: int
+    runs: list
+    bbd_centre_sd: float
+
+
+@dataclass(frozen=True)
+class FactorChoice(_Record):
+    """The factors the screening flagged, those carried forward, and why they differ."""
+
+    flagged: list
+    carried_forward: list
+    note: str
+
+
+@dataclass(frozen=True)
+class ClimbPlan(_Record):
+    """``SteepestClimbPlan.to_dict()``: the stepped factors, their directions and steps, and
+    every factor's value at each level."""
+
+    factors: list
+    stepped: list
+    directions: dict
+    step: dict
+    levels: list
+
+
+@dataclass(frozen=True)
+class ClimbResult(_Record):
+    """``SteepestClimbResult.to_dict()``: the level closest to the target and the window the
+    Box-Behnken design takes from it (levels are numbered from 1)."""
+
+    responses: list
+    smoothed: list | None
+    relative_error_pct: list
+    target: float
+    best_level: int
+    centre: dict
+    low: dict
+    high: dict
+    at_edge: bool
+    note: str
+    centre_level: int
+
+
+@dataclass(frozen=True)
+class SteepestClimbStage(_Record):
+    """Step 4: the climb's runs and its analysis; ``increase`` is the direction toward the target."""
+
+    plan: ClimbPlan
+    response: list
+    replicate_responses: list
+    runs: list
+    result: ClimbResult
+    increase: bool
+
+
+@dataclass(frozen=True)
+class Canonical(_Record):
+    """``CanonicalAnalysis.to_dict()``: eigenvalues and vectors of B, the stationary point and
+    its nature (``maximum``, ``minimum``, ``saddle``, with a ridge when one is near flat)."""
+
+    eigenvalues: list
+    eigenvectors: list
+    stationary_coded: dict | None
+    stationary_actual: dict | None
+    predicted: float | None
+    inside_region: bool
+    verdict: str
+    ridge: str | None
+    near_zero: list
+
+
+@dataclass(frozen=True)
+class BoxBehnkenStage(_Record):
+    """Step 5: the Box-Behnken design in the window the climb chose, its runs, the quadratic
+    fit with its canonical analysis, and each coefficient against the noise."""
+
+    factors: list
+    low: list
+    high: list
+    centre: list
+    fixed: dict
+    design_coded: list
+    design_actual: list
+    response: list
+    replicate_responses: list
+    runs: list
+    fit: SurfaceFit
+    canonical: Canonical
+    terms_vs_noise: dict
+
+
+@dataclass(frozen=True)
+class Solution(_Record):
+    """A point where the fitted surface meets the target, coded and actual."""
+
+    coded: dict
+    actual: dict
+    predicted: float
+    distance: float
+
+
+@dataclass(frozen=True)
+class Optimisation(_Record):
+    """Step 6, ``TargetOptimum.to_dict()``: the solutions of yhat = target in the coded cube,
+    the preferred one (closest to the measured means) first."""
+
+    target: float
+    reached: bool
+    preferred: Solution
+    solutions: tuple[Solution, ...]
+    reference_coded: dict
+    reference_actual: dict
+    note: str
 
 
 @dataclass(frozen=True)
@@ -292,10 +590,13 @@ class CampaignResult(_Record):
     provenance : Provenance
     calibration : Calibration or None
         Plausible workflow.
-    prior, noise, design, surrogate : dict or None
-        Plausible workflow (``noise`` also in the paper's procedure, with its own layout).
-    plackett_burman, significant, steepest_climb, box_behnken, optimisation : dict or None
-        The paper's procedure.
+    prior : dict of str -> PriorMarginal, or None
+    noise : NoiseStudy (plausible) or CentreNoise (the paper's procedure)
+    design, surrogate : DesignRuns, SurrogateSummary or None
+        Plausible workflow.
+    plackett_burman, significant, steepest_climb, box_behnken, optimisation
+        The paper's procedure: ScreeningStage, FactorChoice, SteepestClimbStage,
+        BoxBehnkenStage, Optimisation, or None.
     runner, wall_s : str, float or None
         The DEM runner and the campaign's wall time (not re-derived by the audit).
     schema_version : int
@@ -315,15 +616,15 @@ class CampaignResult(_Record):
     stages: list
     provenance: Provenance
     calibration: Calibration | None = None
-    prior: dict | None = None
-    noise: dict | None = None
-    design: dict | None = None
-    surrogate: dict | None = None
-    plackett_burman: dict | None = None
-    significant: dict | None = None
-    steepest_climb: dict | None = None
-    box_behnken: dict | None = None
-    optimisation: dict | None = None
+    prior: dict[str, PriorMarginal] | None = None
+    noise: NoiseStudy | CentreNoise | None = None
+    design: DesignRuns | None = None
+    surrogate: SurrogateSummary | None = None
+    plackett_burman: ScreeningStage | None = None
+    significant: FactorChoice | None = None
+    steepest_climb: SteepestClimbStage | None = None
+    box_behnken: BoxBehnkenStage | None = None
+    optimisation: Optimisation | None = None
     runner: str | None = None
     wall_s: float | None = None
     schema_version: int = SCHEMA_VERSION
@@ -333,15 +634,12 @@ class CampaignResult(_Record):
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "results.json") -> "CampaignResult":
-        d = dict(d)
         check_schema(d, SCHEMA_VERSION, where)
-        d["validation"] = Validation.from_dict(d.get("validation", {}), f"{where}: validation")
-        if d.get("calibration") is not None:
-            d["calibration"] = Calibration.from_dict(d["calibration"], f"{where}: calibration")
-        prov = d.get("provenance")
-        if isinstance(prov, dict):
-            d["provenance"] = _build(Provenance, prov, f"{where}: provenance")
-        return _build(cls, d, where)
+        noise = d.get("noise")
+        if isinstance(noise, dict):  # each workflow measures the noise its own way
+            kind = NoiseStudy if d.get("workflow") == "plausible" else CentreNoise
+            d = {**d, "noise": kind.from_dict(noise, f"{where}: noise")}
+        return super().from_dict(d, where)
 
     def with_(self, **changes) -> "CampaignResult":
         """A copy with some fields replaced (e.g. ``runner`` and ``wall_s`` after the run)."""

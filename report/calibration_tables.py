@@ -27,7 +27,7 @@ def table_prior(c: Campaign) -> Table:
     rows = []
     for name, p in r.prior.items():
         label, symbol = parameter_label(name, wall)
-        rows.append((label, symbol, p["source"], p["mean"], p["sd"], p["low"], p["high"]))
+        rows.append((label, symbol, p.source, p.mean, p.sd, p.low, p.high))
     return Table("P1", "Prior of the contact parameters: the lab's measured mean and sd of each",
                  ("Parameter", "Symbol", "Measured quantity", "Mean", "SD", "Lowest", "Highest"),
                  ("", "", "", "", "", "", ""), tuple(rows),
@@ -93,26 +93,25 @@ def table_noise_study(c: Campaign) -> Table:
     """Table P2: the seed-to-seed noise, its constancy and the seed correlation."""
     r = c.results
     n = r.noise
-    pairs = n["pairs"]
+    pairs = n.pairs
     rows = [("Runs at the prior mean (seeds shared with the next row)", " / ".join(f"{a:.4g}" for a in pairs["a_responses"]), None, None),
             ("Runs half a prior SD higher in every parameter", " / ".join(f"{a:.4g}" for a in pairs["b_responses"]), None, None)]
-    for label, key in (("SD of one run, these two points", "centre"), ("SD of one run, design points", "design"),
-                       ("SD of one run, all points (used)", "all_points")):
-        s = n.get(key)
+    for label, s in (("SD of one run, these two points", n.centre), ("SD of one run, design points", n.design),
+                     ("SD of one run, all points (used)", n.all_points)):
         if s:
-            rows.append((f"{label} ({s['points']} points, {s['df']} df)", s["sd"], s["ci95"], None))
-    allp = n["all_points"]
-    rows.append(("Same variance at every point: Bartlett's p", allp["constant_p"], None,
-                 "kept" if allp["constant"] else "rejected: per-point noise"))
-    sc = n["seed_correlation"]
-    rows.append((f"Correlation of same-seed runs at the two points ({sc['n']} pairs)", sc["r"], sc["ci95"],
+            rows.append((f"{label} ({s.points} points, {s.df} df)", s.sd, s.ci95, None))
+    allp = n.all_points
+    rows.append(("Same variance at every point: Bartlett's p", allp.constant_p, None,
+                 "kept" if allp.constant else "rejected: per-point noise"))
+    sc = n.seed_correlation
+    rows.append((f"Correlation of same-seed runs at the two points ({sc.n} pairs)", sc.r, sc.ci95,
                  "common random numbers would halve the variance of a difference only above 0.5"))
-    rows.append(("Runs per design point", n["replicates"], None, n["replicates_rule"]))
+    rows.append(("Runs per design point", n.replicates, None, n.replicates_rule))
     return Table("P2", "Seed-to-seed noise of the simulated angle of repose",
                  ("Item", "Value", "95 % interval", "Note"), ("", "deg", "deg", ""), tuple(rows),
                  notes=("Every run is an independent draw of the heap: a design point's angle is the mean "
                         "of its runs, and the surrogate carries each point's noise over its number of runs.",),
-                 sources=({"kind": "runs", "keys": [run["key"] for p in r.design["points"][:2] for run in p["runs"]]},
+                 sources=({"kind": "runs", "keys": [run["key"] for p in r.design.points[:2] for run in p.runs]},
                           _results_source("noise")),
                  formats=("", ".4g", ".3g", ""))
 
@@ -123,20 +122,20 @@ def table_design_runs(c: Campaign) -> Table:
     names = _names(r)
     sym = _symbols(c)
     rows = []
-    for i, p in enumerate(r.design["points"], 1):
-        ys = p["responses"]
-        sd = (sum((y - p["mean"]) ** 2 for y in ys) / (len(ys) - 1)) ** 0.5 if len(ys) > 1 else None
-        rows.append((i, p["stage"], *[p["settings"][n] for n in names], len(ys), p["mean"], sd))
+    for i, p in enumerate(r.design.points, 1):
+        ys = p.responses
+        sd = (sum((y - p.mean) ** 2 for y in ys) / (len(ys) - 1)) ** 0.5 if len(ys) > 1 else None
+        rows.append((i, p.stage, *[p.settings[n] for n in names], len(ys), p.mean, sd))
     d = r.design
     return Table("P3", "Design points: noise pair, space-filling design, sequential rounds, and runs at "
                  "the recommended point",
                  ("#", "Stage", *[sym[n] for n in names], "Runs", "Mean angle", "Run SD"),
                  ("", "", *[""] * len(names), "", "deg", "deg"), tuple(rows),
-                 notes=(f"{d['initial_points']} points of a Latin hypercube through the prior's quantiles, then "
-                        f"rounds of {d['batch']} points where it was least certain whether the mean angle equals "
-                        f"the target (at most {d['budget_runs']} runs of design and rounds); stopped: "
-                        f"{d['stopped_because']}. Every run has its own seed (Table A2).",),
-                 sources=({"kind": "runs", "keys": [run["key"] for p in d["points"] for run in p["runs"]]},
+                 notes=(f"{d.initial_points} points of a Latin hypercube through the prior's quantiles, then "
+                        f"rounds of {d.batch} points where it was least certain whether the mean angle equals "
+                        f"the target (at most {d.budget_runs} runs of design and rounds); stopped: "
+                        f"{d.stopped_because}. Every run has its own seed (Table A2).",),
+                 sources=({"kind": "runs", "keys": [run["key"] for p in d.points for run in p.runs]},
                           _results_source("design.points")),
                  formats=("d", "", *[".3g"] * len(names), "d", ".4g", ".3g"))
 
@@ -147,14 +146,14 @@ def table_surrogate(c: Campaign) -> Table:
     s = r.surrogate
     sym = _symbols(c)
     rows = [(f"Length scale, {sym[n]}", v, "fraction of the prior range: large = the angle hardly depends on it")
-            for n, v in s["length_scales"].items()]
-    loo = s["leave_one_out"]
+            for n, v in s.length_scales.items()]
+    loo = s.leave_one_out
     rows.append(("Leave-one-out RMSE of a point's mean angle", loo["rmse"], "deg"))
     rows.append(("Share of points within 2 predicted SD (leave-one-out)", loo["share_within_2"], "about 0.95 when the surrogate and its noise are right"))
-    rows.append(("Noise model", s["noise_model"], ""))
+    rows.append(("Noise model", s.noise_model, ""))
     return Table("P4", "Surrogate of the mean angle: Gaussian process with per-point noise",
                  ("Item", "Value", "Note"), ("", "", ""), tuple(rows),
-                 notes=(f"Kernel {s['kernel']}.",),
+                 notes=(f"Kernel {s.kernel}.",),
                  sources=(_results_source("surrogate"),), formats=("", ".3g", ""))
 
 

@@ -18,7 +18,7 @@ import numpy as np
 from matplotlib.figure import Figure as _MplFigure
 from matplotlib.image import imread
 
-from demcal.analyse.results import CampaignResult
+from demcal.analyse.results import CampaignResult, NoiseStudy
 from demcal.report.tables import parameter_label
 
 #: Resolution of every PNG [dots per inch].
@@ -84,7 +84,7 @@ def heap_photos(measurement: dict, path: Path) -> Path | None:
 def pareto_chart(results: CampaignResult, path: Path) -> Path | None:
     """Pareto chart of the Plackett-Burman effects: |t| of each factor, sorted, with the
     t-value and Bonferroni limits (Design-Expert's chart)."""
-    p = (results.plackett_burman or {}).get("screening", {}).get("pareto")
+    p = results.plackett_burman.screening.pareto if results.plackett_burman else None
     if not p:
         return None
     names, t, signs = p["names"], np.abs(p["t_values"]), p["signs"]
@@ -133,13 +133,13 @@ def response_surfaces(results: CampaignResult, path: Path, target: float | None 
     ``labels`` maps a screening letter to its axis label (e.g. its symbol).
     """
     b = results.box_behnken
-    if not b or not b.get("fit"):
+    if not b:
         return None
-    fit = b["fit"]
-    codes = list(fit["factors"])          # coded letters, e.g. A B C
-    letters = [fit["factors"][c] for c in codes]
+    fit = b.fit
+    codes = list(fit.factors)          # coded letters, e.g. A B C
+    letters = [fit.factors[c] for c in codes]
     labels = labels or {}
-    low, high = np.asarray(b["low"], float), np.asarray(b["high"], float)
+    low, high = np.asarray(b.low, float), np.asarray(b.high, float)
     pairs = list(combinations(range(len(codes)), 2))
     if not pairs:
         return None
@@ -148,9 +148,9 @@ def response_surfaces(results: CampaignResult, path: Path, target: float | None 
     fig = _new(2.35 * ncol + 0.3, 2.35 * nrow + 0.2)
     axes = np.atleast_1d(fig.subplots(nrow, ncol, squeeze=False).ravel())
     g = np.linspace(-1.0, 1.0, 81)
-    pref = (results.optimisation or {}).get("preferred", {}).get("coded", {})
+    pref = results.optimisation.preferred.coded if results.optimisation else {}
     held = {c: float(pref.get(c, 0.0)) for c in codes}
-    design = np.asarray(b["design_coded"], float)
+    design = np.asarray(b.design_coded, float)
 
     def actual(k, coded):
         return low[k] + (np.asarray(coded) + 1) * (high[k] - low[k]) / 2
@@ -159,7 +159,7 @@ def response_surfaces(results: CampaignResult, path: Path, target: float | None 
         gi, gj = np.meshgrid(g, g)
         x = {c: np.full_like(gi, held[c]) for c in codes}
         x[codes[i]], x[codes[j]] = gi, gj
-        y = polynomial(fit["coefficients"], x)
+        y = polynomial(fit.coefficients, x)
         ai, aj = actual(i, gi), actual(j, gj)
         cf = ax.contourf(ai, aj, y, levels=12, cmap="viridis")
         cs = ax.contour(ai, aj, y, levels=cf.levels, colors="k", linewidths=0.3)
@@ -188,10 +188,10 @@ def climb_curve(results: CampaignResult, path: Path) -> Path | None:
     sc = results.steepest_climb
     if not sc:
         return None
-    err = np.asarray(sc["result"]["relative_error_pct"], float)
-    y = np.asarray(sc["response"], float)
+    err = np.asarray(sc.result.relative_error_pct, float)
+    y = np.asarray(sc.response, float)
     lv = np.arange(1, err.size + 1)
-    best = int(sc["result"]["best_level"])
+    best = int(sc.result.best_level)
     fig = _new(5.2, 2.5)
     ax = fig.subplots()
     ax.plot(lv, err, "o-", color=_BLUE, lw=1.2, ms=4, label="relative error")
@@ -204,7 +204,7 @@ def climb_curve(results: CampaignResult, path: Path) -> Path | None:
     ax.set_xticks(lv)
     ax2 = ax.twinx()
     ax2.plot(lv, y, "s--", color=_GREEN, lw=0.8, ms=3, label="angle")
-    ax2.axhline(sc["result"]["target"], color=_GREEN, lw=0.6, ls=":")
+    ax2.axhline(sc.result.target, color=_GREEN, lw=0.6, ls=":")
     ax2.set_ylabel("simulated angle [deg]", color=_GREEN)
     ax2.tick_params(axis="y", colors=_GREEN)
     ax.legend(loc="upper center", fontsize=7, frameon=False)
@@ -309,27 +309,26 @@ def validation_heaps(results: CampaignResult, runs: dict, measurement: dict, pat
 def noise_panels(results: CampaignResult, path: Path) -> Path | None:
     """Plausible workflow: the same-seed pairs of the noise measurement, and every design
     point's runs around its mean against the pooled noise."""
-    n = results.noise or {}
-    pairs = n.get("pairs")
-    if not pairs:
+    n = results.noise
+    if not isinstance(n, NoiseStudy):
         return None
+    pairs = n.pairs
     fig = _new(6.4, 2.5)
     ax1, ax2 = fig.subplots(1, 2)
     a, b = np.asarray(pairs["a_responses"]), np.asarray(pairs["b_responses"])
     ax1.plot(a, b, "o", color=_BLUE, ms=4)
     lo, hi = float(min(a.min(), b.min())) - 1, float(max(a.max(), b.max())) + 1
     ax1.plot([lo, hi], [lo, hi], ":", color=_GREY, lw=0.8)
-    sc = n["seed_correlation"]
-    ax1.set_title(f"same seed at two nearby points: r = {sc['r']:.2f}", fontsize=7)
+    ax1.set_title(f"same seed at two nearby points: r = {n.seed_correlation.r:.2f}", fontsize=7)
     ax1.set_xlabel("angle at the prior mean [deg]", fontsize=7)
     ax1.set_ylabel("angle half a prior SD higher [deg]", fontsize=7)
-    resid = np.concatenate([np.asarray(p["responses"]) - p["mean"] for p in results.design["points"]
-                            if len(p["responses"]) > 1])
-    sd = n["all_points"]["sd"]
+    resid = np.concatenate([np.asarray(p.responses) - p.mean for p in results.design.points
+                            if len(p.responses) > 1])
+    sd = n.all_points.sd
     ax2.hist(resid, bins=15, density=True, color=_BLUE, alpha=0.5)
     x = np.linspace(-4 * sd, 4 * sd, 200)
     # a run's deviation from its point's mean has variance sd^2 (1 - 1/k)
-    k = n["replicates"]
+    k = n.replicates
     s_dev = sd * math.sqrt(1 - 1 / k) if k > 1 else sd
     ax2.plot(x, np.exp(-0.5 * (x / s_dev) ** 2) / (s_dev * math.sqrt(2 * math.pi)), color=_RED, lw=1)
     ax2.set_title(f"runs about their point's mean; pooled run SD {sd:.2f}°", fontsize=7)

@@ -173,9 +173,9 @@ def _signed_terms(coefs: dict, names: dict) -> str:
 def equations(c: Campaign) -> dict:
     """The fitted model as equations in coded and actual terms, and the paper's eq. (5)."""
     r = c.results
-    fit = r.box_behnken["fit"]
+    fit = r.box_behnken.fit
     wall = str(c.measurement.get("meta", {}).get("contact_material", "steel")).lower()
-    codes = fit["factors"]
+    codes = fit.factors
     symbol = {code: parameter_label(r.factors[letter]["parameter"], wall)[1]
               for code, letter in codes.items()}
 
@@ -187,7 +187,7 @@ def equations(c: Campaign) -> dict:
             return f"{symbol[term[0]]}²"
         return "·".join(symbol[ch] for ch in term)
 
-    coded, actual = fit["coefficients"], fit["coefficients_actual"]
+    coded, actual = fit.coefficients, fit.coefficients_actual
     out = {"coded": "θ = " + _signed_terms(coded, {t: coded_name(t) for t in coded}),
            "actual": "θ = " + _signed_terms(actual, {t: actual_name(t) for t in actual if t != "Intercept"}),
            "codes": ", ".join(f"{code} = {symbol[code]} (screening factor {letter})"
@@ -256,20 +256,19 @@ def differences(c: Campaign) -> list[str]:
     out.append("Screening levels: " + ("the measured minimum and maximum, as the paper."
                                        if cfg.get("levels") == "minmax"
                                        else "measured mean -+ one SD (the paper used min/max)."))
-    n = r.noise or {}
+    n = r.noise
     out.append(f"Seed-to-seed noise, not measured by the paper: the screening centre run with "
-               f"{len(n.get('seeds', []))} seeds (SD {_f(n.get('sd'), '.3g')}°) and the Box-Behnken "
-               f"centre points with different seeds (SD {_f(n.get('bbd_centre_sd'), '.3g')}°).")
-    flagged = (r.significant or {}).get("flagged", [])
+               f"{len(n.seeds)} seeds (SD {_f(n.sd, '.3g')}°) and the Box-Behnken "
+               f"centre points with different seeds (SD {_f(n.bbd_centre_sd, '.3g')}°).")
+    flagged = r.significant.flagged
     paper_sig = p.get("screening", {}).get("significant", [])
     if paper_sig and sorted(flagged) != sorted(paper_sig):
         out.append(f"Significant factors: {', '.join(flagged) or 'none'} here, "
                    f"{', '.join(paper_sig)} in the paper.")
-    if (r.significant or {}).get("note"):
-        out.append("Factors carried forward: " + r.significant["note"] + ".")
-    sc = r.steepest_climb or {}
+    if r.significant.note:
+        out.append("Factors carried forward: " + r.significant.note + ".")
     out.append(f"Steepest climb with {cfg.get('climb_levels')} levels in equal steps across the measured "
-               f"range of each significant factor; level {sc.get('result', {}).get('best_level')} was best "
+               f"range of each significant factor; level {r.steepest_climb.result.best_level} was best "
                "(the paper's number of levels is not in its text; it used its level 4).")
     out.append("The regression models the simulated angle itself (as the paper's eq. 5 does; its text "
                "speaks of the relative error).")
@@ -293,10 +292,10 @@ def abstract(c: Campaign) -> dict:
     q = m["quantities"]
     wall = str(m.get("meta", {}).get("contact_material", "steel")).lower()
     rep = q.get("repose_angle_deg", {})
-    fit = r.box_behnken["fit"]["fit"]
+    fit = r.box_behnken.fit.fit
     val = r.validation.result
     settings = r.validation.settings
-    chosen = r.box_behnken["factors"]
+    chosen = r.box_behnken.factors
     cal = ", ".join(f"{parameter_label(r.factors[f]['parameter'], wall)[0].lower()} "
                     f"{settings[r.factors[f]['parameter']]:.3g}" for f in chosen)
     pv = p.get("validation", {})
@@ -306,10 +305,10 @@ def abstract(c: Campaign) -> dict:
             f"{_f(q.get('length_mm', {}).get('value'))} mm × {_f(q.get('diameter_mm', {}).get('value'))} mm). "
             f"The angle of repose of the heap, {_f(rep.get('value'), '.4g')}° "
             f"(n = {rep.get('n')}), is the calibration target. A Plackett-Burman test of the seven "
-            f"contact parameters found {', '.join(r.significant['flagged']) or 'no factor'} significant; "
+            f"contact parameters found {', '.join(r.significant.flagged) or 'no factor'} significant; "
             f"a steepest climb and a Box-Behnken test of {', '.join(chosen)} gave a quadratic model with "
-            f"R² = {fit['r2']:.4f}, adjusted R² = {fit['adj_r2']:.4f}, Adeq Precision = "
-            f"{fit['adeq_precision']:.4g} and C.V. = {fit['cv_pct']:.3g} %. Optimised to the measured angle, "
+            f"R² = {fit.r2:.4f}, adjusted R² = {fit.adj_r2:.4f}, Adeq Precision = "
+            f"{fit.adeq_precision:.4g} and C.V. = {fit.cv_pct:.3g} %. Optimised to the measured angle, "
             f"the calibrated parameters are {cal}. Simulated with them over {val['n']} seeds the angle "
             f"is {val['mean']:.4g}°, a relative error of {val['relative_error_pct']:.3g} % to the "
             "measured angle.")
@@ -335,7 +334,7 @@ def abstract_plausible(c: Campaign) -> dict:
                 if p.identifiability == kind]
 
     ident, partly, not_ident = names("identified"), names("partly identified"), names("not identified")
-    runs = sum(len(p["runs"]) for p in r.design["points"])
+    runs = sum(len(p.runs) for p in r.design.points)
     # the lab readings the twins translate into other DEM values (beyond a reading's spread)
     moved = [f"{parameter_label(n, wall)[0].lower()} {t['mean']:.3g} where the lab reads {t['measured_mean']:.3g}"
              for n, t in cal.twins.items()
@@ -346,7 +345,7 @@ def abstract_plausible(c: Campaign) -> dict:
             f"({q.get('length_mm', {}).get('n', 0)} segments measured with callipers: "
             f"{_f(q.get('length_mm', {}).get('value'))} mm × {_f(q.get('diameter_mm', {}).get('value'))} mm). "
             f"The angle of repose of the heap, {_f(rep.get('value'), '.4g')}° (n = {rep.get('n')}), is the "
-            f"calibration target. One simulated heap scatters by {noise['all_points']['sd']:.2g}° (SD) from "
+            f"calibration target. One simulated heap scatters by {noise.all_points.sd:.2g}° (SD) from "
             f"seed to seed, so the calibration ran {runs} independent heaps over the measured range of the "
             f"seven contact parameters, modelled their mean angle with a Gaussian process that carries the "
             f"noise, and reports the parameters consistent with the measured angle.{twins} "
@@ -369,11 +368,11 @@ def differences_plausible(c: Campaign) -> list[str]:
     if cfg.get("profile") != "paper":
         out.append(f"Repose rig profile '{cfg.get('profile')}', not the paper-fidelity case.")
     out.append("No Plackett-Burman screening, steepest climb or Box-Behnken design: with a simulated "
-               f"angle that scatters by {r.noise['all_points']['sd']:.2g}° from seed to seed, effects of the "
+               f"angle that scatters by {r.noise.all_points.sd:.2g}° from seed to seed, effects of the "
                "size being screened are not distinguishable run by run. All runs feed one surrogate "
                "instead (--profile paper keeps the paper's procedure and its Tables 3-9).")
     out.append("Every run has its own seed; a design point's angle is the mean of "
-               f"{r.noise['replicates']} runs; the paper ran each point once.")
+               f"{r.noise.replicates} runs; the paper ran each point once.")
     out.append("The answer is a set of parameters with intervals, not one optimum; the recommended point "
                f"is the {r.calibration.recommended.chosen}.")
     out.append("Validation by an equivalence test at a stated tolerance, with runs added until decided, "

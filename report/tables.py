@@ -174,8 +174,8 @@ def run_stages(results: CampaignResult) -> list[tuple[str, list]]:
     if results.workflow == "plausible":
         stages: dict = {f"{t['rig']} twins, {name}": t["runs"]
                         for name, t in results.calibration.twins.items()}
-        for p in results.design["points"]:
-            stages.setdefault(p["stage"], []).extend(p["runs"])
+        for p in results.design.points:
+            stages.setdefault(p.stage, []).extend(p.runs)
         return list(stages.items()) + [("validation", results.validation.runs)]
     return [(stage, _part_runs(results, part)) for stage, part in _RUN_STAGES]
 
@@ -183,9 +183,7 @@ def run_stages(results: CampaignResult) -> list[tuple[str, list]]:
 def _part_runs(results: CampaignResult, part: str) -> list:
     """The run references of one part of the paper's procedure (``plackett_burman``, ...)."""
     x = getattr(results, part)
-    if x is None:
-        return []
-    return x.runs if isinstance(x, Validation) else x.get("runs", [])
+    return [] if x is None else x.runs
 
 
 def run_keys(results: CampaignResult | None) -> list[str]:
@@ -308,10 +306,7 @@ def _replicates(results: CampaignResult, part: str) -> tuple[int, list, list]:
     k = int(results.config.get("replicates", 1))
     runs = _part_runs(results, part)
     x = getattr(results, part)
-    if isinstance(x, Validation):
-        angles = x.replicate_responses or [[y] for y in x.responses]
-    else:
-        angles = x.get("replicate_responses") or [[y] for y in x["response"]]
+    angles = x.replicate_responses or [[y] for y in (x.responses if isinstance(x, Validation) else x.response)]
     return k, [runs[i:i + k] for i in range(0, len(runs), k)], angles
 
 
@@ -514,11 +509,11 @@ def table_pb_levels(c: Campaign) -> Table:
 def table_pb_design(c: Campaign) -> Table:
     """Table 4: the 12-run Plackett-Burman design (coded) and the simulated angle."""
     pb = c.results.plackett_burman
-    cols = list(pb["columns"])
+    cols = list(pb.columns)
     shown = ["d" + col.split("_")[-1] if col.startswith("dummy") else col for col in cols]
     k, point_runs, angles = _replicates(c.results, "plackett_burman")
     rows = []
-    for i, (coded, y, runs, ys) in enumerate(zip(pb["design_coded"], pb["response"], point_runs, angles), 1):
+    for i, (coded, y, runs, ys) in enumerate(zip(pb.design_coded, pb.response, point_runs, angles), 1):
         rows.append((i, *[int(round(v)) for v in coded], y, *_replicate_cells(runs, ys)))
     return Table("4", "Design and results of the Plackett-Burman test",
                  ("Run", *shown, "Angle of repose", "Replicates", "Seeds"),
@@ -541,8 +536,8 @@ def _number(value) -> str:
 def _anova_rows(anova, effects=None, extra=None):
     rows = []
     for a in anova:
-        src = a["source"]
-        row = [src, a["ss"], a["df"], a["ms"], a["f"], a["p"], _MARK.get(a.get("significance"), "")]
+        src = a.source
+        row = [src, a.ss, a.df, a.ms, a.f, a.p, _MARK.get(a.significance, "")]
         if effects is not None:
             row += [effects.get(src), (extra or {}).get(src)]
         rows.append(tuple(row))
@@ -552,25 +547,24 @@ def _anova_rows(anova, effects=None, extra=None):
 def table_pb_anova(c: Campaign) -> Table:
     """Table 5: Type III ANOVA of the Plackett-Burman test, with effects and contributions."""
     r = c.results
-    s = r.plackett_burman["screening"]
-    noise = r.plackett_burman.get("effects_vs_noise", {})
+    s = r.plackett_burman.screening
+    noise = r.plackett_burman.effects_vs_noise
     rows = []
-    for row in _anova_rows(s["anova"], s["effects"], s["contribution_pct"]):
+    for row in _anova_rows(s.anova, s.effects, s.contribution_pct):
         ratio = _get(noise, row[0], "ratio")
         rows.append(row + (ratio,))
     paper_sig = _get(c.paper, "screening", "significant", default=[])
     notes = [SIGNIFICANCE_NOTE,
-             f"Significant at p < {s['alpha']:g}: {', '.join(s['significant']) or 'none'}"
+             f"Significant at p < {s.alpha:g}: {', '.join(s.significant) or 'none'}"
              + (f" (paper: {', '.join(paper_sig)})" if paper_sig else "") + ".",
              "Effect = mean(+1) - mean(-1); contribution = Design-Expert's % of the model sum of "
              "squares; effect/noise = |effect| over the standard error the seed-to-seed noise "
              "alone would give it (Table 5a).",
-             f"Lenth's method over all contrasts: PSE {_number(_get(s, 'lenth', 'pse'))} deg, "
-             f"ME {_number(_get(s, 'lenth', 'me'))} deg, active: "
-             f"{', '.join(_get(s, 'lenth', 'active', default=None) or []) or 'none'}."]
-    note = _get(r.significant, "note")
-    if note:
-        notes.append(f"Carried forward: {', '.join(r.significant['carried_forward'])} ({note}).")
+             f"Lenth's method over all contrasts: PSE {_number(_get(s.lenth, 'pse'))} deg, "
+             f"ME {_number(_get(s.lenth, 'me'))} deg, active: "
+             f"{', '.join(_get(s.lenth, 'active', default=None) or []) or 'none'}."]
+    if r.significant.note:
+        notes.append(f"Carried forward: {', '.join(r.significant.carried_forward)} ({r.significant.note}).")
     return Table("5", "Analysis of variance of the Plackett-Burman test",
                  ("Source", "Sum of squares", "df", "Mean square", "F value", "p-value", "Sig.",
                   "Effect", "Contribution", "Effect/noise"),
@@ -589,15 +583,15 @@ def table_noise(c: Campaign) -> Table:
     k, point_runs, angles = _replicates(r, "noise")
     cells = [_replicate_cells(runs, ys) for runs, ys in zip(point_runs, angles)]
     rows = [(f"centre point {i}, seeds {seeds}", y, reps)
-            for i, ((reps, seeds), y) in enumerate(zip(cells, n["responses"]), 1)]
-    rows.append(("SD between centre points (n - 1)", n["sd"], ""))
-    if k > 1 and n.get("sd_single_run") is not None:
-        rows.append(("SD of a single run (all replicates)", n["sd_single_run"], ""))
-    se = next(iter(r.plackett_burman.get("effects_vs_noise", {}).values()), {}).get("se_noise")
+            for i, ((reps, seeds), y) in enumerate(zip(cells, n.responses), 1)]
+    rows.append(("SD between centre points (n - 1)", n.sd, ""))
+    if k > 1 and n.sd_single_run is not None:
+        rows.append(("SD of a single run (all replicates)", n.sd_single_run, ""))
+    se = next(iter(r.plackett_burman.effects_vs_noise.values()), {}).get("se_noise")
     rows.append(("Standard error of a screening effect from that noise", se, ""))
-    rows.append(("SD of the Box-Behnken centre points", n.get("bbd_centre_sd"), ""))
+    rows.append(("SD of the Box-Behnken centre points", n.bbd_centre_sd, ""))
     _, bbd_runs, _ = _replicates(r, "box_behnken")
-    bbd_keys = [run["key"] for runs, coded in zip(bbd_runs, r.box_behnken["design_coded"])
+    bbd_keys = [run["key"] for runs, coded in zip(bbd_runs, r.box_behnken.design_coded)
                 if not any(coded) for run in runs]
     return Table("5a", "Seed-to-seed noise of the simulated angle of repose",
                  ("Item", "Angle of repose", "Replicates"), ("", "deg", "deg"), tuple(rows),
@@ -616,14 +610,14 @@ def table_climb(c: Campaign) -> Table:
     """Table 6: steepest climb of the significant factors, relative error per level."""
     r = c.results
     sc = r.steepest_climb
-    plan, res = sc["plan"], sc["result"]
-    stepped = list(plan["stepped"])
-    best = int(res["best_level"])
-    mid = int(res.get("centre_level") or best)
+    plan, res = sc.plan, sc.result
+    stepped = list(plan.stepped)
+    best = int(res.best_level)
+    mid = int(res.centre_level or best)
     k, point_runs, angles = _replicates(r, "steepest_climb")
-    smoothed = res.get("smoothed")
+    smoothed = res.smoothed
     rows = []
-    for i, (lv, y, err, ys) in enumerate(zip(plan["levels"], sc["response"], res["relative_error_pct"],
+    for i, (lv, y, err, ys) in enumerate(zip(plan.levels, sc.response, res.relative_error_pct,
                                              angles), 1):
         # each factor steps in its own direction: a neighbour is -1 for some factors, +1 for others
         role = {mid: "centre (0)", mid - 1: "-1/+1", mid + 1: "-1/+1"}.get(i, "")
@@ -633,18 +627,18 @@ def table_climb(c: Campaign) -> Table:
         rows.append((i, *[lv[f] for f in stepped], y, " / ".join(f"{a:.4g}" for a in ys), *fit, err, role))
     wall = _wall(c.measurement)
     names = [parameter_label(r.factors[f]["parameter"], wall)[1] for f in stepped]
-    fixed = [f for f in plan["factors"] if f not in stepped]
+    fixed = [f for f in plan.factors if f not in stepped]
     paper_lv = _get(c.paper, "screening", "steepest_climb", default={})
-    notes = [res.get("note", ""),
-             "Steps: " + ", ".join(f"{f} {'+' if plan['directions'][f] > 0 else '-'}{plan['step'][f]:.4g}"
+    notes = [res.note,
+             "Steps: " + ", ".join(f"{f} {'+' if plan.directions[f] > 0 else '-'}{plan.step[f]:.4g}"
                                    for f in stepped)
              + f"; the other factors ({', '.join(fixed)}) at their measured means; relative error "
-             f"= |angle - {res['target']:.4g}| / {res['target']:.4g}."]
+             f"= |angle - {res.target:.4g}| / {res.target:.4g}."]
     if paper_lv:
         notes.append(f"Paper: level {paper_lv.get('bbd_centre_level')} of its climb was the centre, "
                      f"levels {paper_lv.get('bbd_low_level')} and {paper_lv.get('bbd_high_level')} "
                      "the low and high levels (its Table 6 is not available).")
-    if res.get("at_edge"):
+    if res.at_edge:
         notes.append("The best level is at the edge of the climb: the optimum may lie beyond it.")
     if k > 1:
         notes.append(_replicate_note(k))
@@ -668,7 +662,7 @@ def table_climb(c: Campaign) -> Table:
 
 def _bbd_letters(r: CampaignResult) -> list[tuple[str, str]]:
     """(coded letter of the fit, screening letter) pairs, in the fit's order."""
-    return list(_get(r.box_behnken, "fit", "factors", default={}).items())
+    return list(r.box_behnken.fit.factors.items())
 
 
 def table_bbd_levels(c: Campaign) -> Table:
@@ -679,8 +673,8 @@ def table_bbd_levels(c: Campaign) -> Table:
     rows = []
     for j, (code, letter) in enumerate(_bbd_letters(r)):
         name, symbol = parameter_label(r.factors[letter]["parameter"], wall)
-        rows.append((code, letter, name, symbol, b["low"][j], b["centre"][j], b["high"][j]))
-    fixed = ", ".join(f"{f} = {v:.4g}" for f, v in b["fixed"].items())
+        rows.append((code, letter, name, symbol, b.low[j], b.centre[j], b.high[j]))
+    fixed = ", ".join(f"{f} = {v:.4g}" for f, v in b.fixed.items())
     return Table("7", "Box-Behnken test: factors and level codes",
                  ("Code", "Screening factor", "Parameter", "Symbol", "Low (-1)", "Centre (0)", "High (+1)"),
                  ("",) * 7, tuple(rows),
@@ -699,8 +693,8 @@ def table_bbd_design(c: Campaign) -> Table:
     letters = _bbd_letters(r)
     k, point_runs, angles = _replicates(r, "box_behnken")
     rows = []
-    for i, (coded, actual, y, runs, ys) in enumerate(zip(b["design_coded"], b["design_actual"],
-                                                         b["response"], point_runs, angles), 1):
+    for i, (coded, actual, y, runs, ys) in enumerate(zip(b.design_coded, b.design_actual,
+                                                         b.response, point_runs, angles), 1):
         rows.append((i, *[int(round(v)) for v in coded], *actual, y, *_replicate_cells(runs, ys)))
     return Table("8", "Design and results of the Box-Behnken test",
                  ("Run", *[code for code, _ in letters], *[f"{letter} actual" for _, letter in letters],
@@ -717,11 +711,11 @@ def table_bbd_design(c: Campaign) -> Table:
 def table_bbd_anova(c: Campaign) -> Table:
     """Table 9: ANOVA of the quadratic Box-Behnken model (Design-Expert layout)."""
     r = c.results
-    fit = r.box_behnken["fit"]
+    fit = r.box_behnken.fit
     key = ", ".join(f"{code} = {letter}" for code, letter in _bbd_letters(r))
     return Table("9", "Analysis of variance of the quadratic regression model (Box-Behnken test)",
                  ("Source", "Sum of squares", "df", "Mean square", "F value", "p-value", "Sig."),
-                 ("", "deg^2", "", "deg^2", "", "", ""), tuple(_anova_rows(fit["anova"])),
+                 ("", "deg^2", "", "deg^2", "", "", ""), tuple(_anova_rows(fit.anova)),
                  notes=(SIGNIFICANCE_NOTE, f"Codes: {key} (Table 7). Fit statistics in Table 9a."),
                  sources=(_runs_source(r, "box_behnken"), _results_source("box_behnken.fit.anova")),
                  formats=("", ".4g", "d", ".4g", ".4g", "p", ""))
@@ -730,20 +724,20 @@ def table_bbd_anova(c: Campaign) -> Table:
 def table_fit_statistics(c: Campaign) -> Table:
     """Table 9a: fit statistics beside the paper's."""
     r = c.results
-    fit = r.box_behnken["fit"]
-    st = fit["fit"]
+    fit = r.box_behnken.fit
+    st = fit.fit
     paper = _get(c.paper, "regression", "fit", default={})
-    model_p = next((a["p"] for a in fit["anova"] if a["source"] == "Model"), None)
-    lof_p = next((a["p"] for a in fit["anova"] if a["source"] == "Lack of Fit"), None)
+    model_p = getattr(fit.anova_row("Model"), "p", None)
+    lof_p = getattr(fit.anova_row("Lack of Fit"), "p", None)
     below = _get(c.paper, "regression", "model_p_below")
-    rows = [("Std. Dev.", "deg", st["std_dev"], None),
-            ("Mean", "deg", st["mean"], None),
-            ("C.V.", "%", st["cv_pct"], paper.get("cv_pct")),
-            ("R²", "", st["r2"], paper.get("r2")),
-            ("Adjusted R²", "", st["adj_r2"], paper.get("adj_r2")),
-            ("Predicted R²", "", st["pred_r2"], None),
-            ("PRESS", "deg^2", st["press"], None),
-            ("Adeq Precision", "", st["adeq_precision"], paper.get("adeq_precision")),
+    rows = [("Std. Dev.", "deg", st.std_dev, None),
+            ("Mean", "deg", st.mean, None),
+            ("C.V.", "%", st.cv_pct, paper.get("cv_pct")),
+            ("R²", "", st.r2, paper.get("r2")),
+            ("Adjusted R²", "", st.adj_r2, paper.get("adj_r2")),
+            ("Predicted R²", "", st.pred_r2, None),
+            ("PRESS", "deg^2", st.press, None),
+            ("Adeq Precision", "", st.adeq_precision, paper.get("adeq_precision")),
             ("Model p-value", "", model_p, None if below is None else f"< {below:g}"),
             ("Lack of fit p-value", "", lof_p, None)]
     return Table("9a", "Fit statistics of the quadratic regression model",
@@ -782,17 +776,17 @@ def _actual_term(term: str, code_to_letter: dict) -> str:
 def table_coefficients(c: Campaign) -> Table:
     """Table 9b: regression coefficients in coded and actual terms, eq. (5) of the paper beside."""
     r = c.results
-    fit = r.box_behnken["fit"]
+    fit = r.box_behnken.fit
     code_to_letter = dict(_bbd_letters(r))
     wall = _wall(c.measurement)
     to_quantity = {code: r.factors[letter]["quantity"].replace(f"-{wall}", "-steel")
                    .replace(f".{wall}", ".steel") for code, letter in code_to_letter.items()}
     rows = []
-    for term, coef in fit["coefficients"].items():
-        ci = _get(fit, "ci95", term, default=[None, None])
-        rows.append((term, _actual_term(term, code_to_letter), coef, _get(fit, "std_errors", term),
+    for term, coef in fit.coefficients.items():
+        ci = fit.ci95.get(term) or [None, None]
+        rows.append((term, _actual_term(term, code_to_letter), coef, fit.std_errors.get(term),
                      ci[0], ci[1], _paper_term(term, to_quantity, c.paper),
-                     _get(fit, "coefficients_actual", term)))
+                     fit.coefficients_actual.get(term)))
     pf = _get(c.paper, "regression", "factors", default={})
     notes = ["Coded: each factor scaled to -1/+1 over its Box-Behnken range (Table 7); actual: "
              "the factors in their own units (" + ", ".join(
@@ -822,15 +816,15 @@ def table_solutions(c: Campaign) -> Table:
     o = r.optimisation
     letters = _bbd_letters(r)
     rows = []
-    for i, s in enumerate(o["solutions"], 1):
-        rows.append((i, *[s["coded"][code] for code, _ in letters],
-                     *[s["actual"][letter] for _, letter in letters], s["predicted"], s["distance"],
-                     "preferred" if s == o["preferred"] else ""))
+    for i, s in enumerate(o.solutions, 1):
+        rows.append((i, *[s.coded[code] for code, _ in letters],
+                     *[s.actual[letter] for _, letter in letters], s.predicted, s.distance,
+                     "preferred" if s == o.preferred else ""))
     return Table("10", "Optimisation to the measured angle of repose: solutions",
                  ("Solution", *[code for code, _ in letters], *[f"{letter} actual" for _, letter in letters],
                   "Predicted angle", "Distance", ""),
                  ("", *[""] * len(letters), *[""] * len(letters), "deg", "coded", ""), tuple(rows),
-                 notes=(o.get("note", ""), f"Target {o['target']:.4g} deg; distance from the "
+                 notes=(o.note, f"Target {o.target:.4g} deg; distance from the "
                         "measured means in coded units."),
                  sources=(_results_source("optimisation"), _runs_source(r, "box_behnken")),
                  formats=("d", *[".3f"] * len(letters), *[".4g"] * len(letters), ".4g", ".3g", ""))
@@ -841,7 +835,7 @@ def table_calibrated(c: Campaign) -> Table:
     r = c.results
     wall = _wall(c.measurement)
     settings = r.validation.settings
-    chosen = set(r.box_behnken["factors"])
+    chosen = set(r.box_behnken.factors)
     paper_cal = _get(c.paper, "calibrated", default={})
     rows = []
     for letter, f in r.factors.items():

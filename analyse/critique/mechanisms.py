@@ -333,14 +333,14 @@ def ill_conditioned(results) -> list:
     if results.workflow == "plausible":
         return _ill_conditioned_from_posterior(results)
     factors = results.factors
-    bbd = results.box_behnken or {}
-    carried = list(bbd.get("factors") or (results.significant or {}).get("carried_forward", []))
-    terms = bbd.get("terms_vs_noise") or {}
-    pb = (results.plackett_burman or {}).get("effects_vs_noise") or {}
+    bbd = results.box_behnken
+    carried = list(bbd.factors if bbd else results.significant.carried_forward if results.significant else [])
+    terms = bbd.terms_vs_noise if bbd else {}
+    pb = results.plackett_burman.effects_vs_noise if results.plackett_burman else {}
     if not carried or not (terms or pb):
         return [Finding(mech, "not_testable", evidence="the campaign has no noise comparison of its terms")]
     # the response surface names its factors A, B, C... in the order carried (fit "factors")
-    coded = {v: k for k, v in ((bbd.get("fit") or {}).get("factors") or {}).items()}
+    coded = {v: k for k, v in (bbd.fit.factors if bbd else {}).items()}
     rows = []
     for f in carried:
         param = factors.get(f, {}).get("parameter", f)

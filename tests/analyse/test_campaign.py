@@ -5,6 +5,9 @@ exercised by ``demcal calibrate`` and the opt-in validation run.)"""
 import pytest
 
 from demcal.analyse.campaign import CampaignConfig, calibrate, factor_levels
+from demcal.analyse.results import CampaignResult
+from demcal.errors import InputError
+from demcal.jsonio import read_json
 from tests.analyse.conftest import EXAMPLE
 from tests.analyse.standin import standin_angle, standin_runner
 
@@ -24,14 +27,14 @@ def test_levels_are_the_measured_extremes(measurement):
 def test_campaign_finds_the_active_factors_and_the_target(measurement, tmp_path):
     config = CampaignConfig(workers=1, progress=False, workflow="design-expert")
     res = calibrate(EXAMPLE, tmp_path, config, runner=standin_runner, measurement=measurement)
-    assert set(res.significant["carried_forward"]) == {"B", "E", "F"}
-    assert set(res.plackett_burman["screening"]["significant"]) == {"B", "E", "F"}
+    assert set(res.significant.carried_forward) == {"B", "E", "F"}
+    assert set(res.plackett_burman.screening.significant) == {"B", "E", "F"}
     # the noise repeats measure the stand-in's noise (4 seeds: loose bound)
-    assert 0.02 < res.noise["sd"] < 0.5
+    assert 0.02 < res.noise.sd < 0.5
     # optimisation: the preferred solution sits on the target surface of the fitted model
     opt = res.optimisation
-    assert opt["reached"]
-    assert opt["preferred"]["predicted"] == pytest.approx(res.target_angle_deg, abs=1e-3)
+    assert opt.reached
+    assert opt.preferred.predicted == pytest.approx(res.target_angle_deg, abs=1e-3)
     # validation with fresh seeds: the true response at the solution is the target within noise
     settings = res.validation.settings
     base = res.calibrated_parameters
@@ -44,7 +47,18 @@ def test_campaign_finds_the_active_factors_and_the_target(measurement, tmp_path)
     # every run is in the store and the rerun reuses them all
     again = calibrate(EXAMPLE, tmp_path, config, runner=standin_runner, measurement=measurement)
     assert all(stage["ran"] == 0 for stage in again.stages)
-    assert again.box_behnken["response"] == res.box_behnken["response"]
+    assert again.box_behnken.response == res.box_behnken.response
+    # results.json reads back into the same typed sections; a key renamed deep inside is
+    # refused where it is read, with its place
+    stored = read_json(tmp_path / "results.json")
+    back = CampaignResult.from_dict(stored)
+    assert back.to_dict() == stored
+    assert back.box_behnken.fit.anova_row("Lack of Fit") == res.box_behnken.fit.anova_row("Lack of Fit")
+    assert back.optimisation.preferred == back.optimisation.solutions[0]
+    anova = stored["box_behnken"]["fit"]["anova"]
+    anova[0] = {**anova[0], "F": anova[0]["f"]}
+    with pytest.raises(InputError, match=r"box_behnken\.fit\.anova\[0\]: unknown key.*F"):
+        CampaignResult.from_dict(stored)
 
 
 def test_response_falls_back_to_the_profile_fit_when_the_photo_method_finds_no_slope():

@@ -132,14 +132,15 @@ def test_ill_conditioned_from_campaign_terms():
     results = SimpleNamespace(
         workflow="design-expert", significant=None, plackett_burman=None,
         factors={"B": {"parameter": "e_pp"}, "F": {"parameter": "mu_s_pw"}},
-        box_behnken={"factors": ["B", "F"], "fit": {"factors": {"A": "B", "B": "F"}},
-                               "terms_vs_noise": {
+        box_behnken=SimpleNamespace(
+            factors=["B", "F"], fit=SimpleNamespace(factors={"A": "B", "B": "F"}),
+            terms_vs_noise={
                    "Intercept": {"coefficient": 34.0, "se_noise": 0.1, "exceeds_noise": True},
                    "A": {"coefficient": 0.05, "se_noise": 0.1, "exceeds_noise": False},
                    "B": {"coefficient": 2.0, "se_noise": 0.1, "exceeds_noise": True},
                    "AB": {"coefficient": 0.02, "se_noise": 0.12, "exceeds_noise": False},
                    "A^2": {"coefficient": -0.1, "se_noise": 0.15, "exceeds_noise": False},
-                   "B^2": {"coefficient": -0.4, "se_noise": 0.15, "exceeds_noise": True}}})
+                   "B^2": {"coefficient": -0.4, "se_noise": 0.15, "exceeds_noise": True}}))
     out = ill_conditioned(results)
     assert [(f.verdict, f.covariate) for f in out] == [("found", "e_pp")]
     assert out[0].ci95 == pytest.approx([0.05 - 0.196, 0.05 + 0.196])

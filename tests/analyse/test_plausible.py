@@ -23,35 +23,35 @@ def test_noise_is_measured_and_sizes_the_replicates(campaign):
     _, _, res = campaign
     noise = res.noise
     # the pooled run sd's 95 % interval holds the stand-in's true sd
-    lo, hi = noise["all_points"]["ci95"]
+    lo, hi = noise.all_points.ci95
     assert lo <= HEAP_NOISE_SD <= hi
     # k from the measured noise: run sd / sqrt(k) <= 3 x tolerance (tolerance 1 deg here)
-    k = noise["replicates"]
-    assert k == max(2, int(np.ceil((noise["centre"]["sd"] / 3.0) ** 2)))
-    points = res.design["points"][2:]
-    assert all(len(p["responses"]) == k for p in points if not p["stage"].startswith("refine"))
+    k = noise.replicates
+    assert k == max(2, int(np.ceil((noise.centre.sd / 3.0) ** 2)))
+    points = res.design.points[2:]
+    assert all(len(p.responses) == k for p in points if not p.stage.startswith("refine"))
     # the refinement rounds run refine_runs times at the recommended point of their round
-    refine = [p for p in points if p["stage"].startswith("refine")]
-    assert [p["stage"] for p in refine] == [f"refine {r}" for r in range(1, CampaignConfig().refine_rounds + 1)]
-    assert all(len(p["responses"]) == CampaignConfig().refine_runs for p in refine)
+    refine = [p for p in points if p.stage.startswith("refine")]
+    assert [p.stage for p in refine] == [f"refine {r}" for r in range(1, CampaignConfig().refine_rounds + 1)]
+    assert all(len(p.responses) == CampaignConfig().refine_runs for p in refine)
     # the validation runs where the mean angle was measured: at one of the refined points
     rec = res.calibration.recommended
-    assert rec.values in [p["settings"] for p in refine]
+    assert rec.values in [p.settings for p in refine]
     assert rec.chosen.startswith("refined point of round")
     assert res.validation.settings == rec.values
-    assert -1.0 <= noise["seed_correlation"]["r"] <= 1.0
+    assert -1.0 <= noise.seed_correlation.r <= 1.0
 
 
 def test_every_run_has_its_own_seed_and_the_budget_holds(campaign):
     _, config, res = campaign
-    points = res.design["points"]
-    seeds = [s for p in points[2:] for s in p["seeds"]] + res.validation.seeds
+    points = res.design.points
+    seeds = [s for p in points[2:] for s in p.seeds] + res.validation.seeds
     assert len(seeds) == len(set(seeds))                  # independent draws everywhere ...
-    assert points[0]["seeds"] == points[1]["seeds"]        # ... but the noise pair, by design
-    design_runs = sum(len(p["responses"]) for p in points[2:] if not p["stage"].startswith("refine"))
+    assert points[0].seeds == points[1].seeds        # ... but the noise pair, by design
+    design_runs = sum(len(p.responses) for p in points[2:] if not p.stage.startswith("refine"))
     assert design_runs <= config.budget_runs
     assert res.validation.n_runs <= config.validation_cap
-    assert {p["stage"] for p in points} >= {"noise", "design", "sequential 1"}
+    assert {p.stage for p in points} >= {"noise", "design", "sequential 1"}
 
 
 def test_the_set_holds_the_truth_and_names_what_the_heap_cannot_identify(campaign):
@@ -101,8 +101,8 @@ def test_another_seed_draws_other_runs_and_a_consistent_answer(campaign, measure
     _, config, res = campaign
     other = calibrate(EXAMPLE, tmp_path, CampaignConfig(workers=1, progress=False, seed=4),
                       runner=heap_standin_runner, measurement=measurement)
-    seeds_a = {s for p in res.design["points"] for s in p["seeds"]}
-    seeds_b = {s for p in other.design["points"] for s in p["seeds"]}
+    seeds_a = {s for p in res.design.points for s in p.seeds}
+    seeds_b = {s for p in other.design.points for s in p.seeds}
     assert not seeds_a & seeds_b
     # the two plausible sets overlap and each recommended point lies in the other's intervals
     for name, p in res.calibration.parameters.items():
@@ -169,7 +169,7 @@ def test_first_validation_look_is_sized_by_power(measurement, tmp_path):
                                                       tolerance=3.0, budget_runs=24, validation_first=2),
                     runner=heap_standin_runner, measurement=measurement)
     cal, v = res.calibration, res.validation
-    n = runs_for_power(cal.recommended.predicted - v.target_deg, res.noise["all_points"]["sd"],
+    n = runs_for_power(cal.recommended.predicted - v.target_deg, res.noise.all_points.sd,
                        3.0, 0.8, v.test["target_sd_deg"], v.test["target_n"], n_max=40)
     assert n is not None and n > 2
     assert v.test["looks"][0]["n_runs"] == n
@@ -188,6 +188,10 @@ def test_results_json_reads_back_into_the_same_typed_result(campaign):
     assert back.calibration.parameters["mu_s_pw"].ci95 == res.calibration.parameters["mu_s_pw"].ci95
     assert back.summary() == res.summary()
     assert f"validation: {res.validation.verdict}" in back.summary()
+    # the working sections come back typed, element by element
+    assert back.design.points[0] == res.design.points[0]
+    assert back.noise.all_points.sd == res.noise.all_points.sd
+    assert back.prior["mu_s_pw"].sd == res.prior["mu_s_pw"].sd
     # a renamed key is refused where the file is read, by name
     renamed = {**stored, "validation": {**stored["validation"], "verdict_": stored["validation"]["verdict"]}}
     del renamed["validation"]["verdict"]
