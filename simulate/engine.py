@@ -140,9 +140,9 @@ def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw):
 
 
 @kernel
-def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, n_bodies, bx, bv, bw, bR, bf, bt,
-                    brm, brv, brn, binvm, binvi, bmat, sbody, sx, srad, ppi, pj, ph, ws, wk, wh,
-                    wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
+def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, share_mass, n_bodies, bx, bv, bw, bR,
+                    bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph,
+                    ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
                     e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min):
     """Contact forces, torques and rolling torques on every body from the Verlet lists.
 
@@ -155,10 +155,18 @@ def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, n_bodies, bx,
     the LIGGGHTS lever a particle pair's rolling torque goes into ``bt`` as an equal and
     opposite pair, capped over the step ``dt`` for both bodies alike; wall contacts sum theirs
     into ``brv``, ``brm`` and ``brn`` (normals weighted by magnitude) for the kick's static stop.
+
+    ``share_mass`` (the ``multi_contact_damping`` extension) gives the normal dashpot of each
+    contact the body's mass divided by the body's number of touching contacts this step
+    (counted into ``bcount``): n simultaneous contacts of one body then damp like one contact
+    of n times the stiffness, instead of each damping with the whole mass (Kodam et al. 2010).
     """
     pw = ph.shape[1]
     ww = wh.shape[1]
     store = hist_dt > 0.0
+    if share_mass:
+        _count_contacts(n_bodies, bcount, sbody, sx, srad, ppi, pj, ws, wk, wkind, worig, wnorm,
+                        wu, wv, whalf)
     for b in range(n_bodies):
         bf[b, 0] = 0.0
         bf[b, 1] = 0.0
@@ -230,11 +238,12 @@ def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, n_bodies, bx,
         mj = bmat[bj]
         r_star = ri * rj / rsum
         m_star = 1.0 / (binvm[bi] + binvm[bj])
+        m_damp = 1.0 / (binvm[bi] * bcount[bi] + binvm[bj] * bcount[bj]) if share_mass else m_star
         cd = damp[mi, mj]
         if e_exp[mi, mj] != 0.0:
             cd = impact_damping(ph, k, HIST_IMPACT_SPEED, vn, log_e[mi, mj], e_exp[mi, mj],
                                 log_v_ref[mi, mj], v_min[mi, mj], store)
-        f_n, f_el, sqrt_rd = normal_force(e_star[mi, mj], r_star, m_star, cd, overlap, vn)
+        f_n, f_el, sqrt_rd = normal_force(e_star[mi, mj], r_star, m_damp, cd, overlap, vn)
         ftx, fty, ftz = tangential_force(ph, k, nx, ny, nz, vtx, vty, vtz, g_star[mi, mj],
                                          m_star, cd, mu_s[mi, mj], sqrt_rd, f_n, hist_dt)
         fx = ftx - f_n * nx
@@ -319,11 +328,12 @@ def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, n_bodies, bx,
         mi = bmat[bi]
         mk = wmat[k]
         m_star = 1.0 / binvm[bi]
+        m_damp = m_star / bcount[bi] if share_mass else m_star
         cd = damp[mi, mk]
         if e_exp[mi, mk] != 0.0:
             cd = impact_damping(wh, q, HIST_IMPACT_SPEED, -vn, log_e[mi, mk], e_exp[mi, mk],
                                 log_v_ref[mi, mk], v_min[mi, mk], store)
-        f_n, f_el, sqrt_rd = normal_force(e_star[mi, mk], ri, m_star, cd, overlap, -vn)
+        f_n, f_el, sqrt_rd = normal_force(e_star[mi, mk], ri, m_damp, cd, overlap, -vn)
         ftx, fty, ftz = tangential_force(wh, q, nx, ny, nz, vtx, vty, vtz, g_star[mi, mk],
                                          m_star, cd, mu_s[mi, mk], sqrt_rd, f_n, hist_dt)
         fx = ftx + f_n * nx
@@ -357,6 +367,29 @@ def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, n_bodies, bx,
 
 
 @kernel
+def _count_contacts(n_bodies, bcount, sbody, sx, srad, ppi, pj, ws, wk, wkind, worig, wnorm, wu, wv,
+                    whalf):
+    """Number of touching sphere-sphere and sphere-wall contacts of each body, into ``bcount``."""
+    for b in range(n_bodies):
+        bcount[b] = 0
+    for k in range(ppi.shape[0]):
+        i = ppi[k]
+        j = pj[k]
+        rsum = srad[i] + srad[j]
+        d2 = 0.0
+        for a in range(3):
+            d2 += (sx[j, a] - sx[i, a]) ** 2
+        if d2 < rsum * rsum:
+            bcount[sbody[i]] += 1
+            bcount[sbody[j]] += 1
+    for q in range(ws.shape[0]):
+        i = ws[q]
+        d, nx, ny, nz = wall_distance(wkind, worig, wnorm, wu, wv, whalf, wk[q], sx[i, 0], sx[i, 1], sx[i, 2])
+        if srad[i] - d > 0.0:
+            bcount[sbody[i]] += 1
+
+
+@kernel
 def _wall_velocities(t, wvel, wwin, wvel_now):
     """Velocity of each wall during the step whose midpoint is ``t`` (zero outside its window)."""
     for k in range(wvel.shape[0]):
@@ -366,9 +399,9 @@ def _wall_velocities(t, wvel, wwin, wvel_now):
 
 
 @kernel
-def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
+def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r, share_mass,
              need_rebuild, need_forces,
-             n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bactive,
+             n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, bactive,
              n_spheres, sbody, soff, srad, sx, sx0, sxw,
              pstart, ppi, pj, ph, wstart, ws, wk, wh,
              wkind, worig, wnorm, wu, wv, whalf, wvel, wwin, wmat, wx0, wvel_now,
@@ -423,9 +456,9 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
         need_rebuild = False
         # the first evaluation of a fresh state must not advance the contact history
         hist_dt = dt if step >= 0 else 0.0
-        _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, n_bodies, bx, bv, bw, bR,
-                        bf, bt, brm, brv, brn, binvm, binvi, bmat, sbody, sx, srad, ppi, pj, ph, ws,
-                        wk, wh, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
+        _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, share_mass, n_bodies, bx, bv, bw,
+                        bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj,
+                        ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
                         e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min)
     if n_steps > 0:
         for b in range(n_bodies):
@@ -504,7 +537,7 @@ _BODY_FIELDS = {  # name: (trailing shape, dtype)
     "bL": ((3,), np.float64), "bw": ((3,), np.float64), "bR": ((3, 3), np.float64),
     "bf": ((3,), np.float64), "bt": ((3,), np.float64), "brm": ((), np.float64),
     "brv": ((3,), np.float64), "brn": ((3,), np.float64), "binvm": ((), np.float64), "binvi": ((3,), np.float64),
-    "bmat": ((), np.int64), "bactive": ((), np.bool_), "btemplate": ((), np.int64),
+    "bmat": ((), np.int64), "bcount": ((), np.int64), "bactive": ((), np.bool_), "btemplate": ((), np.int64),
     "bmass": ((), np.float64), "bI": ((3,), np.float64),
 }
 _SPHERE_FIELDS = {
@@ -878,10 +911,10 @@ class Simulation:
         g = self._gravity
         out = _advance(
             n_steps, self.time, self.dt, g[0], g[1], g[2], self.skin, self._lever,
-            pt.rolling_model, pt.rolling_damping_ratio, self._need_rebuild,
+            pt.rolling_model, pt.rolling_damping_ratio, pt.multi_contact_damping, self._need_rebuild,
             self._need_forces,
             self.n_bodies, B["bx"], B["bv"], B["bq"], B["bL"], B["bw"], B["bR"], B["bf"], B["bt"],
-            B["brm"], B["brv"], B["brn"], B["binvm"], B["binvi"], B["bmat"], B["bactive"],
+            B["brm"], B["brv"], B["brn"], B["binvm"], B["binvi"], B["bmat"], B["bcount"], B["bactive"],
             self.n_spheres, S["sbody"], S["soff"], S["srad"], S["sx"], S["sx0"], S["sxw"],
             *self._pairs, *self._wpairs,
             W["kind"], W["origin"], W["normal"], W["axis_u"], W["axis_v"], W["half"], W["velocity"],

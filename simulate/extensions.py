@@ -30,6 +30,15 @@ and is recorded, by name and settings, in the provenance of every run that uses 
 ``more_spheres``
     More spheres per clump (:func:`with_more_spheres`): a smoother surface, closer to the
     cylinder's volume and inertia (:func:`surface_ripple`).
+``multi_contact_damping``
+    A multi-sphere body whose n spheres touch at once (a segment landing flat) damps each
+    contact with the whole body mass in the Hertz-Mindlin dashpot, so it dissipates as if
+    sqrt(n) times too viscous: a flat landing rebounds far below the contact restitution while
+    an end-on one (one contact) does not (the glued-sphere damping of Kodam et al. 2010). Engine
+    hook (``multi_contact_damping=True``, :func:`with_multi_contact_damping`): each normal
+    dashpot takes the body's mass over its number of touching contacts this step, so n equal
+    contacts in parallel damp exactly like one contact of n times the stiffness and the body's
+    mass; a single contact is unchanged.
 ``rolling_spring_dashpot``
     Elastic-plastic spring-dashpot rolling resistance (Ai et al. 2011, model type C). Engine
     hook (``rolling_model="epsd"``, ``rolling_damping_ratio``): the contact kernel's rolling
@@ -43,6 +52,9 @@ Ai, J., Chen, J.-F., Rotter, J. M., Ooi, J. Y. (2011). Assessment of rolling res
 in discrete element simulations. Powder Technol. 206, 269-282.
 Iwashita, K., Oda, M. (1998). Rolling resistance at contacts in simulation of shear band
 development by DEM. J. Eng. Mech. 124(3), 285-292.
+Kodam, M., Bharadwaj, R., Curtis, J., Hancock, B., Wassgren, C. (2010). Cylindrical object
+contact detection for use in discrete element method simulations, Part II: Experimental
+validation. Chem. Eng. Sci. 65, 5863-5871.
 Johnson, K. L. (1985). Contact Mechanics. Cambridge University Press, sec. 11.5.
 Thornton, C., Ning, Z. (1998). A theoretical model for the stick/bounce behaviour of adhesive,
 elastic-plastic spheres. Powder Technol. 99, 154-162.
@@ -64,7 +76,7 @@ from demcal.units import GRAVITY, MM
 
 #: Extension names, in the order of the critique's catalogue.
 EXTENSIONS = ("velocity_dependent_restitution", "inverted_restitution", "size_distribution",
-              "more_spheres", "rolling_spring_dashpot")
+              "more_spheres", "rolling_spring_dashpot", "multi_contact_damping")
 
 
 #: Loosest stopping tolerance of :func:`invert_drop_twin` on the mean apparent restitution [-].
@@ -79,6 +91,7 @@ ENGINE_HOOKS = {
                                        "e_pw_exponent", "e_pw_v_ref", "e_pw_v_min"),
     "rolling_spring_dashpot": ("rolling_model", "rolling_damping_ratio"),
     "size_distribution": ("segment_sizes",),
+    "multi_contact_damping": ("multi_contact_damping",),
 }
 
 
@@ -108,6 +121,9 @@ def engine_hooks(params: DEMParameters) -> list[dict]:
         out.append(describe("size_distribution", mode="segments drawn per clump (engine)",
                             n_sizes=int(sizes.shape[0]),
                             length_mean=float(sizes[:, 0].mean()), diameter_mean=float(sizes[:, 1].mean())))
+    if params.multi_contact_damping:
+        out.append(describe("multi_contact_damping", mode="normal dashpots share the body's mass among "
+                            "its simultaneous contacts (engine)"))
     return out
 
 
@@ -250,6 +266,11 @@ def with_velocity_restitution(params: DEMParameters, pair: str, law: VelocityRes
     v_min = min(law.speeds) if hold_below_fitted and law.speeds else 0.0
     return params.with_(**{name: law.e_ref, f"{name}_v_ref": law.v_ref, f"{name}_exponent": law.exponent,
                            f"{name}_v_min": v_min})
+
+
+def with_multi_contact_damping(params: DEMParameters, on: bool = True) -> DEMParameters:
+    """``params`` with the ``multi_contact_damping`` engine hook switched on (or off)."""
+    return params.with_(multi_contact_damping=bool(on))
 
 
 def with_spring_dashpot_rolling(params: DEMParameters, damping_ratio: float | None = None) -> DEMParameters:

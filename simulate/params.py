@@ -82,6 +82,10 @@ class DEMParameters:
         the repose scene draws each segment from them (equal weight per pair, duplicates
         counting twice; ``simulate.extensions.SizeDistribution``) instead of
         ``segment_length_m`` x ``segment_diameter_m``. Default None (one size).
+    multi_contact_damping : bool
+        Engine hook (``simulate.extensions``): the normal dashpots of a body's simultaneous
+        contacts share its mass, so that a segment landing flat on several spheres damps like
+        one contact. Default False (each contact damps with the whole mass, as LIGGGHTS).
     """
 
     poisson_ratio: float = 0.25
@@ -111,6 +115,7 @@ class DEMParameters:
     rolling_model: str = "constant_torque"
     rolling_damping_ratio: float = EPSD_DAMPING_RATIO
     segment_sizes: tuple | None = None
+    multi_contact_damping: bool = False
 
     def __post_init__(self):
         for name in ("e_pp", "e_pw"):
@@ -162,6 +167,9 @@ class DEMParameters:
             raise InputError(f"rolling_damping_ratio must be a finite number >= 0, got {value!r}")
         if self.segment_sizes is not None:
             object.__setattr__(self, "segment_sizes", _size_pairs(self.segment_sizes))
+        if self.multi_contact_damping not in (True, False, 0, 1):
+            raise InputError(f"multi_contact_damping must be true or false (1 or 0), got {self.multi_contact_damping!r}")
+        object.__setattr__(self, "multi_contact_damping", bool(self.multi_contact_damping))
 
     @classmethod
     def names(cls) -> tuple[str, ...]:
@@ -182,7 +190,11 @@ class DEMParameters:
         return cls().with_(**dict(values))
 
     def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
+        d = dataclasses.asdict(self)
+        if not self.multi_contact_damping:
+            # off is the model every stored run was made with: leaving it out keeps their keys
+            del d["multi_contact_damping"]
+        return d
 
 
 def _size_pairs(value) -> tuple:
@@ -218,6 +230,11 @@ def _coerce(name: str, value):
                              f"got {value!r}") from None
     if isinstance(default, str):
         return text
+    if isinstance(default, bool):
+        flag = {"true": True, "yes": True, "on": True, "1": True, "false": False, "no": False, "off": False, "0": False}
+        if text.lower() not in flag:
+            raise InputError(f"DEM parameter {name} needs true or false, got {value!r}")
+        return flag[text.lower()]
     if name == "mean_mass_kg" and text.lower() in ("", "none"):
         return None
     try:
