@@ -146,6 +146,10 @@ class Truth:
         Spread of the camera roll from photo to photo [deg] (corrected by the estimator).
     operators, batches, days : tuple of str
         Who measures, the segment batches, and the days of the campaign.
+    icc : float
+        Intraclass correlation of repeated trials on one specimen: the share of the trial
+        scatter (``e_sd``, ``mu_sd``) that belongs to the specimen (a random effect per specimen
+        and quantity) [-]; 0: trials independent.
     """
 
     params: DEMParameters = field(default_factory=DEMParameters)
@@ -167,6 +171,7 @@ class Truth:
     operators: tuple = ("op1", "op2")
     batches: tuple = ("B1", "B2", "B3")
     days: tuple = ("2024-03-04", "2024-03-05", "2024-03-06")
+    icc: float = 0.0
 
     def __post_init__(self):
         if not isinstance(self.params, DEMParameters):
@@ -176,6 +181,8 @@ class Truth:
                      "angle_noise_deg", "camera_roll_sd_deg"):
             if not getattr(self, name) >= 0:
                 raise InputError(f"Truth.{name} must be >= 0, got {getattr(self, name)!r}")
+        if not 0 <= self.icc < 1:
+            raise InputError(f"Truth.icc must be in [0, 1), got {self.icc!r}")
         if not 0 < self.repose_angle_deg < 80:
             raise InputError(f"Truth.repose_angle_deg must be in (0, 80), got {self.repose_angle_deg!r}")
         for name in ("operators", "batches", "days"):
@@ -450,15 +457,32 @@ def _density(truth: Truth, rng, n: int) -> pd.DataFrame:
                          "volume_before_ml": np.full(n, 100.0), "volume_after_ml": 100.0 + displaced})
 
 
-def _session(rng, n: int, truth: Truth, day: str, specimens: pd.DataFrame, *, spread_days=False) -> dict:
+def _session(rng, n: int, truth: Truth, day: str, specimens: pd.DataFrame, *, spread_days=False,
+             trials_per_specimen=None) -> dict:
     """Covariates of ``n`` trials in random order: trial order, alternating operators, a day
-    (or, with ``spread_days``, a random day of the campaign each), a specimen each."""
+    (or, with ``spread_days``, a random day of the campaign each), a specimen each (random,
+    or ``n / trials_per_specimen`` specimens tested that many times each)."""
     ops = list(truth.operators)
     days = list(rng.choice(list(truth.days), n)) if spread_days else [day] * n
+    ids = specimens["specimen_id"].to_numpy()
+    if trials_per_specimen:
+        chosen = rng.choice(ids, math.ceil(n / trials_per_specimen), replace=False)
+        spec = rng.permutation(np.repeat(chosen, trials_per_specimen)[:n])
+    else:
+        spec = rng.choice(ids, n)
     return {"trial_order": np.arange(1, n + 1),
             "operator": [ops[k % len(ops)] for k in range(n)],
             "date": days,
-            "specimen_id": rng.choice(specimens["specimen_id"].to_numpy(), n)}
+            "specimen_id": spec}
+
+
+def _specimen_scatter(rng, truth: Truth, sd: float, specimen_ids) -> np.ndarray:
+    """Trial scatter of sd ``sd`` split into a specimen random effect (variance share
+    ``truth.icc``) and the trial's own."""
+    ids = np.asarray(specimen_ids)
+    names, index = np.unique(ids, return_inverse=True)
+    shared = rng.normal(0.0, sd * math.sqrt(truth.icc), names.size)[index]
+    return shared + rng.normal(0.0, sd * math.sqrt(1.0 - truth.icc), ids.size)
 
 
 def _by_day(effects, sheet: str) -> bool:
@@ -511,7 +535,7 @@ def _expected(effects, k: int, sheet: str, quantity: str, rows: pd.DataFrame, de
 
 
 def _drops(truth: Truth, rng, effects, specimens, *, pairs, heights_mm, n_drop, orientation_range,
-           n_tracks, root: Path, cache_dir):
+           n_tracks, root: Path, cache_dir, trials_per_specimen=None):
     """The drop sheet, its tracks, and the expected sizes of the effects planted in it."""
     frames, expected = [], []
     orient = [e for e in effects if e.kind == "orientation_rotation"]
@@ -521,7 +545,8 @@ def _drops(truth: Truth, rng, effects, specimens, *, pairs, heights_mm, n_drop, 
         e_pair = truth.restitution(pair)
         n = n_drop * len(heights_mm)
         rows = pd.DataFrame(_session(rng, n, truth, truth.days[0], specimens,
-                                     spread_days=_by_day(effects, "drop")))
+                                     spread_days=_by_day(effects, "drop"),
+                                     trials_per_specimen=trials_per_specimen))
         rows["pair"] = pair
         rows["drop_height_mm"] = rng.permutation(np.repeat(np.asarray(heights_mm, float), n_drop))
         hand = [e for e in orient if e.acts_on(f"restitution.{pair}")]
@@ -532,11 +557,14 @@ def _drops(truth: Truth, rng, effects, specimens, *, pairs, heights_mm, n_drop, 
         contrib = _contributions(effects, "drop", f"restitution.{pair}", rows, truth, spec_mean,
                                  height_ref_mm=float(np.mean(heights_mm)))
         contact = e_pair + sum(contrib.values(), np.zeros(n))
+        # without a planted orientation effect the rebound is the contact restitution at every
+        # orientation; with one, segments turn part of their energy into rotation as a rigid
+        # segment does: the drop twin without the glued-sphere damping of flat landings
         ratio = np.ones(n)
-        for h in np.unique(rows["drop_height_mm"]):
+        for h in np.unique(rows["drop_height_mm"]) if hand else ():
             sel = rows["drop_height_mm"].to_numpy() == h
-            ratio[sel] = drop_twin_ratio(truth.params, pair, h * 1e-3, rows.loc[sel, "orientation_deg"],
-                                         cache_dir=cache_dir)
+            ratio[sel] = drop_twin_ratio(truth.params.with_(multi_contact_damping=True), pair, h * 1e-3,
+                                         rows.loc[sel, "orientation_deg"], cache_dir=cache_dir)
         apparent = contact * ratio
         # expected sizes, on the noise-free apparent restitution
         for k, c in contrib.items():
@@ -546,7 +574,7 @@ def _drops(truth: Truth, rng, effects, specimens, *, pairs, heights_mm, n_drop, 
                              "covariate": "orientation_deg",
                              "true_effect": _slope(rows["orientation_deg"], apparent - contact),
                              "unit": "quantity per orientation_deg"})
-        e_obs = np.clip(apparent + rng.normal(0.0, truth.e_sd, n), 0.01, 0.99)
+        e_obs = np.clip(apparent + _specimen_scatter(rng, truth, truth.e_sd, rows["specimen_id"]), 0.01, 0.99)
         h1 = rows["drop_height_mm"].to_numpy(float)
         h2 = np.clip(e_obs ** 2 * h1 + rng.normal(0.0, truth.height_noise_mm, n), 0.0, h1).round(1)
         rows["rebound_height_mm"] = h2
@@ -567,7 +595,7 @@ def _drops(truth: Truth, rng, effects, specimens, *, pairs, heights_mm, n_drop, 
     return drop[cols], expected
 
 
-def _inclines(truth: Truth, rng, effects, specimens, *, surfaces, n_incline):
+def _inclines(truth: Truth, rng, effects, specimens, *, surfaces, n_incline, trials_per_specimen=None):
     frames, expected = [], []
     spec_mean = {"length_mm": float(specimens["length_mm"].mean())}
     trial = 0
@@ -576,13 +604,14 @@ def _inclines(truth: Truth, rng, effects, specimens, *, surfaces, n_incline):
         for mode in ("slide", "roll"):
             quantity = f"{'static' if mode == 'slide' else 'rolling'}_friction.{surface}"
             rows = pd.DataFrame(_session(rng, n_incline, truth, day, specimens,
-                                         spread_days=_by_day(effects, "incline")))
+                                         spread_days=_by_day(effects, "incline"),
+                                         trials_per_specimen=trials_per_specimen))
             rows["surface"], rows["mode"] = surface, mode
             rows = _join_specimens(rows, specimens)
             contrib = _contributions(effects, "incline", quantity, rows, truth, spec_mean)
             block = {k: c for k, c in contrib.items() if effects[k].kind == "block_effect"}
             shifts = {k: c for k, c in contrib.items() if k not in block}
-            mu = truth.friction(surface, mode) + rng.normal(0.0, truth.mu_sd, n_incline)
+            mu = truth.friction(surface, mode) + _specimen_scatter(rng, truth, truth.mu_sd, rows["specimen_id"])
 
             def reading(keep):
                 m = mu + sum((c for k, c in shifts.items() if k in keep), np.zeros(n_incline))
@@ -741,7 +770,7 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
                            orientation_range_deg=(80.0, 90.0), n_tracks: int = 2,
                            surfaces=("particle", "steel"), n_incline: int = 30,
                            n_compression: int = 10, n_photos: int = 4,
-                           cache_dir=None, geometry=None) -> VirtualWorkbook:
+                           cache_dir=None, geometry=None, trials_per_specimen: int | None = None) -> VirtualWorkbook:
     """Write a complete lab workbook from ``truth``, with ``effects`` planted.
 
     Parameters
@@ -777,6 +806,10 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
     geometry : simulate.rigs.repose.ReposeGeometry, optional
         The repose rig's carton and fill (written to the meta sheet, and used for the heaps of
         ``photos="dem"``); default the paper's 200 x 100 x 250 mm carton of 500 segments.
+    trials_per_specimen : int, optional
+        Drop and incline trials per specimen: each sheet's trials go to that many trials on
+        each of a random subset of the specimens (with ``Truth.icc`` a clustered design);
+        default a random specimen per trial.
 
     Returns
     -------
@@ -799,6 +832,13 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
                                ("n_tracks", n_tracks, 0)):
         if int(value) != value or value < least:
             raise InputError(f"{name} must be an integer >= {least}, got {value!r}")
+    if trials_per_specimen is not None:
+        if int(trials_per_specimen) != trials_per_specimen or trials_per_specimen < 1:
+            raise InputError(f"trials_per_specimen must be a positive integer, got {trials_per_specimen!r}")
+        need = max(n_drop * len(drop_heights_mm), n_incline)
+        if math.ceil(need / trials_per_specimen) > n_specimens:
+            raise InputError(f"trials_per_specimen {trials_per_specimen}: {need} trials need "
+                             f"{math.ceil(need / trials_per_specimen)} specimens, the workbook has {n_specimens}")
     lo, hi = (float(v) for v in orientation_range_deg)
     if not 0 <= lo <= hi <= 90:
         raise InputError(f"orientation_range_deg must satisfy 0 <= low <= high <= 90, got {orientation_range_deg!r}")
@@ -820,11 +860,11 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
         sheets["drop"], exp = _drops(truth, rng, effects, specimens, pairs=tuple(pairs),
                                      heights_mm=tuple(float(h) for h in drop_heights_mm), n_drop=n_drop,
                                      orientation_range=(lo, hi), n_tracks=n_tracks, root=root,
-                                     cache_dir=cache_dir)
+                                     cache_dir=cache_dir, trials_per_specimen=trials_per_specimen)
         expected += exp
     if surfaces:
         sheets["incline"], exp = _inclines(truth, rng, effects, specimens, surfaces=tuple(surfaces),
-                                           n_incline=n_incline)
+                                           n_incline=n_incline, trials_per_specimen=trials_per_specimen)
         expected += exp
     if n_compression:
         sheets["compression"] = _compression(truth, rng, specimens, n_compression, root)
@@ -843,6 +883,7 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
                "drop_heights_mm": list(drop_heights_mm), "n_drop": n_drop,
                "orientation_range_deg": [lo, hi], "n_tracks": n_tracks, "surfaces": list(surfaces),
                "n_incline": n_incline, "n_compression": n_compression, "n_photos": n_photos,
+               "trials_per_specimen": trials_per_specimen,
                "discarded_heaps": discarded_heaps,
                "geometry": None if geometry is None else geometry.to_dict()}
     result = VirtualWorkbook(path=path, truth=truth, effects=effects, expected=tuple(expected), seed=seed,

@@ -192,3 +192,49 @@ def test_a_block_confounded_with_size_is_explained_away():
     assert by_cov["length_mm"].explained_by is None
     found = [(f.mechanism, f.covariate) for f in judge(tests) if f.verdict == "found"]
     assert found == [("size_dependence", "length_mm")]
+
+
+def test_clustered_tests_are_gls_with_the_random_intercept_covariance():
+    """The quasi-demeaned fit is GLS with covariance s_w^2 I + s_b^2 J per specimen
+    (statsmodels GLS, an independent implementation); a covariate of the specimen in a balanced
+    design has the slope of the specimens' means (a textbook identity) and their dof."""
+    import statsmodels.api as sm
+    from scipy.linalg import block_diag
+
+    rng = np.random.default_rng(3)
+    spec = np.repeat([f"S{i}" for i in range(8)], 4)
+    x = rng.permutation(np.tile([200.0, 400.0, 600.0, 400.0], 8))
+    y = 0.35 + rng.normal(0, 0.03, 8).repeat(4) - 1e-4 * x + rng.normal(0, 0.02, 32)
+    z = (x - x.mean()) / x.std()
+    _, _, s_b2, s_w2 = diagnosis._random_effects_fit(y, z[:, None], spec)
+    assert s_b2 > 0
+    omega = block_diag(*[s_w2 * np.eye(4) + s_b2 * np.ones((4, 4)) for _ in range(8)])
+    gls = sm.GLS(y, sm.add_constant(z), sigma=omega).fit()
+    coef, cov, _, dof = diagnosis._clustered(y, z, spec, between=False)
+    assert coef[0] == pytest.approx(gls.params[1], rel=1e-8)
+    assert math.sqrt(cov[0, 0]) == pytest.approx(gls.bse[1], rel=1e-8)
+    assert dof == 32 - 8 - 1
+    res = diagnosis.clustered_trend_test(x, y, spec, between=False)
+    assert res["effect"] == pytest.approx(gls.params[1] / x.std(), rel=1e-8)
+    # a specimen covariate, balanced: GLS is OLS on the specimens' means
+    length = np.repeat(np.linspace(22, 28, 8), 4)
+    y2 = 0.3 + 0.002 * length + rng.normal(0, 0.03, 8).repeat(4) + rng.normal(0, 0.02, 32)
+    res = diagnosis.clustered_trend_test(length, y2, spec, between=True)
+    means = diagnosis.trend_test(np.linspace(22, 28, 8), y2.reshape(8, 4).mean(axis=1))
+    assert res["effect"] == pytest.approx(means["effect"], rel=1e-8)
+    assert res["dof"] == means["dof"] == 6
+    assert res["p_value"] == pytest.approx(means["p_value"], rel=1e-9)
+    assert res["p_curvature"] == pytest.approx(means["p_curvature"], rel=1e-9)
+
+
+def test_specimen_level_covariates_count_each_specimen_once():
+    spec = tuple(np.repeat([f"S{i}" for i in range(7)], 3))
+    length = tuple(np.repeat(np.linspace(22, 28, 7), 3))
+    order = tuple(np.tile([1, 2, 3], 7))
+    y = tuple(0.3 + np.repeat([0.05, -0.03, 0.02, -0.06, 0.01, 0.04, -0.02], 3) + 0.01 * np.arange(21) % 0.03)
+    s = diagnosis.Series("restitution.particle-steel", "drop", "measured", "restitution", "1", tuple(range(1, 22)), y,
+                         {"specimen_id": spec, "length_mm": length, "trial_order": order})
+    tests, _ = diagnosis.series_tests(s)
+    by = {t.covariate: t for t in tests}
+    assert by["length_mm"].level == "specimen" and by["length_mm"].dof <= 7 - 2
+    assert by["trial_order"].level == "trial within specimens" and by["trial_order"].n == 21
