@@ -925,6 +925,8 @@ CRITIQUE_COLUMNS = {
     "discrepancies": ("observable", "measured", "measured_ci95", "simulated", "simulated_ci95",
                       "difference", "combined_u95", "exceeds"),
     "findings": ("mechanism", "verdict", "sheet", "covariate", "effect", "ci95", "p_adjusted"),
+    "model_findings": ("mechanism", "verdict", "observable", "measured", "simulated", "part", "part_ci95",
+                       "share"),
     "extensions": ("name", "mechanism", "before", "after", "gain", "ci95"),
 }
 
@@ -957,7 +959,7 @@ def _generic(table_id: str, title: str, items: list, source: dict, path: str) ->
 #: shows or names in its notes; any other field goes under the table row by row.
 _TEST_FIELDS = {"series", "sheet", "source", "covariate", "method", "n", "effect", "ci95", "effect_unit",
                 "span", "practical", "threshold", "p_value", "se", "dof", "p_curvature", "p_adjusted",
-                "significant", "relevant", "ci_selected", "explained_by", "levels"}
+                "significant", "relevant", "ci_selected", "explained_by", "levels", "level"}
 
 
 def _p_key(p) -> float:
@@ -987,7 +989,8 @@ def table_covariate_tests(c: Campaign) -> Table:
     for i in order:
         t = items[i]
         rows.append((i + 1, t.get("series"), t.get("sheet"), t.get("source"), t.get("covariate"),
-                     t.get("method"), t.get("n"), t.get("effect"), t.get("ci95"), t.get("effect_unit"),
+                     t.get("method"), t.get("level", "trial"), t.get("n"), t.get("effect"), t.get("ci95"),
+                     t.get("effect_unit"),
                      t.get("practical"), t.get("threshold"), t.get("p_value"), t.get("p_adjusted"),
                      covariate_verdict(t)))
     opts = _get(c.critique, "provenance", "options", default={}) or {}
@@ -1015,23 +1018,26 @@ def table_covariate_tests(c: Campaign) -> Table:
             if key not in _TEST_FIELDS and t[key] not in (None, "", {}, []):
                 value = t[key] if isinstance(t[key], str) else json.dumps(t[key], sort_keys=True)
                 notes.append(f"Test {i + 1}, {key}: {value}")
-    return Table("C4", "Covariate tests of the residual structure (every test, by adjusted p-value)",
-                 ("Test", "Series", "Sheet", "Source", "Covariate", "Method", "n", "Effect", "95 % CI",
-                  "Effect unit", "Over range", "Threshold", "p", "Adjusted p", "Verdict"),
-                 ("",) * 15, tuple(rows), notes=tuple(notes),
+    return Table("C4", "Covariate tests of the lab's measurements (every test, by adjusted p-value)",
+                 ("Test", "Series", "Sheet", "Source", "Covariate", "Method", "Unit of test", "n", "Effect",
+                  "95 % CI", "Effect unit", "Over range", "Threshold", "p", "Adjusted p", "Verdict"),
+                 ("",) * 16, tuple(rows), notes=tuple(notes),
                  sources=({"kind": "critique", **c.critique_source, "path": "tests"},),
-                 formats=("d", "", "", "", "", "", "d", ".3g", ".3g", "", ".3g", ".3g", "p", "p", ""))
+                 formats=("d", "", "", "", "", "", "", "d", ".3g", ".3g", "", ".3g", ".3g", "p", "p", ""))
 
 
 def critique_tables(c: Campaign) -> list[Table]:
-    """Tables C1-C4 from ``critique.json``: discrepancies, findings, extensions, covariate tests."""
+    """Tables C1-C4 from ``critique.json``: model discrepancies, data effects, the causes of the
+    discrepancies, extensions, covariate tests."""
     if c.critique is None:
         return []
     cr = c.critique
-    return [_generic("C1", "Discrepancies between simulation and measurement",
+    return [_generic("C1", "Model discrepancies: where the twins disagree with the lab",
                      list(cr.get("discrepancies", [])), c.critique_source, "discrepancies"),
-            _generic("C2", "Candidate mechanisms tested against the residuals",
+            _generic("C2", "Data effects: covariate effects in the lab's measurements",
                      list(cr.get("findings", [])), c.critique_source, "findings"),
+            _generic("C2b", "Causes of the model discrepancies, each tested, with its share",
+                     list(cr.get("model_findings", [])), c.critique_source, "model_findings"),
             _generic("C3", "Model extensions and their gain", list(cr.get("extensions", [])),
                      c.critique_source, "extensions"),
             table_covariate_tests(c)]

@@ -7,6 +7,8 @@
                         "difference", "combined_u95", "exceeds", ...}],
      "findings": [{"mechanism", "verdict", "sheet", "covariate", "effect", "ci95",
                    "p_adjusted", "quantity", "source", "effect_unit", "evidence"}],
+     "model_findings": [{"mechanism", "verdict", "observable", "measured", "simulated",
+                         "share", "part", "part_ci95", "evidence"}],
      "extensions": [{"name", "mechanism", "before", "after", "gain", "ci95", "measure",
                      "held_out", ...}],
      "summary": [str], "extension_records": [...], "tests": [...], "untestable": [...],
@@ -22,9 +24,11 @@ Steps (docs/design.md, "The critique loop"):
    model under critique (the campaign's calibrated parameters, else the measured means);
 2. the twin of every drop and incline trial, the campaign's repose validation runs, and the
    discrepancy table;
-3. every per-row value and twin residual tested against every covariate, all p-values
-   adjusted together (``diagnosis``);
-4. the catalogue's verdicts (``mechanisms``), ``ill_conditioned_parameter`` from the campaign;
+3. data effects: every measured per-row value tested against every covariate, all p-values
+   adjusted together (``diagnosis``), and the catalogue's verdicts on them (``mechanisms``),
+   ``ill_conditioned_parameter`` from the campaign;
+4. model findings: each drop discrepancy split into its causes, each tested, and the twin's
+   orientation dependence against the lab's (``attribution``);
 5. for each found mechanism that a model extension answers, its gain on held-out trials
    (``gain``).
 """
@@ -40,6 +44,7 @@ from scipy import stats
 
 from demcal.analyse.critique.diagnosis import (CORRECTIONS, DEFAULT_ALPHA, PRACTICAL_THRESHOLDS, CovariateTest,
                                         Series, Untestable, measured_series, run_tests)
+from demcal.analyse.critique.attribution import ModelFinding, attribute_drop_discrepancy, orientation_discrepancy
 from demcal.analyse.critique.gain import ExtensionGain
 from demcal.analyse.critique.mechanisms import CATALOGUE, Finding, ill_conditioned, judge
 from demcal.analyse.critique.twins import (Discrepancy, TwinRunner, constant_discrepancy, drop_trials,
@@ -68,7 +73,11 @@ class Critique:
     Attributes
     ----------
     discrepancies : list of Discrepancy
+        Model discrepancies: where a twin disagrees with the lab.
     findings : list of Finding
+        Data effects: covariate effects in the lab's measurements.
+    model_findings : list of ModelFinding
+        The tested causes of the discrepancies, each with its share.
     extensions : list of ExtensionGain
     tests : list of CovariateTest
         Every test of the residual structure (adjusted).
@@ -91,6 +100,7 @@ class Critique:
     parameters: dict
     twin_runs: list = field(default_factory=list)
     provenance: Provenance = field(default_factory=Provenance)
+    model_findings: list = field(default_factory=list)
 
     def found(self) -> list:
         """The findings with verdict ``found``."""
@@ -106,8 +116,12 @@ class Critique:
             lines.append(f"    {d.observable}: measured {_fmt(d.measured)}, simulated {_fmt(d.simulated)} "
                          f"(difference {_fmt(d.difference)} +- {_fmt(d.combined_u95)})")
         found = self.found()
-        lines.append(f"  mechanisms found: {len(found)} ("
+        lines.append(f"  data effects found: {len(found)} ("
                      + (", ".join(sorted({f.mechanism for f in found})) or "none") + ")")
+        for m in self.model_findings:
+            if m.verdict == "found":
+                lines.append(f"  model: {m.mechanism} explains {_fmt(m.part)} [{_fmt(m.part_ci95[0])}, "
+                             f"{_fmt(m.part_ci95[1])}] of {m.observable} (share {_fmt(m.share)})")
         for e in self.extensions:
             lines.append(f"  extension {e.name}: {e.measure} of {e.quantity} {_fmt(e.before)} -> {_fmt(e.after)}, "
                          f"gain {_fmt(e.gain)} [{_fmt(e.ci95[0])}, {_fmt(e.ci95[1])}]")
@@ -117,6 +131,7 @@ class Critique:
         return {"schema_version": CRITIQUE_SCHEMA_VERSION,
                 "discrepancies": [d.to_dict() for d in self.discrepancies],
                 "findings": [f.to_dict() for f in self.findings],
+                "model_findings": [m.to_dict() for m in self.model_findings],
                 "extensions": [e.to_dict() for e in self.extensions],
                 "summary": list(self.conclusions),
                 "extension_records": [e.as_dict() for e in self.extensions],
@@ -134,6 +149,7 @@ class Critique:
         try:
             return cls(discrepancies=[Discrepancy.from_dict(x) for x in d["discrepancies"]],
                        findings=[Finding.from_dict(x) for x in d["findings"]],
+                       model_findings=[ModelFinding.from_dict(x) for x in d.get("model_findings", [])],
                        extensions=[ExtensionGain.from_dict(x) for x in d.get("extension_records", [])],
                        tests=[CovariateTest.from_dict(x) for x in d.get("tests", [])],
                        untestable=[Untestable.from_dict(x) for x in d.get("untestable", [])],
@@ -223,16 +239,24 @@ def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EX
         runner = TwinRunner(store_dir, workers=workers, progress=progress)
     try:
         if twins and "drop" in rigs:
-            series += _drop_twins(runner, measurement, workbook, params, wall, discrepancies, drop_state)
+            _drop_twins(runner, measurement, workbook, params, wall, discrepancies, drop_state)
         if twins and "incline" in rigs:
             _incline_twins(runner, measurement, workbook, params, wall, discrepancies)
         if twins and "repose" in rigs:
             _repose_twins(runner, measurement, results, campaign, params, repose_seeds, discrepancies)
+        # data effects: the lab's measurements against their covariates
         tests, untestable = run_tests(series, method=correction, alpha=alpha)
         findings = judge(tests, untestable) + ill_conditioned(results)
-        gains = []
+        # model findings: the causes of the twins' discrepancies, each tested
+        rng = np.random.default_rng(seed)
+        model_findings, gains = [], []
+        for pair, s in drop_state.items():
+            mf, g = attribute_drop_discrepancy(runner, params, pair, s, rng)
+            model_findings += mf
+            gains += g
         if twins and extensions:
-            gains = _extensions(runner, params, findings, drop_state, tuple(extensions), seed, summary)
+            gains += _extensions(runner, params, findings, model_findings, drop_state, tuple(extensions), seed,
+                                 summary)
         summary[:0] = _drop_statements(drop_state, params)
         summary += _finding_statements(findings)
         runs = list(runner.log) if runner is not None else []
@@ -241,7 +265,8 @@ def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EX
             runner.close()
     opts = {"twins": twins, "rigs": list(rigs), "extensions": list(extensions), "alpha": alpha,
             "correction": correction, "repose_seeds": repose_seeds, "source": str(source)}
-    return Critique(discrepancies=discrepancies, findings=findings, extensions=gains, tests=tests,
+    return Critique(discrepancies=discrepancies, findings=findings, model_findings=model_findings,
+                    extensions=gains, tests=tests,
                     untestable=untestable, conclusions=summary,
                     parameters={"values": params.to_dict(), "source": param_source}, twin_runs=runs,
                     provenance=Provenance(inputs=dict(measurement.provenance.inputs), seed=seed, options=opts))
@@ -251,10 +276,9 @@ def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EX
 # twins
 
 
-def _drop_twins(runner, measurement, workbook, params, wall, discrepancies, state) -> list:
+def _drop_twins(runner, measurement, workbook, params, wall, discrepancies, state) -> None:
     from demcal.simulate.extensions import restitution_parameter
 
-    out = []
     for pair, trials in drop_trials(measurement, workbook).items():
         quantity = f"restitution.{pair}"
         rp = rig_pair(pair, wall)
@@ -279,20 +303,12 @@ def _drop_twins(runner, measurement, workbook, params, wall, discrepancies, stat
                       f"sqrt(h2/h1) {direct['verdict']} feed the DEM directly"))
         discrepancies.append(paired_discrepancy(f"{quantity} (drop twin, apparent sqrt(h2/h1))", "drop",
                                                 [t.measured for t in twin], [t.simulated for t in twin], note))
-        ok = [t for t in twin if math.isfinite(t.simulated)]
-        names = []
-        for t in ok:
-            names += [k for k in t.covariates if k not in names]
-        covs = {k: tuple(t.covariates.get(k) for t in ok) for k in names}
-        out.append(Series(f"residual:{quantity}", "drop", "twin residual", "restitution", "1",
-                          tuple(t.row for t in ok), tuple(t.residual for t in ok), covs))
-        out.append(Series(f"twin_minus_contact:{quantity}", "drop", "twin", "restitution", "1",
-                          tuple(t.row for t in ok), tuple(t.simulated - e_contact for t in ok),
-                          {"orientation_deg": tuple(t.covariates.get("orientation_deg") for t in ok)},
-                          test="mean"))
+        # the twin's own dependence on orientation is a model discrepancy, never a data effect
+        slope = orientation_discrepancy(quantity, twin)
+        if slope is not None:
+            discrepancies.append(slope)
         state[pair] = {"rig_pair": rp, "trials": trials, "twins": {t.row: t for t in twin},
                        "parameter": param, "contact": e_contact}
-    return out
 
 
 def _incline_twins(runner, measurement, workbook, params, wall, discrepancies):
@@ -353,26 +369,34 @@ def _repose_twins(runner, measurement, results, campaign, params, repose_seeds, 
 
 
 def _pairs_named(findings, mechanism: str, state: dict) -> list:
+    """Drop pairs of ``state`` with a ``found`` finding of ``mechanism`` (data effects name the
+    quantity, model findings the observable ``restitution.<pair> (...)``)."""
     pairs = []
     for f in findings:
-        if f.mechanism == mechanism and f.verdict == "found" and f.sheet == "drop" and f.quantity:
-            pair = f.quantity.split(":", 1)[-1].split(".", 1)[-1]
+        where = getattr(f, "quantity", None) or getattr(f, "observable", "")
+        if f.mechanism == mechanism and f.verdict == "found" and where.startswith("restitution."):
+            pair = where.split(" ", 1)[0].split(".", 1)[-1]
             if pair in state and pair not in pairs:
                 pairs.append(pair)
     return pairs
 
 
-def _extensions(runner, params, findings, state, chosen, seed, summary) -> list:
+def _extensions(runner, params, findings, model_findings, state, chosen, seed, summary) -> list:
     from demcal.analyse.critique.gain import combined_inversion, inverted_restitution_gain, size_gain, velocity_gain
 
     gains = []
     rng = np.random.default_rng(seed)
     scale = {}
     if "inverted_restitution" in chosen:
-        for pair in _pairs_named(findings, "orientation_rotation", state):
+        # the contact restitution that absorbs the rotation the twin (with the damping artefact
+        # corrected where it was found) puts into a rebound
+        for pair in _pairs_named(model_findings, "orientation_rotation", state):
             s = state[pair]
+            damped = pair in _pairs_named(model_findings, "multi_contact_damping", state)
+            model = params.with_(multi_contact_damping=True) if damped else params
+            twins_now = s["twins_on"] if damped else s["twins"]
             try:
-                g, inv = inverted_restitution_gain(runner, params, pair, s["rig_pair"], s["trials"], s["twins"],
+                g, inv = inverted_restitution_gain(runner, model, pair, s["rig_pair"], s["trials"], twins_now,
                                                    rng=rng)
             except InputError as exc:
                 summary.append(f"inverted_restitution ({pair}) not evaluated: {exc}")
@@ -398,6 +422,8 @@ def _extensions(runner, params, findings, state, chosen, seed, summary) -> list:
             except InputError as exc:
                 summary.append(f"size_distribution ({pair}) not evaluated: {exc}")
     for g in gains:
+        if g.name == "multi_contact_damping":
+            continue  # stated with the attribution
         verdict = ("helps" if g.ci95[0] > 0 else "makes it worse" if g.ci95[1] < 0 else "has no clear gain")
         summary.append(f"Extension {g.name} ({g.quantity}): {g.measure} on {g.held_out} {_fmt(g.before)} "
                        f"before, {_fmt(g.after)} after, gain {_fmt(g.gain)} [{_fmt(g.ci95[0])}, {_fmt(g.ci95[1])}]: "
@@ -442,7 +468,11 @@ def _drop_statements(state: dict, params) -> list:
                      f"is within the uncertainty +-{d['half']:.3g} of these drops.")
         else:
             text += ("sqrt(h2/h1) may not feed the DEM directly: the twin's apparent restitution differs from "
-                     f"its contact restitution by {offset:.3g} (part of the energy goes into rotation).")
+                     f"its contact restitution by {offset:.3g}")
+            on = [t.simulated for t in s.get("twins_on", {}).values() if math.isfinite(t.simulated)]
+            text += (f"; with the dashpots sharing the mass it rebounds at {np.mean(on):.3g}, so "
+                     f"{np.mean(on) - d['mean']:.3g} of it is the glued-sphere damping of landings on several "
+                     f"spheres and {e - np.mean(on):.3g} rotation (model findings)." if on else ".")
             inv = s.get("inverted")
             if inv is not None:
                 halves = ", ".join(f"{v:.3g}" for v in inv["halves"])

@@ -1,0 +1,251 @@
+"""Model discrepancies of the drop twin and their causes, each tested and given its share.
+
+The lab's sqrt(h2/h1) and the drop twin's apparent restitution at the lab's heights and
+orientations differ for three reasons, which the twin itself separates:
+
+- ``multi_contact_damping``: a segment landing on several spheres at once damps each contact
+  with the whole body mass (the glued-sphere damping of Kodam et al. 2010); the part of the
+  twin's deficit that goes away when the dashpots share the mass
+  (``simulate.extensions``, ``multi_contact_damping``): twin(on) - twin(off);
+- ``orientation_rotation``: a rigid segment turns part of its energy into rotation; the part
+  left with the damping corrected: e_contact - twin(on);
+- the contact restitution itself: measured - e_contact (what a recalibration would move).
+
+The three parts add up to measured - twin(off). Each part's interval is a percentile bootstrap
+over the trials (the same resample for every part); a cause is ``found`` when its part's
+interval excludes 0 and the part reaches the practical threshold of restitution (0.03),
+``ruled_out`` otherwise. ``multi_contact_damping`` also needs its signature: a flat landing
+(long axis horizontal, no rotation) of the twin rebounds below the contact restitution by more
+than that threshold.
+
+The twin's dependence on orientation is compared with the lab's as a discrepancy of its own
+(slope of the rebound against ``orientation_deg``, twin against lab): a dependence the twin
+shows and the data do not is a model discrepancy, never a data effect.
+
+References
+----------
+Kodam, M., Bharadwaj, R., Curtis, J., Hancock, B., Wassgren, C. (2010). Cylindrical object
+contact detection for use in discrete element method simulations, Part II: Experimental
+validation. Chem. Eng. Sci. 65, 5863-5871.
+Efron, B., Tibshirani, R. J. (1993). An Introduction to the Bootstrap. Chapman & Hall, ch. 13.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy import stats
+
+from demcal.analyse.critique.diagnosis import MIN_ROWS, PRACTICAL_THRESHOLDS, trend_test
+from demcal.analyse.critique.gain import N_BOOTSTRAP, _gain, split_trials
+from demcal.analyse.critique.twins import Discrepancy, drop_task, drop_twin_runner, run_drop_twins
+from demcal.jsonio import restore_nan
+from demcal.simulate.extensions import describe
+
+#: Orientation of a flat landing [deg]: the long axis horizontal.
+FLAT_DEG = 0.0
+#: Drops logged this close to flat are the held-out set of the damping extension [deg].
+FLAT_WITHIN_DEG = 15.0
+
+VERDICTS = ("found", "ruled_out", "not_testable")
+
+
+@dataclass(frozen=True)
+class ModelFinding:
+    """A model-level cause of a discrepancy between twin and lab, tested.
+
+    Attributes
+    ----------
+    mechanism : str
+        Catalogue id (``multi_contact_damping``, ``orientation_rotation``).
+    verdict : str
+        ``found``, ``ruled_out`` or ``not_testable``.
+    observable : str
+        The discrepancy it is a cause of.
+    measured, simulated : float or None
+        The lab's and the twin's value of the observable.
+    share : float or None
+        The cause's part of measured - simulated, as a fraction of it.
+    part, part_ci95 : float or None, list or None
+        The part itself [unit of the observable] and its bootstrap interval.
+    evidence : str
+        One sentence with the numbers.
+    """
+
+    mechanism: str
+    verdict: str
+    observable: str
+    measured: float | None = None
+    simulated: float | None = None
+    share: float | None = None
+    part: float | None = None
+    part_ci95: list | None = None
+    evidence: str = ""
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "ModelFinding":
+        return cls(**restore_nan(d))
+
+
+def _fmt(x, d=3) -> str:
+    return "n/a" if x is None or not np.isfinite(x) else f"{x:.{d}g}"
+
+
+def orientation_discrepancy(quantity: str, twins) -> Discrepancy | None:
+    """Slope of the rebound against ``orientation_deg``: the lab's against the twin's at the
+    same trials (straight lines, Student-t intervals); None when orientation is not logged on
+    enough trials or does not vary."""
+    rows = [(t.covariates.get("orientation_deg"), t.measured, t.simulated) for t in twins]
+    rows = [r for r in rows if r[0] is not None and math.isfinite(r[2])]
+    if len(rows) < MIN_ROWS or len({r[0] for r in rows}) < 2:
+        return None
+    o, y, s = (np.asarray(c, dtype=float) for c in zip(*rows))
+    lab, twin = trend_test(o, y), trend_test(o, s)
+    u_lab, u_twin = 0.5 * (lab["ci95"][1] - lab["ci95"][0]), 0.5 * (twin["ci95"][1] - twin["ci95"][0])
+    u = math.hypot(u_lab, u_twin)
+    d = lab["effect"] - twin["effect"]
+    span = float(o.max() - o.min())
+    exceeds = bool(abs(d) > u and abs(d) * span >= PRACTICAL_THRESHOLDS["restitution"])
+    note = (f"the twin predicts {_fmt(twin['effect'])} per deg, the lab shows {_fmt(lab['effect'])} "
+            f"[{_fmt(lab['ci95'][0])}, {_fmt(lab['ci95'][1])}] per deg over {_fmt(span)} deg of orientation")
+    return Discrepancy(f"{quantity}: slope against orientation_deg (drop twin)", "drop", lab["effect"],
+                       tuple(lab["ci95"]), twin["effect"], tuple(twin["ci95"]), d, u, exceeds, len(rows),
+                       len(rows), note)
+
+
+def _bootstrap_parts(measured, off, on, contact: float, rng) -> dict:
+    """Parts of mean(measured - off) and their percentile intervals, resampling trials."""
+    m, a, b = (np.asarray(v, dtype=float) for v in (measured, off, on))
+    idx = np.random.default_rng(rng).integers(0, m.size, (N_BOOTSTRAP, m.size))
+
+    def parts(i):
+        return {"total": m[i].mean() - a[i].mean(), "damping": b[i].mean() - a[i].mean(),
+                "rotation": contact - b[i].mean(), "contact": m[i].mean() - contact}
+
+    point = {k: float(v) for k, v in parts(np.arange(m.size)).items()}
+    boot = [parts(i) for i in idx]
+    ci = {k: [float(np.percentile([p[k] for p in boot], 2.5)), float(np.percentile([p[k] for p in boot], 97.5))]
+          for k in point}
+    return {"point": point, "ci95": ci}
+
+
+def attribute_drop_discrepancy(runner, params, pair: str, state: dict, rng) -> tuple[list, list]:
+    """Model findings of one drop pair and the gain of ``multi_contact_damping`` on held-out
+    flat drops (see the module docstring).
+
+    Parameters
+    ----------
+    runner : twins.TwinRunner
+    params : DEMParameters
+        The model under critique.
+    pair : str
+    state : dict
+        ``loop._drop_twins``'s record of the pair: ``rig_pair``, ``trials``, ``twins``
+        (row -> TwinTrial), ``parameter``, ``contact``.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    (list of ModelFinding, list of ExtensionGain)
+    """
+    quantity = f"restitution.{pair}"
+    observable = f"{quantity} (drop twin, apparent sqrt(h2/h1))"
+    rig_pair, trials, e_c = state["rig_pair"], state["trials"], state["contact"]
+    on_params = params.with_(multi_contact_damping=True)
+    twins_on = {t.row: t for t in run_drop_twins(runner, on_params, trials, rig_pair, quantity=quantity,
+                                                 desc=f"drop twins, shared damping ({pair})")}
+    state["twins_on"] = twins_on
+    rows = [r for r in state["twins"] if math.isfinite(state["twins"][r].simulated)
+            and math.isfinite(twins_on[r].simulated)]
+    bar = PRACTICAL_THRESHOLDS["restitution"]
+    if len(rows) < 2:
+        why = "fewer than 2 drops the twin could measure"
+        return [ModelFinding(m, "not_testable", observable, evidence=why)
+                for m in ("multi_contact_damping", "orientation_rotation")], []
+    measured = [state["twins"][r].measured for r in rows]
+    off = [state["twins"][r].simulated for r in rows]
+    on = [twins_on[r].simulated for r in rows]
+    parts = _bootstrap_parts(measured, off, on, e_c, rng)
+    p, ci = parts["point"], parts["ci95"]
+    total = p["total"]
+    # the signature: a flat landing of the twin, where no energy goes into rotation
+    height = float(np.median([t[2] for t in trials]))
+    flat = runner(drop_twin_runner, [drop_task(params, rig_pair, height, FLAT_DEG, 0),
+                                     drop_task(on_params, rig_pair, height, FLAT_DEG, 0)], "flat landing")
+    flat_off, flat_on = (float(r["observable"]["apparent_restitution"]) for r in flat)
+
+    def share(x):
+        return x / total if total != 0 else None
+
+    def judged(part):
+        lo, hi = ci[part]
+        return (lo > 0 or hi < 0) and abs(p[part]) >= bar
+
+    common = dict(observable=observable, measured=float(np.mean(measured)), simulated=float(np.mean(off)))
+    signature = e_c - flat_off > bar
+    damping_found = signature and judged("damping")
+    findings = [
+        ModelFinding("multi_contact_damping", "found" if damping_found else "ruled_out",
+                     share=share(p["damping"]), part=p["damping"], part_ci95=ci["damping"],
+                     evidence=(f"landing flat the twin rebounds at {_fmt(flat_off)} with contact {state['parameter']} "
+                               f"= {_fmt(e_c)} ({_fmt(flat_on)} with the dashpots sharing the mass); at the lab's "
+                               f"drops the shared damping raises the twin from {_fmt(np.mean(off))} to "
+                               f"{_fmt(np.mean(on))}: {_fmt(p['damping'])} [{_fmt(ci['damping'][0])}, "
+                               f"{_fmt(ci['damping'][1])}] of the discrepancy {_fmt(total)}"
+                               + ("" if signature else "; the flat landing shows no overdamping")), **common),
+        ModelFinding("orientation_rotation", "found" if judged("rotation") else "ruled_out",
+                     share=share(p["rotation"]), part=p["rotation"], part_ci95=ci["rotation"],
+                     evidence=(f"with the damping shared, the twin's apparent restitution {_fmt(np.mean(on))} lies "
+                               f"{_fmt(p['rotation'])} [{_fmt(ci['rotation'][0])}, {_fmt(ci['rotation'][1])}] "
+                               f"below its contact restitution {_fmt(e_c)}: energy into rotation; the rest, "
+                               f"measured minus contact restitution, is {_fmt(p['contact'])} "
+                               f"[{_fmt(ci['contact'][0])}, {_fmt(ci['contact'][1])}]"), **common),
+    ]
+    gains = []
+    if damping_found:
+        gain = _damping_gain(runner, params, on_params, pair, state, rng)
+        if gain is not None:
+            gains.append(gain)
+    return findings, gains
+
+
+def _damping_gain(runner, params, on_params, pair: str, state: dict, rng):
+    """|mean residual| of the held-out drops logged near flat (all drops when too few are),
+    before (the model under critique) and after (shared damping, the contact restitution taken
+    as the mean sqrt(h2/h1) of the other half: two-fold cross-fit)."""
+    quantity = f"restitution.{pair}"
+    trials = state["trials"]
+    flat = [t for t in trials if t[3] is not None and float(t[3]) <= FLAT_WITHIN_DEG]
+    pool, where = (flat, f"drops logged within {FLAT_WITHIN_DEG:g} deg of flat") if len(flat) >= 4 else (trials, "drops")
+    if len(pool) < 4:
+        return None
+    half_a, half_b = split_trials(pool)
+    param = state["parameter"]
+    before, after, fitted = [], [], []
+    for train, test in ((half_a, half_b), (half_b, half_a)):
+        e_train = float(np.mean([t[1] for t in train]))
+        fitted.append(e_train)
+        twins = run_drop_twins(runner, on_params.with_(**{param: min(max(e_train, 1e-3), 1.0)}), test,
+                               state["rig_pair"], quantity=quantity, desc=f"held-out drops, shared damping ({pair})")
+        for t in twins:
+            if math.isfinite(t.simulated) and math.isfinite(state["twins"][t.row].simulated):
+                before.append(t.measured - state["twins"][t.row].simulated)
+                after.append(t.measured - t.simulated)
+    if len(before) < 2:
+        return None
+    d = float(np.mean(after))
+    u = float(stats.t.ppf(0.975, len(after) - 1)) * float(np.std(after, ddof=1)) / math.sqrt(len(after))
+    note = (f"held-out discrepancy with the extension {_fmt(d)} +- {_fmt(u)} (95 %): "
+            + ("inside its uncertainty" if abs(d) <= u else "beyond its uncertainty"))
+    return _gain("multi_contact_damping", "multi_contact_damping", "abs_mean_residual", quantity,
+                 f"{len(before)} {where}, each judged with the contact restitution of the other half "
+                 "(two-fold cross-fit)", before, after, rng,
+                 fitted=(f"{param} = mean sqrt(h2/h1) of the other half: "
+                         + ", ".join(_fmt(e) for e in fitted)), note=note,
+                 extension=describe("multi_contact_damping", mode="normal dashpots share the body's mass "
+                                    "among its simultaneous contacts (engine)"))
