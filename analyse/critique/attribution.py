@@ -41,7 +41,6 @@ from scipy import stats
 from demcal.analyse.critique.diagnosis import MIN_ROWS, PRACTICAL_THRESHOLDS, trend_test
 from demcal.analyse.critique.gain import N_BOOTSTRAP, _gain, split_trials
 from demcal.analyse.critique.twins import Discrepancy, drop_task, drop_twin_runner, run_drop_twins
-from demcal.jsonio import restore_nan
 from demcal.simulate.extensions import describe
 
 #: Orientation of a flat landing [deg]: the long axis horizontal.
@@ -89,7 +88,7 @@ class ModelFinding:
 
     @classmethod
     def from_dict(cls, d: dict) -> "ModelFinding":
-        return cls(**restore_nan(d))
+        return cls(**d)
 
 
 def _fmt(x, d=3) -> str:

@@ -121,8 +121,9 @@ class Series:
     Attributes
     ----------
     name : str
-        Quantity name (``restitution.particle-steel``), ``residual:<quantity>`` for a twin
-        residual, or ``flank_difference_deg`` / ``base_tilt_deg`` / ``twin_minus_contact:<q>``.
+        Quantity name (``restitution.particle-steel``), or ``flank_difference_deg`` /
+        ``base_tilt_deg`` (critique files of earlier versions also hold ``residual:<quantity>``
+        series of twin residuals).
     sheet : str
         Workbook sheet of the rows.
     source : str

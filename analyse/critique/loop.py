@@ -43,7 +43,7 @@ import numpy as np
 from scipy import stats
 
 from demcal.analyse.critique.diagnosis import (CORRECTIONS, DEFAULT_ALPHA, PRACTICAL_THRESHOLDS, CovariateTest,
-                                        Series, Untestable, measured_series, run_tests)
+                                        Untestable, measured_series, run_tests)
 from demcal.analyse.critique.attribution import ModelFinding, attribute_drop_discrepancy, orientation_discrepancy
 from demcal.analyse.critique.gain import ExtensionGain
 from demcal.analyse.critique.mechanisms import CATALOGUE, Finding, ill_conditioned, judge

@@ -130,7 +130,7 @@ def classify(series: str, sheet: str, covariate: str, categorical: bool) -> str:
     cov = covariate.lower()
     if series.endswith("flank_difference_deg") or series.endswith("base_tilt_deg"):
         return "camera_tilt"
-    if series.startswith("twin_minus_contact:") or cov == "orientation_deg":
+    if cov == "orientation_deg":
         return "orientation_rotation"
     if cov == "drop_height_mm" and sheet == "drop":
         return "velocity_dependent_restitution"
