@@ -139,6 +139,10 @@ class CampaignConfig:
     n_significant : tuple of int
         Least and most factors carried from the screening to the Box-Behnken design; when the
         screening flags fewer or more, the largest effects fill up or are kept (and it is said).
+    model_extensions : dict
+        Engine-hook fields of ``DEMParameters`` (``simulate.extensions.ENGINE_HOOKS``) set on
+        every run of the campaign, e.g. ``{"multi_contact_damping": True}``: the model extended
+        (the critique's heap-side gain recalibrates this way). Empty: the default model.
     """
 
     profile: str = "quick"
@@ -165,6 +169,7 @@ class CampaignConfig:
     alpha: float = 0.05
     n_significant: tuple = (3, 3)
     progress: bool = True
+    model_extensions: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if self.levels not in ("minmax", "sd"):
@@ -196,6 +201,12 @@ class CampaignConfig:
             raise InputError(f"likelihood must be 'joint' or 'heap', got {self.likelihood!r}")
         if not self.discrepancy_sd >= 0:
             raise InputError(f"discrepancy_sd must be >= 0, got {self.discrepancy_sd!r}")
+        from demcal.simulate.extensions import ENGINE_HOOKS
+        hooks = sorted(f for fields_ in ENGINE_HOOKS.values() for f in fields_)
+        unknown = sorted(set(self.model_extensions) - set(hooks))
+        if unknown:
+            raise InputError(f"model_extensions: {', '.join(unknown)} not an extension's parameter; valid: "
+                             f"{', '.join(hooks)}")
 
     @classmethod
     def from_dict(cls, d: dict) -> "CampaignConfig":
@@ -471,7 +482,7 @@ def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
         raise InputError("the campaign needs a target angle of repose: the workbook has no "
                          "'repose' photos and no meta 'target_repose_deg'")
     factors = factor_levels(measurement, config.levels)
-    base = base_parameters(measurement)
+    base = base_parameters(measurement).with_(**config.model_extensions)
     geometry = repose_geometry(measurement.meta)
     if config.workflow == "plausible":
         from demcal.analyse.plausible import derive_plausible

@@ -57,7 +57,7 @@ def _typed(tp, value, where: str):
     if isinstance(tp, type) and is_dataclass(tp):
         if isinstance(value, tp):
             return value
-        if issubclass(tp, _Record):
+        if issubclass(tp, Record):
             return tp.from_dict(value, where)
         return _build(tp, value, where)
     if tp is tuple:
@@ -75,7 +75,7 @@ def _typed(tp, value, where: str):
 
 def _plain(value):
     """``value`` with every record replaced by its ``to_dict``."""
-    if isinstance(value, _Record):
+    if isinstance(value, Record):
         return value.to_dict()
     if isinstance(value, dict):
         return {k: _plain(v) for k, v in value.items()}
@@ -84,7 +84,7 @@ def _plain(value):
     return value
 
 
-class _Record:
+class Record:
     """JSON round trip of a frozen dataclass whose fields are its keys.
 
     ``from_dict`` builds nested records from their annotations, refusing unknown or missing
@@ -113,7 +113,7 @@ class _Record:
 
 
 @dataclass(frozen=True)
-class ParameterEstimate(_Record):
+class ParameterEstimate(Record):
     """What the calibration says about one contact parameter (``--set`` name).
 
     Attributes
@@ -146,7 +146,7 @@ class ParameterEstimate(_Record):
 
 
 @dataclass(frozen=True)
-class Point(_Record):
+class Point(Record):
     """A point of the parameter space with the surrogate's prediction of the mean angle there.
 
     Attributes
@@ -173,7 +173,7 @@ class Point(_Record):
 
 
 @dataclass(frozen=True)
-class HeapOnly(_Record):
+class HeapOnly(Record):
     """The heap-only posterior on the same surrogate, for comparison with a joint calibration."""
 
     parameters: dict[str, ParameterEstimate]
@@ -182,7 +182,7 @@ class HeapOnly(_Record):
 
 
 @dataclass(frozen=True)
-class Calibration(_Record):
+class Calibration(Record):
     """The plausible set and the recommended point (``results["calibration"]``).
 
     Attributes
@@ -228,7 +228,7 @@ class Calibration(_Record):
 
 
 @dataclass(frozen=True)
-class Validation(_Record):
+class Validation(Record):
     """Runs at the calibrated point, tested for equivalence with the lab (``results["validation"]``).
 
     Attributes
@@ -293,7 +293,7 @@ class Validation(_Record):
 # Working sections of the plausible workflow (``analyse.plausible``)
 
 @dataclass(frozen=True)
-class PriorMarginal(_Record):
+class PriorMarginal(Record):
     """One parameter's prior: normal (mean, sd) truncated to [low, high], from its lab test."""
 
     mean: float
@@ -306,7 +306,7 @@ class PriorMarginal(_Record):
 
 
 @dataclass(frozen=True)
-class NoiseStudy(_Record):
+class NoiseStudy(Record):
     """The seed-to-seed noise of the plausible workflow (``analyse.noise``).
 
     Attributes
@@ -335,7 +335,7 @@ class NoiseStudy(_Record):
 
 
 @dataclass(frozen=True)
-class DesignPoint(_Record):
+class DesignPoint(Record):
     """A design point's runs: its stage (``noise``, ``design``, ``sequential``, ``refine``),
     settings, one response, seed and run reference per run, and their mean [deg]."""
 
@@ -348,7 +348,7 @@ class DesignPoint(_Record):
 
 
 @dataclass(frozen=True)
-class DesignRuns(_Record):
+class DesignRuns(Record):
     """Every design point of the plausible workflow and how the sequence of rounds went.
 
     ``rounds`` logs each sequential round, ``refinements`` each refinement at the posterior
@@ -365,7 +365,7 @@ class DesignRuns(_Record):
 
 
 @dataclass(frozen=True)
-class SurrogateSummary(_Record):
+class SurrogateSummary(Record):
     """The fitted surrogate: its kernel, length scales per parameter, leave-one-out check and
     noise model (pooled, or per point shrunk to the pooled)."""
 
@@ -381,7 +381,7 @@ class SurrogateSummary(_Record):
 # ``SteepestClimbResult``, ``CanonicalAnalysis`` and ``TargetOptimum``.
 
 @dataclass(frozen=True)
-class SurfaceFit(_Record):
+class SurfaceFit(Record):
     """A fitted response surface (``ResponseSurface.to_dict()``): coded coefficients, ANOVA
     with lack of fit, Design-Expert's fit statistics, equations and stationary point."""
 
@@ -422,7 +422,7 @@ class Screening(SurfaceFit):
 
 
 @dataclass(frozen=True)
-class ScreeningStage(_Record):
+class ScreeningStage(Record):
     """Step 2: the Plackett-Burman runs, their screening, and each effect against the noise."""
 
     design_coded: list
@@ -436,7 +436,7 @@ class ScreeningStage(_Record):
 
 
 @dataclass(frozen=True)
-class CentreNoise(_Record):
+class CentreNoise(Record):
     """Step 3: the screening centre run with different seeds (``sd`` of a point's response,
     ``sd_single_run`` of one run); the Box-Behnken centre points' sd for comparison."""
 
@@ -452,7 +452,7 @@ class CentreNoise(_Record):
 
 
 @dataclass(frozen=True)
-class FactorChoice(_Record):
+class FactorChoice(Record):
     """The factors the screening flagged, those carried forward, and why they differ."""
 
     flagged: list
@@ -461,7 +461,7 @@ class FactorChoice(_Record):
 
 
 @dataclass(frozen=True)
-class ClimbPlan(_Record):
+class ClimbPlan(Record):
     """``SteepestClimbPlan.to_dict()``: the stepped factors, their directions and steps, and
     every factor's value at each level."""
 
@@ -473,7 +473,7 @@ class ClimbPlan(_Record):
 
 
 @dataclass(frozen=True)
-class ClimbResult(_Record):
+class ClimbResult(Record):
     """``SteepestClimbResult.to_dict()``: the level closest to the target and the window the
     Box-Behnken design takes from it (levels are numbered from 1)."""
 
@@ -491,7 +491,7 @@ class ClimbResult(_Record):
 
 
 @dataclass(frozen=True)
-class SteepestClimbStage(_Record):
+class SteepestClimbStage(Record):
     """Step 4: the climb's runs and its analysis; ``increase`` is the direction toward the target."""
 
     plan: ClimbPlan
@@ -503,7 +503,7 @@ class SteepestClimbStage(_Record):
 
 
 @dataclass(frozen=True)
-class Canonical(_Record):
+class Canonical(Record):
     """``CanonicalAnalysis.to_dict()``: eigenvalues and vectors of B, the stationary point and
     its nature (``maximum``, ``minimum``, ``saddle``, with a ridge when one is near flat)."""
 
@@ -519,7 +519,7 @@ class Canonical(_Record):
 
 
 @dataclass(frozen=True)
-class BoxBehnkenStage(_Record):
+class BoxBehnkenStage(Record):
     """Step 5: the Box-Behnken design in the window the climb chose, its runs, the quadratic
     fit with its canonical analysis, and each coefficient against the noise."""
 
@@ -539,7 +539,7 @@ class BoxBehnkenStage(_Record):
 
 
 @dataclass(frozen=True)
-class Solution(_Record):
+class Solution(Record):
     """A point where the fitted surface meets the target, coded and actual."""
 
     coded: dict
@@ -549,7 +549,7 @@ class Solution(_Record):
 
 
 @dataclass(frozen=True)
-class Optimisation(_Record):
+class Optimisation(Record):
     """Step 6, ``TargetOptimum.to_dict()``: the solutions of yhat = target in the coded cube,
     the preferred one (closest to the measured means) first."""
 
@@ -563,7 +563,7 @@ class Optimisation(_Record):
 
 
 @dataclass(frozen=True)
-class CampaignResult(_Record):
+class CampaignResult(Record):
     """Everything a calibration campaign found, in the layout of ``results.json``.
 
     Attributes

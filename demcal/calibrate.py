@@ -52,8 +52,22 @@ def register(subparsers) -> None:
     cal.add_argument("--tolerance", type=float, default=None,
                      help="equivalence tolerance of the validation [deg] (default: the larger of "
                           "1 deg and the lab's heap-to-heap sd)")
+    cal.add_argument("--set", dest="sets", action="append", default=[], metavar="NAME=VALUE",
+                     help="switch a model extension on for every run (repeatable), e.g. --set "
+                          "multi_contact_damping=true; only the extensions' parameters "
+                          "(simulate.extensions.ENGINE_HOOKS)")
     cal.add_argument("--no-report", action="store_true", help="skip the HTML/PDF report")
     cal.set_defaults(handler=_run_calibrate)
+
+
+def extension_settings(items) -> dict:
+    """``--set NAME=VALUE`` items as typed ``DEMParameters`` values (``CampaignConfig``
+    checks that each names an extension's parameter)."""
+    from demcal.simulate.cli import parameters, parse_sets
+
+    names = parse_sets(items)
+    params = parameters(items)
+    return {name: getattr(params, name) for name in names}
 
 
 def _run_calibrate(args) -> int:
@@ -67,6 +81,8 @@ def _run_calibrate(args) -> int:
                 if getattr(args, name) is not None}
     if args.validation_cap is not None:
         optional["validation_cap"] = args.validation_cap
+    if args.sets:
+        optional["model_extensions"] = extension_settings(args.sets)
     config = CampaignConfig(profile=args.profile, workflow=args.workflow, levels=args.levels,
                             seed=args.seed, replicates=args.replicates, scheduler=args.scheduler,
                             **optional)

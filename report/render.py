@@ -427,47 +427,47 @@ def _ci(ci) -> str:
     return f"[{_g(ci[0])}, {_g(ci[1])}]" if isinstance(ci, (list, tuple)) and len(ci) == 2 else ""
 
 
-def _extension_sentence(e: dict) -> str:
-    lo, hi = (e.get("ci95") or [None, None])[:2]
-    verdict = ("it helps" if isinstance(lo, (int, float)) and lo > 0 else
-               "it makes it worse" if isinstance(hi, (int, float)) and hi < 0 else "no clear gain")
-    return (f"Extension {e.get('name')} ({e.get('mechanism')}): {e.get('measure')}"
-            + (f" on {e['held_out']}" if e.get("held_out") else "")
-            + f" {_g(e.get('before'))} before, {_g(e.get('after'))} after, gain {_g(e.get('gain'))} "
-            f"{_ci(e.get('ci95'))}: {verdict} (Table C3).")
+def _extension_sentence(e) -> str:
+    lo, hi = e.ci95
+    verdict = ("it helps" if lo > 0 else "it makes it worse" if hi < 0 else "no clear gain")
+    return (f"Extension {e.name} ({e.mechanism}): {e.measure} of {e.quantity}"
+            + (f" on {e.held_out}" if e.held_out else "")
+            + f" {_g(e.before)} before, {_g(e.after)} after, gain {_g(e.gain)} "
+            f"{_ci(e.ci95)}: {verdict} (Table C3).")
 
 
-def _direct_headline(d: dict, quantity: str) -> str:
-    """One drop-twin row of Table C1 as the answer to "may sqrt(h2/h1) feed the DEM directly?"."""
-    note = d.get("note") or ""
-    if d.get("simulated") is None:
-        return (f"{quantity}: not assessed; the lab's sqrt(h2/h1) is {_g(d.get('measured'))} "
-                f"{_ci(d.get('measured_ci95'))}, the drop twin was {note or 'not run'}.")
-    m = _DIRECT_VERDICT.search(note)
+def _direct_headline(d, quantity: str) -> str:
+    """One drop-twin row of Table C1 (a ``Discrepancy``) as the answer to "may sqrt(h2/h1) feed
+    the DEM directly?"."""
+    if d.simulated is None:
+        return (f"{quantity}: not assessed; the lab's sqrt(h2/h1) is {_g(d.measured)} "
+                f"{_ci(d.measured_ci95)}, the drop twin was {d.note or 'not run'}.")
+    m = _DIRECT_VERDICT.search(d.note)
     verdict = m.group(0) if m else "critique.json states no verdict on direct use (too few simulated drops)"
-    beyond = {True: "beyond", False: "within"}.get(d.get("exceeds"), "against")
-    return (f"{quantity}: {verdict}. The lab's drops give sqrt(h2/h1) = {_g(d.get('measured'))} "
-            f"{_ci(d.get('measured_ci95'))} (n {d.get('n_measured', '–')}); the drop twin rebounds with an "
-            f"apparent {_g(d.get('simulated'))} {_ci(d.get('simulated_ci95'))} (n {d.get('n_simulated', '–')}): "
-            f"measured minus twin {_g(d.get('difference'))}, {beyond} its 95 % uncertainty "
-            f"±{_g(d.get('combined_u95'))} (Table C1).")
+    beyond = {True: "beyond", False: "within"}.get(d.exceeds, "against")
+    return (f"{quantity}: {verdict}. The lab's drops give sqrt(h2/h1) = {_g(d.measured)} "
+            f"{_ci(d.measured_ci95)} (n {d.n_measured}); the drop twin rebounds with an "
+            f"apparent {_g(d.simulated)} {_ci(d.simulated_ci95)} (n {d.n_simulated}): "
+            f"measured minus twin {_g(d.difference)}, {beyond} its 95 % uncertainty "
+            f"±{_g(d.combined_u95)} (Table C1).")
 
 
-def critique_text(critique: dict) -> dict:
-    """The critique's sentences for the start of its section.
+def critique_text(critique) -> dict:
+    """The critique's sentences for the start of its section (``critique``: a ``Critique`` or None).
 
     ``direct``: per restitution pair with a drop twin, whether sqrt(h2/h1) may feed the DEM
     directly (the twin's apparent restitution against the measured one, from Table C1's row),
-    followed by critique.json's own summary sentences on that pair (its drop statement, the gain
-    of each extension of that quantity; an extension row the summary does not state is stated
-    from Table C3). ``summary``: the other summary sentences, in their order. Every summary
-    sentence appears once.
+    followed by the critique's own conclusions on that pair (its drop statement, the gain of
+    each extension of that quantity; an extension the conclusions do not state is stated from
+    Table C3). ``summary``: the other conclusions, in their order. Every conclusion appears once.
     """
-    summary = [str(x) for x in critique.get("summary") or []]
+    if critique is None:
+        return {"direct": [], "summary": []}
+    summary = [str(x) for x in critique.conclusions]
     used: set = set()
     direct = []
-    for d in critique.get("discrepancies") or []:
-        m = _DROP_TWIN.match(str(d.get("observable", "")))
+    for d in critique.discrepancies:
+        m = _DROP_TWIN.match(d.observable)
         if not m:
             continue
         quantity, pair = m.groups()
@@ -476,9 +476,9 @@ def critique_text(critique: dict) -> dict:
             or re.match(rf"\w+ \({re.escape(pair)}\) not evaluated", s))]
         used.update(mine)
         paragraphs = [summary[i] for i in mine]
-        for e in critique.get("extensions") or []:
-            if str(e.get("measure", "")).endswith(f" of {quantity}") and not any(
-                    s.startswith(f"Extension {e.get('name')} ({quantity})") for s in paragraphs):
+        for e in critique.extensions:
+            if e.quantity == quantity and not any(
+                    s.startswith(f"Extension {e.name} ({quantity})") for s in paragraphs):
                 paragraphs.append(_extension_sentence(e))
         direct.append({"headline": _direct_headline(d, quantity), "paragraphs": paragraphs})
     return {"direct": direct, "summary": [s for i, s in enumerate(summary) if i not in used]}
@@ -539,7 +539,7 @@ def render_html(c: Campaign, tables: list[dict], figures: list) -> str:
         "runner_warn": runner_warn,
         "synthetic": c.measurement.get("meta", {}).get("synthetic"),
         "notes": c.measurement.get("notes", []), "critique": c.critique is not None,
-        "critique_text": critique_text(c.critique or {}),
+        "critique_text": critique_text(c.critique),
         "marked": {t["id"]: marked_rows(t) for t in tables},
         "provenance": provenance(c), "references": REFERENCES, "results": r,
         "critique_ids": [t["id"] for t in tables if t["id"].startswith("C")],

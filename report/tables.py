@@ -23,6 +23,7 @@ import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from demcal.analyse.critique.loop import Critique
 from demcal.analyse.results import CampaignResult, Validation
 from demcal.errors import InputError
 from demcal.jsonio import read_json, to_jsonable
@@ -147,7 +148,7 @@ class Campaign:
         The paper's printed numbers (``data/paper_defaults.json``), empty when not available.
     paper_source : dict
         ``{"file", "sha256"}`` of that file (empty when not available).
-    critique : dict or None
+    critique : analyse.critique.loop.Critique or None
         ``critique.json`` when the critique stage has run.
     critique_source : dict
         ``{"file", "sha256"}`` of ``critique.json`` (empty when absent).
@@ -158,7 +159,7 @@ class Campaign:
     runs: dict = field(default_factory=dict)
     paper: dict = field(default_factory=dict)
     paper_source: dict = field(default_factory=dict)
-    critique: dict | None = None
+    critique: Critique | None = None
     critique_source: dict = field(default_factory=dict)
 
 
@@ -217,15 +218,17 @@ def load_campaign(out_dir) -> Campaign:
                     paper_source=paper_source, critique=critique, critique_source=critique_source)
 
 
-def load_critique(out_dir) -> tuple[dict | None, dict]:
+def load_critique(out_dir) -> tuple[Critique | None, dict]:
+    """The critique of a campaign folder (``critique.json``, typed) and ``{"file", "sha256"}``."""
     p = Path(out_dir) / "critique.json"
     if not p.exists():
         return None, {}
     try:
-        # named relative to the campaign folder, so that a moved or copied folder still audits
-        return read_json(p), {"file": "critique.json", "sha256": sha256_file(p)}
+        doc = read_json(p)
     except json.JSONDecodeError as exc:
         raise InputError(f"{p} is not valid JSON ({exc})") from None
+    # named relative to the campaign folder, so that a moved or copied folder still audits
+    return Critique.from_dict(doc, str(p)), {"file": "critique.json", "sha256": sha256_file(p)}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -918,48 +921,50 @@ def table_validation(c: Campaign) -> Table:
 
 
 # ----------------------------------------------------------------------------------------------
-# Critique (generic: its stage renders into critique.json)
+# Critique (``analyse.critique.loop.Critique``, stored as critique.json)
 
-#: Columns the critique tables show first (critique.json's documented keys).
-CRITIQUE_COLUMNS = {
-    "discrepancies": ("observable", "measured", "measured_ci95", "simulated", "simulated_ci95",
-                      "difference", "combined_u95", "exceeds"),
-    "findings": ("mechanism", "verdict", "sheet", "covariate", "effect", "ci95", "p_adjusted"),
-    "model_findings": ("mechanism", "verdict", "observable", "measured", "simulated", "part", "part_ci95",
-                       "share"),
-    "extensions": ("name", "mechanism", "before", "after", "gain", "ci95"),
-}
-
-#: Text longer than this goes under the table as a numbered note instead of into a cell.
-LONG_TEXT = 40
-
-
-def _generic(table_id: str, title: str, items: list, source: dict, path: str) -> Table:
-    """A table of a list of flat records: the documented keys first, then every other key;
-    long text values become numbered notes under the table, so nothing is left out."""
-    keys = list(CRITIQUE_COLUMNS.get(path, ()))
-    keys = [k for k in keys if any(k in it for it in items)]
-    for it in items:
-        keys += [k for k in it if k not in keys]
-    long = [k for k in keys if any(isinstance(it.get(k), str) and len(it[k]) > LONG_TEXT for it in items)
-            or any(isinstance(it.get(k), dict) for it in items)]
-    cols = [k for k in keys if k not in long]
-    rows = tuple(tuple(it.get(k) for k in cols) for it in items)
-    notes = [] if items else ["None."]
-    for i, it in enumerate(items, 1):
-        for k in long:
-            if it.get(k) not in (None, "", {}):
-                value = it[k] if isinstance(it[k], str) else json.dumps(it[k], sort_keys=True)
-                notes.append(f"Row {i}, {k}: {value}")
-    return Table(table_id, title, tuple(cols) or ("(none)",), ("",) * (len(cols) or 1), rows,
-                 notes=tuple(notes), sources=({"kind": "critique", **source, "path": path},))
+#: Columns of the critique tables: (header, attribute of the record). The headers are
+#: critique.json's keys, so that a reader finds each cell there.
+DISCREPANCY_COLUMNS = tuple((a, a) for a in (
+    "observable", "sheet", "measured", "measured_ci95", "simulated", "simulated_ci95", "difference",
+    "combined_u95", "exceeds", "n_measured", "n_simulated"))
+FINDING_COLUMNS = tuple((a, a) for a in (
+    "mechanism", "verdict", "sheet", "covariate", "effect", "ci95", "p_adjusted", "quantity", "source",
+    "effect_unit"))
+MODEL_FINDING_COLUMNS = tuple((a, a) for a in (
+    "mechanism", "verdict", "observable", "measured", "simulated", "part", "part_ci95", "share"))
+EXTENSION_COLUMNS = (("name", "name"), ("mechanism", "mechanism"), ("before", "before"), ("after", "after"),
+                     ("gain", "gain"), ("ci95", "ci95"), ("measure", "measure"), ("quantity", "quantity"),
+                     ("before_ci95", "before_ci95"), ("after_ci95", "after_ci95"), ("n_held_out", "n_held_out"))
 
 
-#: Fields of a covariate test (``analyse.critique.diagnosis.CovariateTest``) that Table C4
-#: shows or names in its notes; any other field goes under the table row by row.
-_TEST_FIELDS = {"series", "sheet", "source", "covariate", "method", "n", "effect", "ci95", "effect_unit",
-                "span", "practical", "threshold", "p_value", "se", "dof", "p_curvature", "p_adjusted",
-                "significant", "relevant", "ci_selected", "explained_by", "levels", "level"}
+def _cell(value):
+    """A record's field as a table cell (intervals as lists, like critique.json holds them)."""
+    return list(value) if isinstance(value, tuple) else value
+
+
+def _long(value) -> str:
+    return value if isinstance(value, str) else json.dumps(to_jsonable(value), sort_keys=True)
+
+
+def _record_table(table_id: str, title: str, records: list, columns: tuple, note_fields: tuple, source: dict,
+                  path: str) -> Table:
+    """A table of critique records, one row each; the text fields (``note_fields``) go under the
+    table as numbered notes, so that nothing is left out."""
+    rows = tuple(tuple(_cell(getattr(r, attr)) for _, attr in columns) for r in records)
+    notes = [] if records else ["None."]
+    for i, r in enumerate(records, 1):
+        for attr in note_fields:
+            value = getattr(r, attr)
+            if value not in (None, "", {}, []):
+                notes.append(f"Row {i}, {attr}: {_long(value)}")
+    return Table(table_id, title, tuple(h for h, _ in columns), ("",) * len(columns), rows, notes=tuple(notes),
+                 sources=({"kind": "critique", **source, "path": path},))
+
+
+#: Fields of a covariate test (``analyse.critique.diagnosis.CovariateTest``) that Table C4 has
+#: no column for; they are in critique.json.
+_TEST_DETAILS = ("se", "dof", "span", "p_curvature", "levels")
 
 
 def _p_key(p) -> float:
@@ -967,33 +972,30 @@ def _p_key(p) -> float:
     return p if isinstance(p, (int, float)) and not isinstance(p, bool) and p == p else float("inf")
 
 
-def covariate_verdict(t: dict) -> str:
-    """What the critique concluded from one covariate test, in a few words."""
-    if not t.get("significant"):
+def covariate_verdict(t) -> str:
+    """What the critique concluded from one covariate test (``CovariateTest``), in a few words."""
+    if not t.significant:
         return "not significant"
-    if t.get("relevant") is False:
+    if t.relevant is False:
         return "significant, below threshold"
-    if t.get("explained_by"):
-        return f"significant, explained by {t['explained_by']}"
+    if t.explained_by:
+        return f"significant, explained by {t.explained_by}"
     return "significant: cause"
 
 
 def table_covariate_tests(c: Campaign) -> Table:
-    """Table C4: every covariate test of the critique (``critique.json`` ``tests``), sorted by
-    adjusted p-value; ``Test`` is the test's position in that list, so each row can be found
-    again. All tests are listed; the fields too wide for an A4 column are named in the notes."""
-    items = list((c.critique or {}).get("tests") or [])
-    order = sorted(range(len(items)), key=lambda i: (_p_key(items[i].get("p_adjusted")),
-                                                     _p_key(items[i].get("p_value")), i))
+    """Table C4: every covariate test of the critique (``Critique.tests``), sorted by adjusted
+    p-value; ``Test`` is the test's position in critique.json's ``tests``, so each row can be
+    found again. All tests are listed; the fields too wide for an A4 column are in critique.json."""
+    items = list(c.critique.tests) if c.critique is not None else []
+    order = sorted(range(len(items)), key=lambda i: (_p_key(items[i].p_adjusted), _p_key(items[i].p_value), i))
     rows, notes = [], []
     for i in order:
         t = items[i]
-        rows.append((i + 1, t.get("series"), t.get("sheet"), t.get("source"), t.get("covariate"),
-                     t.get("method"), t.get("level", "trial"), t.get("n"), t.get("effect"), t.get("ci95"),
-                     t.get("effect_unit"),
-                     t.get("practical"), t.get("threshold"), t.get("p_value"), t.get("p_adjusted"),
+        rows.append((i + 1, t.series, t.sheet, t.source, t.covariate, t.method, t.level, t.n, t.effect,
+                     list(t.ci95), t.effect_unit, t.practical, t.threshold, t.p_value, t.p_adjusted,
                      covariate_verdict(t)))
-    opts = _get(c.critique, "provenance", "options", default={}) or {}
+    opts = c.critique.provenance.options if c.critique is not None else {}
     how = {"bh": "Benjamini-Hochberg", "holm": "Holm"}.get(opts.get("correction"), opts.get("correction"))
     notes.append("Sorted by adjusted p-value" + (f" ({how}, all tests together)" if how else "")
                  + "; significant rows in bold" + (f" (adjusted p < {opts['alpha']:g})"
@@ -1005,19 +1007,14 @@ def table_covariate_tests(c: Campaign) -> Table:
                  "explained by another covariate.")
     if items:
         notes.append("Standard errors, degrees of freedom, covariate spans, curvature p-values and the "
-                     "level means of each anova are in critique.json (tests).")
+                     "level means of each anova (" + ", ".join(_TEST_DETAILS) + ") are in critique.json (tests).")
     else:
         notes.append("None: critique.json holds no covariate tests.")
     for i in order:
-        t = items[i]
-        if t.get("ci_selected"):
-            lo, hi = t["ci_selected"]
+        if items[i].ci_selected:
+            lo, hi = items[i].ci_selected
             notes.append(f"Test {i + 1}: interval after selection (false-coverage rate, Benjamini & "
-                         f"Yekutieli 2005) [{lo:.3g}, {hi:.3g}] {t.get('effect_unit') or ''}".rstrip() + ".")
-        for key in t:
-            if key not in _TEST_FIELDS and t[key] not in (None, "", {}, []):
-                value = t[key] if isinstance(t[key], str) else json.dumps(t[key], sort_keys=True)
-                notes.append(f"Test {i + 1}, {key}: {value}")
+                         f"Yekutieli 2005) [{lo:.3g}, {hi:.3g}] {items[i].effect_unit or ''}".rstrip() + ".")
     return Table("C4", "Covariate tests of the lab's measurements (every test, by adjusted p-value)",
                  ("Test", "Series", "Sheet", "Source", "Covariate", "Method", "Unit of test", "n", "Effect",
                   "95 % CI", "Effect unit", "Over range", "Threshold", "p", "Adjusted p", "Verdict"),
@@ -1026,21 +1023,66 @@ def table_covariate_tests(c: Campaign) -> Table:
                  formats=("d", "", "", "", "", "", "", "d", ".3g", ".3g", "", ".3g", ".3g", "p", "p", ""))
 
 
+def _within(flag) -> str:
+    return {True: "within its uncertainty", False: "beyond its uncertainty"}.get(flag, "no interval")
+
+
+def table_heap_parameters(c: Campaign) -> Table:
+    """Table C5: the calibrated parameters before and after recalibrating with each accepted
+    extension (``Critique.heap_gains``), each against its own 95 % plausible interval."""
+    gains = c.critique.heap_gains
+    rows = tuple((h.extension, p.name, p.before, _cell(p.before_ci95), p.after, _cell(p.after_ci95), p.shift,
+                  _within(p.within_uncertainty)) for h in gains for p in h.parameters)
+    notes = [f"{h.extension} (recalibrated in {h.campaign} with "
+             + ", ".join(f"{k} = {_long(v)}" for k, v in h.settings.items()) + f"): {h.conclusion}" for h in gains]
+    if not gains:
+        notes.append("None: no extension was recalibrated (see the conclusions above for why).")
+    notes.append("A recalibrated value inside the 95 % plausible interval of the campaign under critique "
+                 "has moved by less than the parameter's own uncertainty.")
+    return Table("C5", "Heap-side gain: calibrated parameters recalibrated with each accepted extension",
+                 ("Extension", "Parameter", "Before", "Before 95 % set", "After", "After 95 % set", "Shift",
+                  "Shift judged"), ("",) * 8, rows, notes=tuple(notes),
+                 sources=({"kind": "critique", **c.critique_source, "path": "heap_gains"},),
+                 formats=("", "", ".4g", ".4g", ".4g", ".4g", ".3g", ""))
+
+
+def table_heap_observables(c: Campaign) -> Table:
+    """Table C6: the heap observables over the validation runs of the campaign under critique
+    and of each recalibration; all but the fitted angle are predictions the calibration was not
+    fitted to."""
+    gains = c.critique.heap_gains
+    rows = tuple((h.extension, o.name, o.unit, "yes" if o.fitted else "no", o.before, o.before_sd, o.n_before,
+                  o.after, o.after_sd, o.n_after, o.difference, _cell(o.ci95),
+                  {True: "beyond the noise", False: "within the noise"}.get(o.beyond_noise, "too few runs"))
+                 for h in gains for o in h.observables)
+    notes = ["Over the validation runs at each campaign's calibrated point, every run an independent draw; "
+             "difference after - before with Welch's 95 % interval. Outflow fraction: share of the segments "
+             "whose centre ends beyond the end plate; outside pile angle: the pile beyond the carton; crest "
+             "height: the top of the heap's profile."]
+    if not gains:
+        notes.append("None: no extension was recalibrated.")
+    return Table("C6", "Heap-side gain: heap observables before and after each accepted extension",
+                 ("Extension", "Observable", "Unit", "Fitted", "Before", "sd", "n", "After", "sd", "n",
+                  "Difference", "95 % CI", "Judged"), ("",) * 13, rows, notes=tuple(notes),
+                 sources=({"kind": "critique", **c.critique_source, "path": "heap_gains"},),
+                 formats=("", "", "", "", ".4g", ".3g", "d", ".4g", ".3g", "d", ".3g", ".3g", ""))
+
+
 def critique_tables(c: Campaign) -> list[Table]:
-    """Tables C1-C4 from ``critique.json``: model discrepancies, data effects, the causes of the
-    discrepancies, extensions, covariate tests."""
+    """Tables C1-C6 of the critique: model discrepancies, data effects, the causes of the
+    discrepancies, extensions, covariate tests and the extensions' heap-side gains."""
     if c.critique is None:
         return []
-    cr = c.critique
-    return [_generic("C1", "Model discrepancies: where the twins disagree with the lab",
-                     list(cr.get("discrepancies", [])), c.critique_source, "discrepancies"),
-            _generic("C2", "Data effects: covariate effects in the lab's measurements",
-                     list(cr.get("findings", [])), c.critique_source, "findings"),
-            _generic("C2b", "Causes of the model discrepancies, each tested, with its share",
-                     list(cr.get("model_findings", [])), c.critique_source, "model_findings"),
-            _generic("C3", "Model extensions and their gain", list(cr.get("extensions", [])),
-                     c.critique_source, "extensions"),
-            table_covariate_tests(c)]
+    cr, src = c.critique, c.critique_source
+    return [_record_table("C1", "Model discrepancies: where the twins disagree with the lab", cr.discrepancies,
+                          DISCREPANCY_COLUMNS, ("note",), src, "discrepancies"),
+            _record_table("C2", "Data effects: covariate effects in the lab's measurements", cr.findings,
+                          FINDING_COLUMNS, ("evidence",), src, "findings"),
+            _record_table("C2b", "Causes of the model discrepancies, each tested, with its share",
+                          cr.model_findings, MODEL_FINDING_COLUMNS, ("evidence",), src, "model_findings"),
+            _record_table("C3", "Model extensions and their gain on held-out trials", cr.extensions,
+                          EXTENSION_COLUMNS, ("held_out", "fitted", "note"), src, "extension_records"),
+            table_covariate_tests(c), table_heap_parameters(c), table_heap_observables(c)]
 
 
 # ----------------------------------------------------------------------------------------------

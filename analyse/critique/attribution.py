@@ -247,4 +247,5 @@ def _damping_gain(runner, params, on_params, pair: str, state: dict, rng):
                  fitted=(f"{param} = mean sqrt(h2/h1) of the other half: "
                          + ", ".join(_fmt(e) for e in fitted)), note=note,
                  extension=describe("multi_contact_damping", mode="normal dashpots share the body's mass "
-                                    "among its simultaneous contacts (engine)"))
+                                    "among its simultaneous contacts (engine)"),
+                 heap_settings={"multi_contact_damping": True})

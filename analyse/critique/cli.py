@@ -3,10 +3,13 @@
     demcal critique WORKBOOK_OR_DIR [--json OUT] [--no-twins] [--rigs drop,incline,repose]
                     [--extensions NAME,...] [--alpha 0.01] [--correction bh|holm]
                     [--workers N] [--store DIR] [--repose-seeds N] [--seed S] [--progress]
+                    [--heap-gain]
 
 WORKBOOK_OR_DIR is a lab workbook (``.xlsx`` or CSV folder) or a calibration campaign folder
 (``results.json``); for a campaign the result is also written to ``DIR/critique.json``, which
-the report renders, and the twin runs are kept in ``DIR/critique_runs``.
+the report renders, and the twin runs are kept in ``DIR/critique_runs``. With ``--heap-gain``
+the campaign is run again with each accepted extension (``DIR/heap_gain/<extension>``, one
+campaign each, resumable) and the heaps compared.
 """
 
 from __future__ import annotations
@@ -47,6 +50,10 @@ def register(subparsers) -> None:
                    help="repose twins to run when no campaign gives validation runs (%(default)s)")
     p.add_argument("--seed", type=int, default=0, help="seed of the bootstrap intervals (%(default)s)")
     p.add_argument("--progress", action="store_true", help="show progress bars")
+    p.add_argument("--heap-gain", action="store_true",
+                   help="campaign folder only: recalibrate with each accepted extension (a whole campaign "
+                        "each, in DIR/heap_gain/) and report what it changes in the calibrated parameters "
+                        "and in the heap observables the calibration does not fit")
     p.set_defaults(handler=critique_command)
 
 
@@ -69,7 +76,7 @@ def critique_command(args) -> int:
     result = run_critique(source, twins=not args.no_twins, rigs=_list(args.rigs, "--rigs"),
                           extensions=extensions, alpha=args.alpha, correction=args.correction,
                           store_dir=args.store, workers=args.workers, progress=args.progress,
-                          repose_seeds=args.repose_seeds, seed=args.seed)
+                          repose_seeds=args.repose_seeds, seed=args.seed, heap_gain=args.heap_gain)
     doc = result.to_dict()
     written = []
     if args.json:

@@ -25,10 +25,16 @@ paired difference or offset (``mean``)
 Multiple testing. The p-values of all tests of a workbook are adjusted together, by
 Benjamini & Hochberg (1995) (``"bh"``, default; false discovery rate) or Holm (1979)
 (``"holm"``; family-wise error rate). A test is *significant* when its adjusted p-value is
-below ``alpha`` and *relevant* when its effect over the covariate's observed range (numeric:
+below ``alpha`` and *relevant* when its effect over the data (trend: the range of the fitted
+line-and-quadratic over the covariate's observed values, so that a U-shape counts; line:
 |slope| x range; block: the range of level means; mean: |mean|) reaches the practical
 threshold of its quantity (``PRACTICAL_THRESHOLDS``), so that a tiny but significant effect is
 not reported as a cause.
+
+Pooled series. An effect several pairs share (a velocity dependence or a drift on every drop
+pair) is also tested on all their rows at once (``pooled_series``): each value relative to its
+own pair's mean, so the pairs' different levels do not hide it, with the family's threshold
+over the mean level.
 
 Level. ``DEFAULT_ALPHA`` is 0.01. When nothing is there, BH (like Holm) lets a workbook name a
 cause with probability about alpha whatever the number of tests; with the 50-odd tests of a
@@ -139,6 +145,9 @@ class Series:
         Covariate name -> tuple of values (None where missing), one per row.
     test : str
         ``covariates`` (against each covariate) or ``mean`` (one-sample test of the mean).
+    practical_threshold : float or None
+        The practical threshold in the series' unit when its family's does not apply (a pooled
+        series of values relative to their pair's mean).
     """
 
     name: str
@@ -150,9 +159,12 @@ class Series:
     values: tuple
     covariates: dict = field(default_factory=dict)
     test: str = "covariates"
+    practical_threshold: float | None = None
 
     @property
     def threshold(self) -> float:
+        if self.practical_threshold is not None:
+            return self.practical_threshold
         if self.family in PRACTICAL_THRESHOLDS:
             return PRACTICAL_THRESHOLDS[self.family]
         y = np.asarray(self.values, dtype=float)
@@ -186,7 +198,9 @@ class CovariateTest:
     dof : int
         Degrees of freedom of the t quantile.
     practical : float
-        Size of the effect over the covariate's range [unit].
+        Size of the effect over the data [unit]: the range of the fitted curve (line and
+        quadratic) over the covariate's observed values for ``trend``, |slope| x range for
+        ``line``, |effect| otherwise.
     threshold : float
         Practical threshold [unit].
     p_value : float
@@ -375,8 +389,9 @@ def trend_test(x, y) -> dict:
             p_curv = float(2.0 * stats.t.sf(abs(tc), dof2))
         else:
             p, p_curv = (0.0, 0.0) if rss0 > 0 else (1.0, 1.0)
+        fitted = X @ coef
         return {"method": "trend", "n": n, "effect": b, "ci95": ci, "se": se_b, "dof": dof1, "p_value": p,
-                "p_curvature": p_curv, "span": span}
+                "p_curvature": p_curv, "span": span, "curve_range": float(fitted.max() - fitted.min())}
     if se_b > 0:
         p = float(2.0 * stats.t.sf(abs(b / se_b), dof1))
     else:
@@ -498,7 +513,9 @@ def clustered_trend_test(x, y, groups, between: bool) -> dict:
     if np.unique(x).size >= 3 and dof > 1:
         b2, cov2, p, dof2 = _clustered(y, np.column_stack([z, z * z]), groups, between)
         p_curv = float(2.0 * stats.t.sf(abs(b2[1]) / math.sqrt(cov2[1, 1]), dof2)) if cov2[1, 1] > 0 else 0.0
-        return {**out, "method": "trend", "p_value": p, "p_curvature": p_curv}
+        curve = b2[0] * z + b2[1] * z * z
+        return {**out, "method": "trend", "p_value": p, "p_curvature": p_curv,
+                "curve_range": float(curve.max() - curve.min())}
     return {**out, "method": "line", "p_value": p_line, "p_curvature": None}
 
 
@@ -595,7 +612,9 @@ def series_tests(series: Series) -> tuple[list, list]:
 
     def make(cov, res, unit, level="trial"):
         span = res.get("span")
-        practical = abs(res["effect"]) * span if span is not None else abs(res["effect"])
+        # relevance on the fitted curve's range over the data, so that a U-shape counts
+        practical = (res["curve_range"] if "curve_range" in res else
+                     abs(res["effect"]) * span if span is not None else abs(res["effect"]))
         tests.append(CovariateTest(
             series=series.name, sheet=series.sheet, source=series.source, covariate=cov,
             method=res["method"], n=int(res["n"]), effect=float(res["effect"]),
@@ -818,6 +837,40 @@ def measured_series(measurement, workbook=None) -> list:
                           covariates={k: tuple(c.get(k) for c in covs) for k in names}))
         if name == "repose_angle_deg":
             out += _photo_series(used, sheet)
+    return out + pooled_series(out)
+
+
+#: Prefix of a pooled series' name (``pooled:restitution``).
+POOLED = "pooled:"
+
+
+def pooled_series(series_list) -> list:
+    """One series per family measured on several pairs or surfaces in one sheet (the drop
+    pairs' restitutions, the incline surfaces' frictions), each value relative to its own
+    pair's mean (y / mean - 1), over the covariates every member has: an effect the pairs
+    share (a velocity dependence, a drift with trial order) is tested with all their rows at
+    once. Its practical threshold is the family's over the mean of the pairs' means."""
+    groups: dict = {}
+    for s in series_list:
+        if (s.source == "measured" and s.test == "covariates" and "." in s.name
+                and s.family in PRACTICAL_THRESHOLDS and len(s.values) >= MIN_ROWS):
+            groups.setdefault((s.family, s.sheet), []).append(s)
+    out = []
+    for (family, sheet), members in groups.items():
+        means = [float(np.mean(s.values)) for s in members]
+        if len(members) < 2 or min(abs(m) for m in means) == 0:
+            continue
+        common = [c for c in members[0].covariates if all(c in s.covariates for s in members[1:])]
+        rows, values = [], []
+        covs: dict = {c: [] for c in common}
+        for s, m in zip(members, means):
+            rows += list(s.rows)
+            values += [v / m - 1.0 for v in s.values]
+            for c in common:
+                covs[c] += list(s.covariates[c])
+        out.append(Series(name=f"{POOLED}{family}", sheet=sheet, source="measured", family=family, unit="1",
+                          rows=tuple(rows), values=tuple(values), covariates={c: tuple(v) for c, v in covs.items()},
+                          practical_threshold=PRACTICAL_THRESHOLDS[family] / abs(float(np.mean(means)))))
     return out
 
 

@@ -33,7 +33,7 @@ from demcal.analyse.critique.twins import run_drop_twins
 from demcal.errors import InputError
 from demcal.jsonio import restore_nan
 from demcal.simulate.extensions import (describe, fit_velocity_restitution, impact_speed, invert_drop_twin,
-                                 restitution_parameter)
+                                        restitution_parameter)
 
 MEASURES = ("abs_mean_residual", "rms_residual")
 N_BOOTSTRAP = 2000
@@ -67,6 +67,9 @@ class ExtensionGain:
     note : str
     extension : dict
         Provenance record of the extension (``simulate.extensions.describe``).
+    heap_settings : dict
+        The ``DEMParameters`` engine-hook fields that switch the extension on in a heap (a
+        recalibration's ``CampaignConfig.model_extensions``); empty when it is no model switch.
     """
 
     name: str
@@ -84,6 +87,7 @@ class ExtensionGain:
     fitted: str = ""
     note: str = ""
     extension: dict = field(default_factory=dict)
+    heap_settings: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         """Flat, JSON-ready (the keys the report's critique table shows first)."""
@@ -250,10 +254,14 @@ def velocity_gain(runner, params, lab_pair: str, rig_pair: str, trials, *, rng,
     fitted = (f"e(v) = {law.e_ref:.3g} (v / {law.v_ref:.3g} m/s)^-{law.exponent:.3g}, n "
               f"[{law.exponent_ci95[0]:.3g}, {law.exponent_ci95[1]:.3g}]; at {top * 1e3:.0f} mm: "
               f"{param} = {e_v:.3g} (constant: {e_const:.3g})")
+    # in a heap the law's shape goes to the engine (``with_velocity_restitution``); its level
+    # stays the calibrated restitution
+    heap = {f"{param}_v_ref": law.v_ref, f"{param}_exponent": law.exponent,
+            f"{param}_v_min": min(law.speeds) if law.speeds else 0.0}
     return _gain("velocity_dependent_restitution", "velocity_dependent_restitution", "abs_mean_residual",
                  quantity, f"{len(held)} drops from the highest height ({top * 1e3:.0f} mm), not used to fit",
                  [t.residual for t in before_tw], [t.residual for t in after_tw], rng, fitted=fitted,
-                 extension=ext)
+                 extension=ext, heap_settings=heap)
 
 
 def size_gain(runner, params, lab_pair: str, rig_pair: str, trials, before_twins: dict, *, rng) -> ExtensionGain:
@@ -272,6 +280,11 @@ def size_gain(runner, params, lab_pair: str, rig_pair: str, trials, before_twins
     after_tw = run_drop_twins(runner, params, held, rig_pair, quantity=quantity, sizes=sizes, extension=ext,
                               desc=f"held-out drops ({lab_pair}, specimen sizes)")
     before = [before_twins[t[0]].residual for t in held]
+    # a heap draws its segments from the sizes of every dropped specimen
+    every = [(float(c["length_mm"]) * 1e-3, float(min(c["diameter_mm"], c["length_mm"])) * 1e-3)
+             for _, _, _, _, c, _ in trials
+             if isinstance(c.get("length_mm"), (int, float)) and isinstance(c.get("diameter_mm"), (int, float))]
     return _gain("size_distribution", "size_dependence", "rms_residual", quantity,
                  f"{len(held)} drops (every other row)", before, [t.residual for t in after_tw], rng,
-                 fitted="nothing fitted: each segment has its specimen's length and diameter", extension=ext)
+                 fitted="nothing fitted: each segment has its specimen's length and diameter", extension=ext,
+                 heap_settings={"segment_sizes": [list(x) for x in every]})

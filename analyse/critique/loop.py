@@ -11,6 +11,8 @@
                          "share", "part", "part_ci95", "evidence"}],
      "extensions": [{"name", "mechanism", "before", "after", "gain", "ci95", "measure",
                      "held_out", ...}],
+     "heap_gains": [{"extension", "mechanism", "settings", "campaign", "verdict_before",
+                     "verdict_after", "parameters": [...], "observables": [...], "conclusion"}],
      "summary": [str], "extension_records": [...], "tests": [...], "untestable": [...],
      "catalogue": [...], "parameters": {...}, "twin_runs": [...], "provenance": {...},
      "schema_version": 1}
@@ -30,11 +32,16 @@ Steps (docs/design.md, "The critique loop"):
 4. model findings: each drop discrepancy split into its causes, each tested, and the twin's
    orientation dependence against the lab's (``attribution``);
 5. for each found mechanism that a model extension answers, its gain on held-out trials
-   (``gain``).
+   (``gain``);
+6. with ``heap_gain`` (a campaign folder), for each extension accepted on its held-out trials
+   that a heap can switch on: the campaign again with it, and what that changes in the
+   calibrated parameters and in the heap observables the calibration does not fit
+   (``heap_gain``).
 """
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,10 +49,11 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from demcal.analyse.critique.diagnosis import (CORRECTIONS, DEFAULT_ALPHA, PRACTICAL_THRESHOLDS, CovariateTest,
-                                        Untestable, measured_series, run_tests)
+from demcal.analyse.critique.diagnosis import (CORRECTIONS, DEFAULT_ALPHA, POOLED, PRACTICAL_THRESHOLDS,
+                                        CovariateTest, Untestable, measured_series, run_tests)
 from demcal.analyse.critique.attribution import ModelFinding, attribute_drop_discrepancy, orientation_discrepancy
 from demcal.analyse.critique.gain import ExtensionGain
+from demcal.analyse.critique.heap_gain import HeapGain
 from demcal.analyse.critique.mechanisms import CATALOGUE, Finding, ill_conditioned, judge
 from demcal.analyse.critique.twins import (Discrepancy, TwinRunner, constant_discrepancy, drop_trials,
                                     incline_groups,
@@ -54,7 +62,7 @@ from demcal.analyse.critique.twins import (Discrepancy, TwinRunner, constant_dis
                                     wall_of)
 from demcal.analyse.results import CampaignResult
 from demcal.errors import InputError
-from demcal.jsonio import check_schema, read_json
+from demcal.jsonio import check_schema, read_json, to_jsonable
 from demcal.provenance import Provenance
 
 RIGS = ("drop", "incline", "repose")
@@ -79,6 +87,8 @@ class Critique:
     model_findings : list of ModelFinding
         The tested causes of the discrepancies, each with its share.
     extensions : list of ExtensionGain
+    heap_gains : list of HeapGain
+        What each accepted extension changes on the heap, after recalibrating with it.
     tests : list of CovariateTest
         Every test of the residual structure (adjusted).
     untestable : list of Untestable
@@ -101,6 +111,7 @@ class Critique:
     twin_runs: list = field(default_factory=list)
     provenance: Provenance = field(default_factory=Provenance)
     model_findings: list = field(default_factory=list)
+    heap_gains: list = field(default_factory=list)
 
     def found(self) -> list:
         """The findings with verdict ``found``."""
@@ -125,6 +136,16 @@ class Critique:
         for e in self.extensions:
             lines.append(f"  extension {e.name}: {e.measure} of {e.quantity} {_fmt(e.before)} -> {_fmt(e.after)}, "
                          f"gain {_fmt(e.gain)} [{_fmt(e.ci95[0])}, {_fmt(e.ci95[1])}]")
+        for h in self.heap_gains:
+            lines.append(f"  heap-side gain of {h.extension} ({h.campaign}):")
+            for p in h.parameters:
+                lines.append(f"    {p.name:14s} {_fmt(p.before, 4)} -> {_fmt(p.after, 4)}"
+                             + ("" if p.within_uncertainty is None else
+                                "  (within its uncertainty)" if p.within_uncertainty else "  (beyond its uncertainty)"))
+            for o in h.observables:
+                lines.append(f"    {o.name:26s} {_fmt(o.before)} -> {_fmt(o.after)} {o.unit}, difference "
+                             f"{_fmt(o.difference)} [{_fmt(o.ci95[0])}, {_fmt(o.ci95[1])}]"
+                             + ("  (fitted)" if o.fitted else ""))
         return "\n".join(lines + list(self.conclusions))
 
     def to_dict(self) -> dict:
@@ -133,6 +154,7 @@ class Critique:
                 "findings": [f.to_dict() for f in self.findings],
                 "model_findings": [m.to_dict() for m in self.model_findings],
                 "extensions": [e.to_dict() for e in self.extensions],
+                "heap_gains": [h.to_dict() for h in self.heap_gains],
                 "summary": list(self.conclusions),
                 "extension_records": [e.as_dict() for e in self.extensions],
                 "tests": [t.to_dict() for t in self.tests],
@@ -151,6 +173,8 @@ class Critique:
                        findings=[Finding.from_dict(x) for x in d["findings"]],
                        model_findings=[ModelFinding.from_dict(x) for x in d.get("model_findings", [])],
                        extensions=[ExtensionGain.from_dict(x) for x in d.get("extension_records", [])],
+                       heap_gains=[HeapGain.from_dict(x, f"{where}: heap_gains[{i}]")
+                                   for i, x in enumerate(d.get("heap_gains", []))],
                        tests=[CovariateTest.from_dict(x) for x in d.get("tests", [])],
                        untestable=[Untestable.from_dict(x) for x in d.get("untestable", [])],
                        conclusions=list(d.get("summary", [])), parameters=dict(d.get("parameters", {})),
@@ -190,7 +214,8 @@ def _fmt(x, d=3):
 
 def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EXTENSIONS,
                  alpha: float = DEFAULT_ALPHA, correction: str = "bh", store_dir=None, workers: int = 1,
-                 progress: bool = False, repose_seeds: int = 0, seed: int = 0) -> Critique:
+                 progress: bool = False, repose_seeds: int = 0, seed: int = 0, heap_gain: bool = False,
+                 campaign_runner=None) -> Critique:
     """Critique the model calibrated from a workbook (see the module docstring).
 
     Parameters
@@ -216,6 +241,12 @@ def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EX
         Repose twins to run when no campaign gives validation runs (0: none).
     seed : int
         Seed of the bootstrap intervals.
+    heap_gain : bool
+        Recalibrate the campaign with each accepted extension and compare (``heap_gain``);
+        needs a campaign folder. Each is a campaign of its own, with the campaign's own
+        settings (its worker count too), kept and resumable in ``DIR/heap_gain/<extension>``.
+    campaign_runner : callable, optional
+        The recalibrations' DEM runner (default ``analyse.campaign.campaign_runner``).
 
     Returns
     -------
@@ -227,6 +258,9 @@ def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EX
     if unknown:
         raise InputError(f"unknown rig(s) {unknown}; valid: {', '.join(RIGS)}")
     measurement, workbook, results, campaign = load_source(source)
+    if heap_gain and campaign is None:
+        raise InputError(f"{source}: the heap-side gain recalibrates a campaign; give a campaign folder "
+                         "(one holding results.json), not a workbook")
     params, param_source = twin_parameters(measurement, results)
     wall = wall_of(measurement.meta)
     series = measured_series(measurement, workbook)
@@ -257,6 +291,8 @@ def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EX
         if twins and extensions:
             gains += _extensions(runner, params, findings, model_findings, drop_state, tuple(extensions), seed,
                                  summary)
+        heap_gains = _heap_gains(campaign, results, gains, findings + model_findings, heap_gain, summary,
+                                 runner=campaign_runner, progress=progress)
         summary[:0] = _drop_statements(drop_state, params)
         summary += _finding_statements(findings)
         runs = list(runner.log) if runner is not None else []
@@ -265,8 +301,9 @@ def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EX
             runner.close()
     opts = {"twins": twins, "rigs": list(rigs), "extensions": list(extensions), "alpha": alpha,
             "correction": correction, "repose_seeds": repose_seeds, "source": str(source)}
+    opts["heap_gain"] = heap_gain
     return Critique(discrepancies=discrepancies, findings=findings, model_findings=model_findings,
-                    extensions=gains, tests=tests,
+                    extensions=gains, heap_gains=heap_gains, tests=tests,
                     untestable=untestable, conclusions=summary,
                     parameters={"values": params.to_dict(), "source": param_source}, twin_runs=runs,
                     provenance=Provenance(inputs=dict(measurement.provenance.inputs), seed=seed, options=opts))
@@ -374,7 +411,9 @@ def _pairs_named(findings, mechanism: str, state: dict) -> list:
     pairs = []
     for f in findings:
         where = getattr(f, "quantity", None) or getattr(f, "observable", "")
-        if f.mechanism == mechanism and f.verdict == "found" and where.startswith("restitution."):
+        if f.mechanism == mechanism and f.verdict == "found" and where == f"{POOLED}restitution":
+            pairs += [p for p in state if p not in pairs]       # an effect every drop pair shares
+        elif f.mechanism == mechanism and f.verdict == "found" and where.startswith("restitution."):
             pair = where.split(" ", 1)[0].split(".", 1)[-1]
             if pair in state and pair not in pairs:
                 pairs.append(pair)
@@ -429,6 +468,42 @@ def _extensions(runner, params, findings, model_findings, state, chosen, seed, s
                        f"before, {_fmt(g.after)} after, gain {_fmt(g.gain)} [{_fmt(g.ci95[0])}, {_fmt(g.ci95[1])}]: "
                        f"it {verdict}. Fitted: {g.fitted}.")
     return gains
+
+
+def _heap_gains(campaign, results, gains, found, run: bool, summary, **kw) -> list:
+    """The heap-side gain of every extension accepted for a found mechanism: its held-out gain's
+    interval above 0 and a switch a heap can take. Without ``run`` (or without a campaign) the
+    summary says which would be measured and how."""
+    from demcal.analyse.critique.heap_gain import heap_gain
+
+    found_mechanisms = {f.mechanism for f in found if f.verdict == "found"}
+    out, done = [], {}
+    for g in gains:
+        if g.mechanism not in found_mechanisms:
+            continue
+        settings = json.dumps(to_jsonable(g.heap_settings), sort_keys=True)
+        if (g.name, settings) in done:  # the same switch accepted on another pair
+            continue
+        # one folder per extension, and per pair when pairs switch it differently
+        folder = g.name if g.name not in {n for n, _ in done} else f"{g.name}-{g.quantity.rsplit('.', 1)[-1]}"
+        done[(g.name, settings)] = folder
+        if not g.heap_settings:
+            summary.append(f"Heap-side gain of {g.name} ({g.quantity}): none to measure, it sets a "
+                           "parameter value rather than switching the model.")
+        elif not (math.isfinite(g.ci95[0]) and g.ci95[0] > 0):
+            summary.append(f"Heap-side gain of {g.name} ({g.quantity}): not measured, the extension is not "
+                           f"accepted (held-out gain {_fmt(g.gain)} [{_fmt(g.ci95[0])}, {_fmt(g.ci95[1])}] "
+                           "does not exclude 0).")
+        elif not run or campaign is None:
+            summary.append(f"Heap-side gain of {g.name} ({g.quantity}): not measured; "
+                           + ("`demcal critique DIR --heap-gain` recalibrates the campaign with it and "
+                              "compares the heaps." if campaign is not None else
+                              "it needs a calibration campaign to recalibrate."))
+        else:
+            h = heap_gain(campaign, results, g, folder=folder, **kw)
+            out.append(h)
+            summary.append(f"Heap-side gain of {g.name} ({g.quantity}). {h.conclusion}")
+    return out
 
 
 def _direct_use(twins, e_contact: float) -> dict | None:

@@ -70,3 +70,36 @@ def heap_standin_runner(inputs: dict) -> dict:
     return {"rig": "repose", "observable": {"angle_deg": angle, "angle_profile_deg": angle},
             "record": {}, "wall_s": 0.0, "steps": 0, "spheres": 0, "sphere_steps_per_s": 0.0,
             "seed": inputs["seed"]}
+
+
+#: Flat-landing apparent over contact restitution of the stand-in's drop twin without shared
+#: damping (the DEM's five-sphere segment: 0.05 at e = 0.36); 1 with it.
+FLAT_DROP_RATIO = 0.14
+#: Outflow fraction of the stand-in heap: OUTFLOW_BASE + OUTFLOW_SLOPE (e_pw - 0.5), plus noise.
+OUTFLOW_BASE, OUTFLOW_SLOPE, OUTFLOW_NOISE = 0.10, 0.2, 0.01
+
+
+def extension_standin_runner(inputs: dict) -> dict:
+    """The noisy heap stand-in with flat drops whose rebound depends on ``multi_contact_damping``
+    (``FLAT_DROP_RATIO`` times the contact restitution without it, the contact restitution with
+    it), and heaps that record an outflow fraction depending on e_pw, an outside pile angle and a
+    crest height: what a recalibration with the extension changes is known in closed form."""
+    import hashlib
+    import json
+
+    p = inputs["params"]
+    rng = np.random.default_rng(int.from_bytes(hashlib.sha256(json.dumps(inputs, sort_keys=True).encode())
+                                               .digest()[:8], "little"))
+    if inputs.get("rig") == "drop":
+        e = p["e_pp"] if inputs["pair"] == "particle-particle" else p["e_pw"]
+        ratio = 1.0 if p.get("multi_contact_damping") else FLAT_DROP_RATIO
+        return {"rig": "drop", "observable": {"apparent_restitution": ratio * e + rng.normal(0.0, 0.005)}}
+    if inputs.get("rig") == "incline":
+        return heap_standin_runner(inputs)
+    angle = heap_standin_angle(p) + rng.normal(0.0, HEAP_NOISE_SD)
+    outflow = OUTFLOW_BASE + OUTFLOW_SLOPE * (p["e_pw"] - 0.5) + rng.normal(0.0, OUTFLOW_NOISE)
+    return {"rig": "repose",
+            "observable": {"angle_deg": angle, "angle_profile_deg": angle, "outside_fraction": outflow,
+                           "angle_outside_deg": 25.0 + rng.normal(0.0, 1.0)},
+            "record": {"crest_height": 0.08 + rng.normal(0.0, 0.002)}, "wall_s": 0.0, "steps": 0, "spheres": 0,
+            "sphere_steps_per_s": 0.0, "seed": inputs["seed"]}

@@ -326,27 +326,36 @@ def test_html_works_offline(campaign):
 def test_report_command_renders_critique_json(campaign, tmp_path, capsys):
     out = tmp_path / "copy"
     shutil.copytree(campaign["out"], out)
-    critique = {"discrepancies": [{"observable": "restitution.particle-steel", "measured": 0.35,
-                                   "simulated": 0.41, "difference": 0.06, "exceeds": True}],
-                "findings": [{"mechanism": "velocity-dependent restitution", "verdict": "supported",
+    critique = {"discrepancies": [{"observable": "restitution.particle-steel", "sheet": "drop", "measured": 0.35,
+                                   "measured_ci95": [0.33, 0.37], "simulated": 0.41, "simulated_ci95": None,
+                                   "difference": 0.06, "combined_u95": 0.02, "exceeds": True,
+                                   "n_measured": 10, "n_simulated": 1}],
+                "findings": [{"mechanism": "velocity_dependent_restitution", "verdict": "found",
                               "sheet": "drop", "covariate": "drop_height_mm", "effect": -0.12,
-                              "ci95": [-0.2, -0.04], "p_adjusted": 0.003}],
-                "extensions": []}
+                              "ci95": [-0.2, -0.04], "p_adjusted": 0.003}]}
     (out / "critique.json").write_text(json.dumps(critique))
     assert main(["report", str(out), "--no-pdf"]) == 0
     assert f"report: {out / 'report.html'}" in capsys.readouterr().out
     tables = {t["id"]: t for t in json.loads((out / "tables.json").read_text())["tables"]}
-    assert tables["C2"]["columns"] == ["mechanism", "verdict", "sheet", "covariate", "effect", "ci95",
-                                       "p_adjusted"]
-    assert tables["C2"]["rows"] == [["velocity-dependent restitution", "supported", "drop",
-                                     "drop_height_mm", -0.12, [-0.2, -0.04], 0.003]]
+    assert tables["C2"]["columns"][:7] == ["mechanism", "verdict", "sheet", "covariate", "effect", "ci95",
+                                           "p_adjusted"]
+    assert tables["C2"]["rows"][0][:7] == ["velocity_dependent_restitution", "found", "drop",
+                                           "drop_height_mm", -0.12, [-0.2, -0.04], 0.003]
     assert tables["C1"]["rows"][0][0] == "restitution.particle-steel" and tables["C3"]["rows"] == []
     html = (out / "report.html").read_text(encoding="utf-8")
-    assert "Critique of the calibrated model" in html and "velocity-dependent restitution" in html
-    assert "Table C3" in html
+    assert "Critique of the calibrated model" in html and "velocity_dependent_restitution" in html
+    assert "Table C3" in html and "Table C5" in html and "Table C6" in html
     # no drop twin: the report says the question of sqrt(h2/h1) was not assessed
     assert "Not assessed: this critique ran no drop twin" in html
     assert tables["C4"]["rows"] == [] and "None: critique.json holds no covariate tests." in tables["C4"]["notes"]
+    assert tables["C5"]["rows"] == [] and tables["C6"]["rows"] == []
+    # a critique.json missing a documented key is refused by name, not half-rendered
+    del critique["discrepancies"][0]["measured_ci95"]
+    (out / "critique.json").write_text(json.dumps(critique))
+    assert main(["report", str(out), "--no-pdf"]) == 2
+    assert "critique.json: not a critique of this layout" in capsys.readouterr().err
+    (out / "critique.json").write_text(json.dumps({**critique, "discrepancies": []}))
+    assert main(["report", str(out), "--no-pdf"]) == 0
     assert (out / "tables.json").read_text().count("critique.json") >= 3  # hashed and named as source
 
 
@@ -410,6 +419,27 @@ CRITIQUE = {
                     "before_ci95": [0.06, 0.082], "after_ci95": [0.002, 0.019], "n_held_out": 20,
                     "fitted": "half 1: e_pw = 0.441 [0.425, 0.458] from 10 drops; half 2: e_pw = 0.452 "
                               "[0.436, 0.469] from 10 drops (calibrated 0.352)", "note": ""}],
+    "extension_records": [
+        {"name": "inverted_restitution", "mechanism": "orientation_rotation", "measure": "abs_mean_residual",
+         "quantity": "restitution.particle-steel",
+         "held_out": "20 drops, each judged by the inversion of the other half (two-fold cross-fit)",
+         "before": 0.0712, "before_ci95": [0.06, 0.082], "after": 0.00814, "after_ci95": [0.002, 0.019],
+         "gain": 0.0631, "ci95": [0.0512, 0.0748], "n_held_out": 20,
+         "fitted": "half 1: e_pw = 0.441 [0.425, 0.458] from 10 drops; half 2: e_pw = 0.452 "
+                   "[0.436, 0.469] from 10 drops (calibrated 0.352)", "note": "",
+         "extension": {"extension": "inverted_restitution", "pair": "particle-steel"}, "heap_settings": {}}],
+    "heap_gains": [
+        {"extension": "multi_contact_damping", "mechanism": "multi_contact_damping",
+         "settings": {"multi_contact_damping": True}, "campaign": "heap_gain/multi_contact_damping",
+         "verdict_before": "equivalent", "verdict_after": "equivalent",
+         "parameters": [{"name": "e_pw", "before": 0.71, "after": 0.36, "before_ci95": [0.62, 0.8],
+                         "after_ci95": [0.3, 0.42], "shift": -0.35, "within_uncertainty": False},
+                        {"name": "mu_s_pw", "before": 0.18, "after": 0.19, "before_ci95": [0.09, 0.39],
+                         "after_ci95": [0.1, 0.38], "shift": 0.01, "within_uncertainty": True}],
+         "observables": [{"name": "outflow fraction", "unit": "-", "fitted": False, "before": 0.094,
+                          "before_sd": 0.02, "n_before": 20, "after": 0.121, "after_sd": 0.025, "n_after": 20,
+                          "difference": 0.027, "ci95": [0.0125, 0.0415], "beyond_noise": True}],
+         "conclusion": "Recalibrated with multi_contact_damping: e_pw moved beyond its uncertainty."}],
     "summary": [
         "restitution.particle-steel: the lab's sqrt(h2/h1) is 0.352; the drop twin with contact e_pw = 0.352, "
         "at the lab's 20 drop heights and orientations, rebounds with an apparent 0.281 [0.268, 0.294] "

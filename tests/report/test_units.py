@@ -68,18 +68,21 @@ def test_heap_profile_reads_both_record_layouts():
     assert heap_profile({"result": {"record": {}}}) is None
 
 
-def test_covariate_tests_table_sorts_by_adjusted_p_and_keeps_every_test_and_field():
+def test_covariate_tests_table_sorts_by_adjusted_p_and_keeps_every_test():
+    from demcal.analyse.critique.loop import Critique
     from demcal.report.tables import Campaign, table_covariate_tests
 
     def t(series, p, p_adj, **kw):
         return {"series": series, "sheet": "drop", "source": "measured", "covariate": "drop_height_mm",
                 "method": "trend", "n": 10, "effect": 0.1, "ci95": [0.0, 0.2], "effect_unit": "1/mm",
-                "practical": 0.05, "threshold": 0.03, "p_value": p, "p_adjusted": p_adj, **kw}
+                "span": 300.0, "practical": 0.05, "threshold": 0.03, "p_value": p, "p_adjusted": p_adj, **kw}
 
     tests = [t("a", 0.2, 0.4), t("b", None, None), t("c", 0.001, 0.004, significant=True, relevant=True,
                                                       ci_selected=[0.01, 0.3]),
-             t("d", 0.1, 0.4, bootstrap={"n": 2000})]
-    c = Campaign(measurement={}, results=None, critique={"tests": tests},
+             t("d", 0.1, 0.4, level="specimen")]
+    critique = Critique.from_dict({"discrepancies": [], "findings": [], "tests": tests,
+                                   "provenance": {"options": {"alpha": 0.01, "correction": "bh"}}})
+    c = Campaign(measurement={}, results=None, critique=critique,
                  critique_source={"file": "critique.json", "sha256": "00"})
     table = table_covariate_tests(c)
     # adjusted p, then raw p, then list order; a test without p-values last, none dropped
@@ -87,14 +90,19 @@ def test_covariate_tests_table_sorts_by_adjusted_p_and_keeps_every_test_and_fiel
                                                          (1, "a", "not significant"), (2, "b", "not significant")]
     assert "Test 3: interval after selection (false-coverage rate, Benjamini & Yekutieli 2005) " \
            "[0.01, 0.3] 1/mm." in table.notes
-    assert 'Test 4, bootstrap: {"n": 2000}' in table.notes          # a field C4 has no column for
+    assert [r[6] for r in table.rows] == ["trial", "specimen", "trial", "trial"]   # the unit of each test
+    assert table.notes[0].startswith("Sorted by adjusted p-value (Benjamini-Hochberg, all tests together)")
     assert table.sources == ({"kind": "critique", "file": "critique.json", "sha256": "00", "path": "tests"},)
-    empty = table_covariate_tests(Campaign(measurement={}, results=None, critique={}))
+    empty = table_covariate_tests(Campaign(measurement={}, results=None, critique=None))
     assert empty.rows == () and "None: critique.json holds no covariate tests." in empty.notes
 
 
 def test_critique_text_states_direct_use_and_each_summary_sentence_once():
+    from demcal.analyse.critique.loop import Critique
     from demcal.report.render import critique_text
+
+    def critique(**parts):
+        return Critique.from_dict({"discrepancies": [], "findings": [], **parts})
 
     drop = {"observable": "restitution.particle-particle (drop twin, apparent sqrt(h2/h1))", "measured": 0.3,
             "measured_ci95": [0.28, 0.32], "simulated": 0.29, "simulated_ci95": [0.27, 0.31], "difference": 0.01,
@@ -102,11 +110,13 @@ def test_critique_text_states_direct_use_and_each_summary_sentence_once():
             "note": "contact e_pp = 0.3; twin apparent / contact = 0.967: whether sqrt(h2/h1) may feed the DEM "
                     "directly is undetermined with these drops"}
     ext = {"name": "velocity_dependent_restitution", "mechanism": "velocity_dependent_restitution",
-           "measure": "rms_residual of restitution.particle-particle", "held_out": "4 drops", "before": 0.02,
-           "after": 0.019, "gain": 0.001, "ci95": [-0.004, 0.006]}
+           "measure": "rms_residual", "quantity": "restitution.particle-particle", "held_out": "4 drops",
+           "before": 0.02, "before_ci95": [0.01, 0.03], "after": 0.019, "after_ci95": [0.01, 0.028],
+           "gain": 0.001, "ci95": [-0.004, 0.006], "n_held_out": 4}
     summary = ["restitution.particle-particle: the lab's sqrt(h2/h1) is 0.3; ... undetermined ...",
                "Found: velocity_dependent_restitution."]
-    text = critique_text({"discrepancies": [drop], "extensions": [ext], "summary": summary})
+    text = critique_text(critique(discrepancies=[{"sheet": "drop", **drop}], extension_records=[ext],
+                                  summary=summary))
     (d,) = text["direct"]
     assert d["headline"] == (
         "restitution.particle-particle: whether sqrt(h2/h1) may feed the DEM directly is undetermined. The lab's "
@@ -118,4 +128,5 @@ def test_critique_text_states_direct_use_and_each_summary_sentence_once():
                                "on 4 drops 0.02 before, 0.019 after, gain 0.001 [-0.004, 0.006]: no clear gain "
                                "(Table C3)."]
     assert text["summary"] == [summary[1]]
-    assert critique_text({"summary": summary}) == {"direct": [], "summary": summary}
+    assert critique_text(critique(summary=summary)) == {"direct": [], "summary": summary}
+    assert critique_text(None) == {"direct": [], "summary": []}
