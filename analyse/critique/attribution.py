@@ -66,7 +66,8 @@ class ModelFinding:
     measured, simulated : float or None
         The lab's and the twin's value of the observable.
     share : float or None
-        The cause's part of measured - simulated, as a fraction of it.
+        The cause's part of measured - simulated, as a fraction of it (None when that
+        difference is within its own interval: there is nothing to share).
     part, part_ci95 : float or None, list or None
         The part itself [unit of the observable] and its bootstrap interval.
     evidence : str
@@ -178,8 +179,11 @@ def attribute_drop_discrepancy(runner, params, pair: str, state: dict, rng) -> t
                                      drop_task(on_params, rig_pair, height, FLAT_DEG, 0)], "flat landing")
     flat_off, flat_on = (float(r["observable"]["apparent_restitution"]) for r in flat)
 
+    # a share of a discrepancy that is not there (its interval holds 0) means nothing
+    real = ci["total"][0] > 0 or ci["total"][1] < 0
+
     def share(x):
-        return x / total if total != 0 else None
+        return x / total if real and total != 0 else None
 
     def judged(part):
         lo, hi = ci[part]

@@ -481,16 +481,17 @@ def _heap_gains(campaign, results, gains, found, run: bool, summary, **kw) -> li
     for g in gains:
         if g.mechanism not in found_mechanisms:
             continue
+        if not g.heap_settings:
+            summary.append(f"Heap-side gain of {g.name} ({g.quantity}): none to measure, it sets a "
+                           "parameter value rather than switching the model.")
+            continue
         settings = json.dumps(to_jsonable(g.heap_settings), sort_keys=True)
         if (g.name, settings) in done:  # the same switch accepted on another pair
             continue
         # one folder per extension, and per pair when pairs switch it differently
         folder = g.name if g.name not in {n for n, _ in done} else f"{g.name}-{g.quantity.rsplit('.', 1)[-1]}"
         done[(g.name, settings)] = folder
-        if not g.heap_settings:
-            summary.append(f"Heap-side gain of {g.name} ({g.quantity}): none to measure, it sets a "
-                           "parameter value rather than switching the model.")
-        elif not (math.isfinite(g.ci95[0]) and g.ci95[0] > 0):
+        if not (math.isfinite(g.ci95[0]) and g.ci95[0] > 0):
             summary.append(f"Heap-side gain of {g.name} ({g.quantity}): not measured, the extension is not "
                            f"accepted (held-out gain {_fmt(g.gain)} [{_fmt(g.ci95[0])}, {_fmt(g.ci95[1])}] "
                            "does not exclude 0).")
