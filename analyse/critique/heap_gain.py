@@ -2,8 +2,10 @@
 under critique.
 
 A gain on held-out drops shows that an extension mends the twin of one lab test. What the
-calibration is for is the heap. For each extension accepted for a found mechanism (its held-out
-gain's interval above 0, and an engine hook that a heap can switch on), :func:`recalibrate`
+calibration is for is the heap. For each extension accepted for a found mechanism (an engine
+hook a heap can switch on that does not make the held-out trials worse: a calibration that
+compensates an artefact with a parameter fits the drops as well as the mended model does, and
+the question is then what the mended model changes on the heap), :func:`recalibrate`
 runs the campaign again with the same workbook, settings and seed and the extension on
 (``CampaignConfig.model_extensions``), in ``DIR/heap_gain/<extension>/``, and
 :func:`compare_campaigns` compares the two:

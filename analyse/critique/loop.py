@@ -33,8 +33,8 @@ Steps (docs/design.md, "The critique loop"):
    orientation dependence against the lab's (``attribution``);
 5. for each found mechanism that a model extension answers, its gain on held-out trials
    (``gain``);
-6. with ``heap_gain`` (a campaign folder), for each extension accepted on its held-out trials
-   that a heap can switch on: the campaign again with it, and what that changes in the
+6. with ``heap_gain`` (a campaign folder), for each extension of a found mechanism that a heap
+   can switch on and that does not make its held-out trials worse: the campaign again with it, and what that changes in the
    calibrated parameters and in the heap observables the calibration does not fit
    (``heap_gain``).
 """
@@ -471,8 +471,10 @@ def _extensions(runner, params, findings, model_findings, state, chosen, seed, s
 
 
 def _heap_gains(campaign, results, gains, found, run: bool, summary, **kw) -> list:
-    """The heap-side gain of every extension accepted for a found mechanism: its held-out gain's
-    interval above 0 and a switch a heap can take. Without ``run`` (or without a campaign) the
+    """The heap-side gain of every extension accepted for a found mechanism: a switch a heap can
+    take that does not make the held-out trials worse (its gain's interval is not below 0; a
+    calibration that absorbed an artefact into a parameter fits them as well as the mended
+    model, so no gain is required). Without ``run`` (or without a campaign) the
     summary says which would be measured and how."""
     from demcal.analyse.critique.heap_gain import heap_gain
 
@@ -491,10 +493,10 @@ def _heap_gains(campaign, results, gains, found, run: bool, summary, **kw) -> li
         # one folder per extension, and per pair when pairs switch it differently
         folder = g.name if g.name not in {n for n, _ in done} else f"{g.name}-{g.quantity.rsplit('.', 1)[-1]}"
         done[(g.name, settings)] = folder
-        if not (math.isfinite(g.ci95[0]) and g.ci95[0] > 0):
+        if not (math.isfinite(g.ci95[1]) and g.ci95[1] >= 0):
             summary.append(f"Heap-side gain of {g.name} ({g.quantity}): not measured, the extension is not "
-                           f"accepted (held-out gain {_fmt(g.gain)} [{_fmt(g.ci95[0])}, {_fmt(g.ci95[1])}] "
-                           "does not exclude 0).")
+                           f"accepted: it makes the held-out trials worse (gain {_fmt(g.gain)} "
+                           f"[{_fmt(g.ci95[0])}, {_fmt(g.ci95[1])}]).")
         elif not run or campaign is None:
             summary.append(f"Heap-side gain of {g.name} ({g.quantity}): not measured; "
                            + ("`demcal critique DIR --heap-gain` recalibrates the campaign with it and "
