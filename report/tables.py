@@ -923,19 +923,16 @@ def table_validation(c: Campaign) -> Table:
 # ----------------------------------------------------------------------------------------------
 # Critique (``analyse.critique.loop.Critique``, stored as critique.json)
 
-#: Columns of the critique tables: (header, attribute of the record). The headers are
-#: critique.json's keys, so that a reader finds each cell there.
-DISCREPANCY_COLUMNS = tuple((a, a) for a in (
-    "observable", "sheet", "measured", "measured_ci95", "simulated", "simulated_ci95", "difference",
-    "combined_u95", "exceeds", "n_measured", "n_simulated"))
-FINDING_COLUMNS = tuple((a, a) for a in (
-    "mechanism", "verdict", "sheet", "covariate", "effect", "ci95", "p_adjusted", "quantity", "source",
-    "effect_unit"))
-MODEL_FINDING_COLUMNS = tuple((a, a) for a in (
-    "mechanism", "verdict", "observable", "measured", "simulated", "part", "part_ci95", "share"))
-EXTENSION_COLUMNS = (("name", "name"), ("mechanism", "mechanism"), ("before", "before"), ("after", "after"),
-                     ("gain", "gain"), ("ci95", "ci95"), ("measure", "measure"), ("quantity", "quantity"),
-                     ("before_ci95", "before_ci95"), ("after_ci95", "after_ci95"), ("n_held_out", "n_held_out"))
+#: Columns of the critique tables: attributes of the records, which are also critique.json's
+#: keys, so that a reader finds each cell there.
+DISCREPANCY_COLUMNS = ("observable", "sheet", "measured", "measured_ci95", "simulated", "simulated_ci95",
+                       "difference", "combined_u95", "exceeds", "n_measured", "n_simulated")
+FINDING_COLUMNS = ("mechanism", "verdict", "sheet", "covariate", "effect", "ci95", "p_adjusted", "quantity",
+                   "source", "effect_unit")
+MODEL_FINDING_COLUMNS = ("mechanism", "verdict", "observable", "measured", "simulated", "part", "part_ci95",
+                         "share")
+EXTENSION_COLUMNS = ("name", "mechanism", "before", "after", "gain", "ci95", "measure", "quantity",
+                     "before_ci95", "after_ci95", "n_held_out")
 
 
 def _cell(value):
@@ -951,14 +948,14 @@ def _record_table(table_id: str, title: str, records: list, columns: tuple, note
                   path: str) -> Table:
     """A table of critique records, one row each; the text fields (``note_fields``) go under the
     table as numbered notes, so that nothing is left out."""
-    rows = tuple(tuple(_cell(getattr(r, attr)) for _, attr in columns) for r in records)
+    rows = tuple(tuple(_cell(getattr(r, attr)) for attr in columns) for r in records)
     notes = [] if records else ["None."]
     for i, r in enumerate(records, 1):
         for attr in note_fields:
             value = getattr(r, attr)
             if value not in (None, "", {}, []):
                 notes.append(f"Row {i}, {attr}: {_long(value)}")
-    return Table(table_id, title, tuple(h for h, _ in columns), ("",) * len(columns), rows, notes=tuple(notes),
+    return Table(table_id, title, columns, ("",) * len(columns), rows, notes=tuple(notes),
                  sources=({"kind": "critique", **source, "path": path},))
 
 
