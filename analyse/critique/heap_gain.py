@@ -144,6 +144,11 @@ def _fmt(x, d=3) -> str:
     return "n/a" if x is None or not math.isfinite(x) else f"{x:.{d}g}"
 
 
+def with_unit(x, unit: str) -> str:
+    """``x`` formatted, followed by its unit unless it has none (``-``)."""
+    return _fmt(x) + ("" if unit in ("", "-") else f" {unit}")
+
+
 def validation_values(campaign_dir, result: CampaignResult) -> dict:
     """``{observable name: array}`` over the validation runs of a campaign (its run store)."""
     from demcal.analyse.runs import RunStore
@@ -234,9 +239,9 @@ def _conclusion(extension, params, obs, verdict_before, verdict_after) -> str:
         if o.fitted or not math.isfinite(o.difference):
             continue
         if o.beyond_noise is None:
-            text.append(f"{o.name}: {_fmt(o.before)} -> {_fmt(o.after)} {o.unit}, too few runs for an interval.")
+            text.append(f"{o.name}: {_fmt(o.before)} -> {with_unit(o.after, o.unit)}, too few runs for an interval.")
             continue
-        text.append(f"{o.name} {_fmt(o.before)} -> {_fmt(o.after)} {o.unit} (difference {_fmt(o.difference)} "
+        text.append(f"{o.name} {_fmt(o.before)} -> {with_unit(o.after, o.unit)} (difference {_fmt(o.difference)} "
                     f"[{_fmt(o.ci95[0])}, {_fmt(o.ci95[1])}]): "
                     + ("beyond the run-to-run noise." if o.beyond_noise else "within the run-to-run noise."))
     text.append(f"Validation: {verdict_before} before, {verdict_after} after.")

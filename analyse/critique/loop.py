@@ -53,7 +53,7 @@ from demcal.analyse.critique.diagnosis import (CORRECTIONS, DEFAULT_ALPHA, POOLE
                                         CovariateTest, Untestable, measured_series, run_tests)
 from demcal.analyse.critique.attribution import ModelFinding, attribute_drop_discrepancy, orientation_discrepancy
 from demcal.analyse.critique.gain import ExtensionGain
-from demcal.analyse.critique.heap_gain import HeapGain
+from demcal.analyse.critique.heap_gain import HeapGain, with_unit
 from demcal.analyse.critique.mechanisms import CATALOGUE, Finding, ill_conditioned, judge
 from demcal.analyse.critique.twins import (Discrepancy, TwinRunner, constant_discrepancy, drop_trials,
                                     incline_groups,
@@ -143,7 +143,7 @@ class Critique:
                              + ("" if p.within_uncertainty is None else
                                 "  (within its uncertainty)" if p.within_uncertainty else "  (beyond its uncertainty)"))
             for o in h.observables:
-                lines.append(f"    {o.name:26s} {_fmt(o.before)} -> {_fmt(o.after)} {o.unit}, difference "
+                lines.append(f"    {o.name:26s} {_fmt(o.before)} -> {with_unit(o.after, o.unit)}, difference "
                              f"{_fmt(o.difference)} [{_fmt(o.ci95[0])}, {_fmt(o.ci95[1])}]"
                              + ("  (fitted)" if o.fitted else ""))
         return "\n".join(lines + list(self.conclusions))
