@@ -583,7 +583,8 @@ def rederive(out_dir) -> tuple[Campaign | None, list[str]]:
     paper, paper_source = load_paper()
     critique, critique_source = load_critique(out)
     return Campaign(measurement=measurement.to_dict(), results=derived, runs=runs, paper=paper,
-                    paper_source=paper_source, critique=critique, critique_source=critique_source), problems
+                    paper_source=paper_source, critique=critique, critique_source=critique_source,
+                    folder=out), problems
 
 
 def audit(out_dir) -> AuditResult:

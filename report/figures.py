@@ -61,18 +61,33 @@ def _save(fig: _MplFigure, path: Path) -> Path:
     return path
 
 
-def heap_photos(measurement: dict, path: Path) -> Path | None:
+def annotated_photos(measurement: dict, folder) -> list[tuple[dict, Path]]:
+    """(row, image) of each heap photo the measure stage annotated. The recorded path is relative
+    to where the campaign ran, so the image is looked for in the campaign folder's
+    ``annotated/`` first: a moved or copied folder keeps its photos."""
+    out = []
+    for r in measurement.get("per_row", {}).get("repose_angle_deg", []):
+        if not r.get("annotated"):
+            continue
+        recorded = Path(r["annotated"])
+        found = [p for p in ([Path(folder) / "annotated" / recorded.name] if folder else []) + [recorded]
+                 if p.is_file()]
+        if found:
+            out.append((r, found[0]))
+    return out
+
+
+def heap_photos(measurement: dict, path: Path, folder=None) -> Path | None:
     """The heap photos as processed by the measure stage (boundary, floor and fitted flank lines
     drawn on each), side by side with the angle found. None when no annotated photo exists."""
-    rows = [r for r in measurement.get("per_row", {}).get("repose_angle_deg", [])
-            if r.get("annotated") and Path(r["annotated"]).exists()]
+    rows = annotated_photos(measurement, folder)
     if not rows:
         return None
     n = min(len(rows), 3)
     fig = _new(6.8, 2.1 * math.ceil(len(rows) / n) + 0.2)
     axes = fig.subplots(math.ceil(len(rows) / n), n, squeeze=False).ravel()
-    for ax, rec in zip(axes, rows):
-        ax.imshow(imread(rec["annotated"]))
+    for ax, (rec, image) in zip(axes, rows):
+        ax.imshow(imread(image))
         flanks = ", ".join(f"{k} {v:.2f}°" for k, v in (rec.get("flanks") or {}).items() if v is not None)
         used = "" if rec.get("used", True) else " (rejected)"
         ax.set_title(f"{rec.get('id', '')}: {rec['value']:.2f}°{used}\n{flanks}", fontsize=7)
@@ -242,7 +257,7 @@ def _flank_midpoint(x: np.ndarray, z: np.ndarray) -> tuple[float, float, int]:
 
 
 def validation_heaps(results: CampaignResult, runs: dict, measurement: dict, path: Path,
-                     paper: dict | None = None) -> Path | None:
+                     paper: dict | None = None, folder=None) -> Path | None:
     """Simulated heap profiles of the validation runs against the photographed heap: one
     annotated photo, the profiles with the photo's mean angle drawn through their flank, and
     the simulated angles against the measured one (the paper's values beside)."""
@@ -251,8 +266,7 @@ def validation_heaps(results: CampaignResult, runs: dict, measurement: dict, pat
         return None
     records = [runs.get(r["key"], {}) for r in v.runs]
     profiles = [heap_profile(rec) for rec in records]
-    photo_rows = [r for r in measurement.get("per_row", {}).get("repose_angle_deg", [])
-                  if r.get("annotated") and Path(r["annotated"]).exists()]
+    photo_rows = annotated_photos(measurement, folder)
     target = float(v.result["target"]) if v.result else float(v.target_deg)
     est = measurement.get("quantities", {}).get("repose_angle_deg", {})
     sd = est.get("sd")
@@ -261,8 +275,8 @@ def validation_heaps(results: CampaignResult, runs: dict, measurement: dict, pat
     axes = list(np.atleast_1d(fig.subplots(1, panels, width_ratios=[1.4] * (panels - 1) + [1])))
     if photo_rows:
         ax = axes.pop(0)
-        ax.imshow(imread(photo_rows[0]["annotated"]))
-        ax.set_title(f"photographed heap {photo_rows[0].get('id', '')}", fontsize=7)
+        ax.imshow(imread(photo_rows[0][1]))
+        ax.set_title(f"photographed heap {photo_rows[0][0].get('id', '')}", fontsize=7)
         ax.set_axis_off()
     if any(profiles):
         ax = axes.pop(0)
@@ -414,7 +428,7 @@ def make_figures(campaign, fig_dir) -> list[Figure]:
         if path is not None:
             out.append(Figure(fid, path, caption))
 
-    add("photos", heap_photos(m, fig_dir / "heap_photos.png"),
+    add("photos", heap_photos(m, fig_dir / "heap_photos.png", campaign.folder),
         "Image processing of the heap photos: heap boundary, floor line and the straight line fitted "
         "to each measured flank (measure stage, annotated images).")
     wall = str(m.get("meta", {}).get("contact_material", "steel")).lower()
@@ -443,7 +457,8 @@ def make_figures(campaign, fig_dir) -> list[Figure]:
             "Response surfaces of the fitted quadratic model for each factor pair, the remaining "
             "factor held at the preferred solution (dashed red: the measured angle; star: the "
             "preferred solution; circles: Box-Behnken runs of the plane through the centre).")
-        add("validation", validation_heaps(r, campaign.runs, m, fig_dir / "validation.png", campaign.paper),
+        add("validation", validation_heaps(r, campaign.runs, m, fig_dir / "validation.png", campaign.paper,
+                                           campaign.folder),
             "Validation: the photographed heap, the simulated heap profiles of the validation runs "
             "with the photos' mean angle (± SD, dotted) drawn through their flank (grey dotted: the "
             "carton's end plate, when recorded), and the "

@@ -152,6 +152,8 @@ class Campaign:
         ``critique.json`` when the critique stage has run.
     critique_source : dict
         ``{"file", "sha256"}`` of ``critique.json`` (empty when absent).
+    folder : Path or None
+        The campaign folder (where its annotated photos are).
     """
 
     measurement: dict
@@ -161,6 +163,7 @@ class Campaign:
     paper_source: dict = field(default_factory=dict)
     critique: Critique | None = None
     critique_source: dict = field(default_factory=dict)
+    folder: Path | None = None
 
 
 def load_paper() -> tuple[dict, dict]:
@@ -215,7 +218,7 @@ def load_campaign(out_dir) -> Campaign:
     paper, paper_source = load_paper()
     critique, critique_source = load_critique(out)
     return Campaign(measurement=measurement, results=results, runs=runs, paper=paper,
-                    paper_source=paper_source, critique=critique, critique_source=critique_source)
+                    paper_source=paper_source, critique=critique, critique_source=critique_source, folder=out)
 
 
 def load_critique(out_dir) -> tuple[Critique | None, dict]:

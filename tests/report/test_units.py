@@ -130,3 +130,17 @@ def test_critique_text_states_direct_use_and_each_summary_sentence_once():
     assert text["summary"] == [summary[1]]
     assert critique_text(critique(summary=summary)) == {"direct": [], "summary": summary}
     assert critique_text(None) == {"direct": [], "summary": []}
+
+
+def test_annotated_photos_are_found_in_a_moved_campaign_folder(tmp_path):
+    """measure.json records the annotated photo's path as the campaign saw it (relative to where
+    it ran); a copied folder, or an audit run from elsewhere, finds it in DIR/annotated."""
+    from demcal.report.figures import annotated_photos
+
+    (tmp_path / "annotated").mkdir()
+    (tmp_path / "annotated" / "heap_1_annotated.png").write_bytes(b"png")
+    rows = [{"id": "heap_1", "annotated": "out/astragalus/annotated/heap_1_annotated.png"},
+            {"id": "heap_2", "annotated": "out/astragalus/annotated/heap_2_annotated.png"}, {"id": "heap_3"}]
+    m = {"per_row": {"repose_angle_deg": rows}}
+    assert annotated_photos(m, tmp_path) == [(rows[0], tmp_path / "annotated" / "heap_1_annotated.png")]
+    assert annotated_photos(m, None) == []
