@@ -23,7 +23,7 @@ runs the campaign again with the same workbook, settings and seed and the extens
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -182,6 +182,10 @@ def welch_interval(a, b) -> tuple[float, tuple]:
     return d, (d - half, d + half)
 
 
+def _mean_sd(x: np.ndarray) -> tuple[float, float]:
+    return (float(x.mean()) if len(x) else math.nan, float(x.std(ddof=1)) if len(x) > 1 else math.nan)
+
+
 def _estimates(result: CampaignResult) -> dict:
     """``{parameter: (value, ci95 or None)}`` of a campaign's calibrated parameters."""
     if result.calibration is not None:
@@ -206,10 +210,7 @@ def compare_campaigns(before: CampaignResult, before_values: dict, after: Campai
     for name, _, _, unit, fitted in HEAP_OBSERVABLES:
         a, b = before_values.get(name, np.array([])), after_values.get(name, np.array([]))
         d, ci = welch_interval(a, b)
-
-        def mean_sd(x):
-            return (float(x.mean()) if len(x) else math.nan, float(x.std(ddof=1)) if len(x) > 1 else math.nan)
-        (mb, sb), (ma, sa) = mean_sd(a), mean_sd(b)
+        (mb, sb), (ma, sa) = _mean_sd(a), _mean_sd(b)
         beyond = None if not all(math.isfinite(c) for c in ci) else bool(ci[0] > 0 or ci[1] < 0)
         obs.append(ObservableShift(name, unit, fitted, mb, sb, len(a), ma, sa, len(b), d, ci, beyond))
     return HeapGain(extension, mechanism, dict(settings), campaign, before.validation.verdict,
@@ -253,8 +254,6 @@ def recalibrate(campaign_dir, results: CampaignResult, settings: dict, name: str
     """Run the campaign of ``campaign_dir`` again with ``settings`` added to its model
     extensions, in ``campaign_dir/heap_gain/name`` (resumable: finished runs are kept).
     Returns (folder, result)."""
-    from dataclasses import replace
-
     from demcal.analyse.campaign import CampaignConfig, calibrate
     from demcal.measure.pipeline import Measurement
 
