@@ -82,8 +82,9 @@ from demcal.simulate.clump import ClumpTemplate
 from demcal.simulate.contact.hertz_mindlin import impact_damping, normal_force, tangential_force
 from demcal.simulate.contact.rolling import (EPSD, LIGGGHTS_REFF, constant_torque, epsd_torque,
                                              kick_mode, lever_index, rolling_lever)
-from demcal.simulate.integrate import (drift, half_kick, matrix_from_quat, pair_rolling_scale,
-                                       quat_from_matrix, quat_multiply, refresh_rotation)
+from demcal.simulate.integrate import (damping_inverse_mass, drift, half_kick, matrix_from_quat,
+                                       pair_rolling_scale, quat_from_matrix, quat_multiply,
+                                       refresh_rotation)
 from demcal.simulate.materials import MaterialTable
 from demcal.simulate.neighbours import build_pair_list, build_wall_list, grid_shape, padded_cell_count
 from demcal.simulate.timestep import DEFAULT_MAX_FRACTION, check_time_step, rayleigh_time
@@ -157,9 +158,11 @@ def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, share_mass, n
     into ``brv``, ``brm`` and ``brn`` (normals weighted by magnitude) for the kick's static stop.
 
     ``share_mass`` (the ``multi_contact_damping`` extension) gives the normal dashpot of each
-    contact the body's mass divided by the body's number of touching contacts this step
-    (counted into ``bcount``): n simultaneous contacts of one body then damp like one contact
-    of n times the stiffness, instead of each damping with the whole mass (Kodam et al. 2010).
+    contact the smaller of the body's mass over its number of touching contacts this step
+    (counted into ``bcount``) and the rigid-body effective mass at the contact
+    (``damping_inverse_mass``): n simultaneous contacts of one body then damp like one contact
+    of n times the stiffness, and one off-centre contact damps the mass it actually moves,
+    instead of each damping with the whole mass (Kodam et al. 2010).
     """
     pw = ph.shape[1]
     ww = wh.shape[1]
@@ -238,7 +241,10 @@ def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, share_mass, n
         mj = bmat[bj]
         r_star = ri * rj / rsum
         m_star = 1.0 / (binvm[bi] + binvm[bj])
-        m_damp = 1.0 / (binvm[bi] * bcount[bi] + binvm[bj] * bcount[bj]) if share_mass else m_star
+        m_damp = m_star
+        if share_mass:
+            m_damp = 1.0 / (damping_inverse_mass(bR, binvi, binvm, bcount, bi, aix, aiy, aiz, nx, ny, nz)
+                            + damping_inverse_mass(bR, binvi, binvm, bcount, bj, ajx, ajy, ajz, nx, ny, nz))
         cd = damp[mi, mj]
         if e_exp[mi, mj] != 0.0:
             cd = impact_damping(ph, k, HIST_IMPACT_SPEED, vn, log_e[mi, mj], e_exp[mi, mj],
@@ -328,7 +334,9 @@ def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, share_mass, n
         mi = bmat[bi]
         mk = wmat[k]
         m_star = 1.0 / binvm[bi]
-        m_damp = m_star / bcount[bi] if share_mass else m_star
+        m_damp = m_star
+        if share_mass:
+            m_damp = 1.0 / damping_inverse_mass(bR, binvi, binvm, bcount, bi, aix, aiy, aiz, nx, ny, nz)
         cd = damp[mi, mk]
         if e_exp[mi, mk] != 0.0:
             cd = impact_damping(wh, q, HIST_IMPACT_SPEED, -vn, log_e[mi, mk], e_exp[mi, mk],

@@ -36,9 +36,13 @@ and is recorded, by name and settings, in the provenance of every run that uses 
     sqrt(n) times too viscous: a flat landing rebounds far below the contact restitution while
     an end-on one (one contact) does not (the glued-sphere damping of Kodam et al. 2010). Engine
     hook (``multi_contact_damping=True``, :func:`with_multi_contact_damping`): each normal
-    dashpot takes the body's mass over its number of touching contacts this step, so n equal
-    contacts in parallel damp exactly like one contact of n times the stiffness and the body's
-    mass; a single contact is unchanged.
+    dashpot damps the smaller of two masses, the body's mass over its number of touching
+    contacts this step and the rigid-body effective mass at the contact,
+    1 / (1/m + (a x n) . I^-1 (a x n)) for the lever a from the centre of mass. So n equal
+    contacts of a flat landing damp exactly like one contact of n times the stiffness and the
+    body's mass, and a single off-centre contact (a tilted segment striking with its end sphere)
+    rebounds at the contact restitution, as rigid-body impact theory has it, where the whole
+    mass would overdamp it too; an end-on contact (lever along n) is unchanged.
 ``rolling_spring_dashpot``
     Elastic-plastic spring-dashpot rolling resistance (Ai et al. 2011, model type C). Engine
     hook (``rolling_model="epsd"``, ``rolling_damping_ratio``): the contact kernel's rolling
@@ -122,8 +126,9 @@ def engine_hooks(params: DEMParameters) -> list[dict]:
                             n_sizes=int(sizes.shape[0]),
                             length_mean=float(sizes[:, 0].mean()), diameter_mean=float(sizes[:, 1].mean())))
     if params.multi_contact_damping:
-        out.append(describe("multi_contact_damping", mode="normal dashpots share the body's mass among "
-                            "its simultaneous contacts (engine)"))
+        out.append(describe("multi_contact_damping", mode="each normal dashpot damps the smaller of the "
+                            "contact's rigid-body effective mass and the body's mass over its "
+                            "simultaneous contacts (engine)"))
     return out
 
 

@@ -67,6 +67,24 @@ def apply_inverse_inertia(R, b, inv_i, ax, ay, az):
 
 
 @evaluator
+def damping_inverse_mass(R, inv_i, inv_m, count, b, ax, ay, az, nx, ny, nz):
+    """Inverse of the mass a normal dashpot of body ``b`` damps with, when the body shares it
+    among its ``count[b]`` touching contacts (``multi_contact_damping``): the larger of
+    count / m and the rigid-body inverse mass at the contact along ``n``,
+    1/m + (a x n) . I^-1 (a x n), for the lever ``a`` from the centre of mass.
+
+    One contact alone then damps its own effective mass, so an off-centre impact rebounds at
+    the contact restitution as rigid-body impact theory has it; n equal contacts of a flat
+    landing (levers cancelling) damp m / n each, i.e. as one contact of n times the stiffness.
+    """
+    cx = ay * nz - az * ny
+    cy = az * nx - ax * nz
+    cz = ax * ny - ay * nx
+    wx, wy, wz = apply_inverse_inertia(R, b, inv_i, cx, cy, cz)
+    return max(inv_m[b] + cx * wx + cy * wy + cz * wz, inv_m[b] * count[b])
+
+
+@evaluator
 def apply_inertia(R, b, inv_i, wx, wy, wz):
     """R diag(1 / inv_i) R^T w: a world-frame angular velocity to angular momentum (an axis of
     zero inverse inertia holds no angular velocity and gives none)."""

@@ -41,7 +41,7 @@ from scipy import stats
 from demcal.analyse.critique.diagnosis import MIN_ROWS, PRACTICAL_THRESHOLDS, trend_test
 from demcal.analyse.critique.gain import N_BOOTSTRAP, _gain, split_trials
 from demcal.analyse.critique.twins import Discrepancy, drop_task, drop_twin_runner, run_drop_twins
-from demcal.simulate.extensions import describe
+from demcal.simulate.extensions import engine_hooks
 
 #: Orientation of a flat landing [deg]: the long axis horizontal.
 FLAT_DEG = 0.0
@@ -250,6 +250,5 @@ def _damping_gain(runner, params, on_params, pair: str, state: dict, rng):
                  "(two-fold cross-fit)", before, after, rng,
                  fitted=(f"{param} = mean sqrt(h2/h1) of the other half: "
                          + ", ".join(_fmt(e) for e in fitted)), note=note,
-                 extension=describe("multi_contact_damping", mode="normal dashpots share the body's mass "
-                                    "among its simultaneous contacts (engine)"),
+                 extension=next(h for h in engine_hooks(on_params) if h["extension"] == "multi_contact_damping"),
                  heap_settings={"multi_contact_damping": True})
