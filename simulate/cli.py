@@ -14,7 +14,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -42,8 +41,9 @@ def register(subparsers) -> None:
     p.add_argument("--json", dest="json_out", metavar="OUT", help="write the result to this JSON file")
     p.add_argument("--full-record", action="store_true",
                    help="put the whole record (all sphere positions, time series) in the JSON")
-    p.add_argument("--vtk", metavar="DIR", help=f"write about {VTK_FRAMES} particle frames and the "
-                                                "last one to DIR (.vtp, for ParaView)")
+    p.add_argument("--vtk", metavar="DIR",
+                   help=f"write about {VTK_FRAMES} frames of the spheres and the walls to DIR "
+                        "(.vtp), and their time series particles.pvd and walls.pvd for ParaView")
     g = p.add_argument_group("repose rig")
     g.add_argument("--profile", choices=("paper", "quick"), default="quick",
                    help="paper: the source paper's case (10 s simulated); quick: the same carton and "
@@ -152,22 +152,22 @@ def rig_options(args) -> tuple[dict, dict]:
 
 
 class _Monitor:
-    """The rigs' callback: a progress bar on stderr (shown after a few seconds) and VTK frames."""
+    """The rigs' callback: a progress bar on stderr (shown after a few seconds) and VTK frames.
+
+    The frames (``simulate.vtk.FrameSeries``) come every ``t_end / VTK_FRAMES`` simulated
+    seconds at the first chunk past that time, and at the end of the run.
+    """
 
     def __init__(self, vtk_dir=None):
         self.bar = None
-        self.vtk_dir = Path(vtk_dir) if vtk_dir else None
+        self.frames = None
         self.next_frame = 0.0
-        self.frames = 0
-        self.write_vtp = None
-        if self.vtk_dir is not None:
+        if vtk_dir is not None:
+            from demcal.simulate.vtk import FrameSeries
             try:
-                from demcal.simulate.vtk import write_vtp
-            except ImportError:
-                raise InputError("--vtk: simulate.vtk (write_vtp) is not available in this "
-                                 "installation") from None
-            self.write_vtp = write_vtp
-            self.vtk_dir.mkdir(parents=True, exist_ok=True)
+                self.frames = FrameSeries(vtk_dir)
+            except InputError as exc:
+                raise InputError(f"--vtk: {exc}") from None
 
     def __call__(self, sim, t_end, final):
         if self.bar is None:
@@ -178,10 +178,8 @@ class _Monitor:
         done = round(min(sim.time, t_end), 3)
         if done > self.bar.n:
             self.bar.update(done - self.bar.n)
-        if self.write_vtp is not None and (final or sim.time >= self.next_frame):
-            name = "last.vtp" if final else f"frame_{self.frames:04d}.vtp"
-            self.write_vtp(self.vtk_dir / name, sim)
-            self.frames += 0 if final else 1
+        if self.frames is not None and (final or sim.time >= self.next_frame):
+            self.frames.write(sim, last=final)
             self.next_frame = sim.time + t_end / VTK_FRAMES
         if final:
             self.bar.close()

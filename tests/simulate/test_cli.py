@@ -67,7 +67,7 @@ def test_simulate_vtk_frames(tmp_path):
     pytest.importorskip("demcal.simulate.vtk")
     frames = tmp_path / "frames"
     assert main(["simulate", "incline", "--tilt-rate", "4", "--vtk", str(frames)]) == 0
-    written = sorted(p.name for p in frames.glob("*.vtp"))
+    written = sorted(p.name for p in frames.glob("*.vtp") if "walls" not in p.name)
     # a frame every 1/50 of the longest run (up to 60 deg), the run ends at the slide (11.3 deg)
     assert "last.vtp" in written and 8 <= len(written) <= 14
     assert "<VTKFile" in (frames / "last.vtp").read_text()[:300]
