@@ -8,7 +8,11 @@ every run whose record says ``"status": "ok"``. A failed run is recorded with it
 retried once; a run that fails twice stays recorded as failed and the campaign reports it.
 
 Runs execute in local worker processes (``workers``) or on a Dask distributed cluster
-(``scheduler="tcp://host:port"``), with a progress bar and ETA.
+(``scheduler="tcp://host:port"``), with a progress bar and ETA. On a cluster, a run in flight on
+a worker that dies is rerun by Dask on another worker; when Dask gives up on it
+(``KilledWorker``) or the run is otherwise lost, that counts as a failed attempt and the run is
+retried as above, while the other runs go on being recorded. A run's result is released on the
+cluster once it is here, so a worker dying later never makes Dask run a finished run again.
 
 Record layout::
 
@@ -140,8 +144,13 @@ def run_all(tasks: Iterable[dict], runner: Callable[[dict], dict], store: RunSto
                 futures = {submit(_execute, runner, task): (key, task) for key, task in queue}
                 queue = []
                 for fut in _as_completed(futures):
-                    key, task = futures[fut]
-                    status, result, error, wall = fut.result()
+                    key, task = futures.pop(fut)
+                    try:
+                        status, result, error, wall = fut.result()
+                    except Exception as exc:  # _execute never raises: the executor lost the run
+                        status, result, wall = "failed", None, 0.0
+                        error = f"run lost by the executor: {type(exc).__name__}: {exc}"
+                    _release(fut)
                     attempts[key] += 1
                     if status == "failed" and attempts[key] < MAX_ATTEMPTS:
                         record(key, task, status, result, error, wall, attempts[key])
@@ -201,6 +210,15 @@ class _LazyResult:
 
 def _inline_submit(fn, *args):
     return _LazyResult(fn, args)
+
+
+def _release(fut) -> None:
+    """Let a Dask cluster forget a run whose result is here: while the future is held, the
+    scheduler recomputes its result if the worker holding it dies, so a finished run would run
+    again."""
+    release = getattr(fut, "release", None)
+    if release is not None:
+        release()
 
 
 def _as_completed(futures):

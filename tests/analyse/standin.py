@@ -103,3 +103,36 @@ def extension_standin_runner(inputs: dict) -> dict:
                            "angle_outside_deg": 25.0 + rng.normal(0.0, 1.0)},
             "record": {"crest_height": 0.08 + rng.normal(0.0, 0.002)}, "wall_s": 0.0, "steps": 0, "spheres": 0,
             "sphere_steps_per_s": 0.0, "seed": inputs["seed"]}
+
+
+#: Seconds one slow stand-in run takes: long enough that a Dask worker killed midway has a run
+#: in flight.
+SLOW_STANDIN_S = 0.25
+#: Environment variable naming the file the slow stand-in logs its runs to (unset: no log).
+SLOW_STANDIN_LOG = "DEMCAL_STANDIN_LOG"
+
+
+def slow_standin_runner(inputs: dict) -> dict:
+    """:func:`standin_runner` taking ``SLOW_STANDIN_S`` seconds, for tests on a real Dask cluster
+    (a module function, so that worker processes can import it). With ``DEMCAL_STANDIN_LOG`` set
+    in the worker's environment it appends ``start <run key> <pid>`` and ``end <run key> <pid>``
+    lines to that file, so a test can tell which worker has a run in flight and which runs
+    finished, where and how often."""
+    import os
+    import time
+
+    from demcal.analyse.runs import run_key
+
+    log = os.environ.get(SLOW_STANDIN_LOG)
+
+    def note(event):
+        if log:
+            # one short O_APPEND write per line: lines from several workers do not interleave
+            with open(log, "a") as f:
+                f.write(f"{event} {run_key(inputs)} {os.getpid()}\n")
+
+    note("start")
+    time.sleep(SLOW_STANDIN_S)
+    result = standin_runner(inputs)
+    note("end")
+    return result
