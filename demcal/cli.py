@@ -13,7 +13,7 @@ from demcal.errors import DemcalError
 #: Stage modules that contribute sub-commands, in the order of the pipeline.
 STAGE_CLIS = ("demcal.measure.cli", "demcal.measure.repose_cli", "demcal.simulate.cli",
               "demcal.analyse.cli", "demcal.calibrate", "demcal.analyse.critique.cli",
-              "demcal.report.cli")
+              "demcal.report.cli", "demcal.export")
 
 EXIT_INPUT = 2     # bad input or a domain error
 EXIT_FAILURE = 1   # the job ran but failed a check (e.g. audit found differences)

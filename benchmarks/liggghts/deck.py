@@ -46,6 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from demcal.errors import InputError
+from demcal.simulate.export import liggghts_seeds, youngs_modulus
 from demcal.units import GRAVITY
 
 #: File names inside a run folder.
@@ -58,24 +59,6 @@ MESH_NAMES = ("back", "side_y0", "side_y1", "plate")
 #: LIGGGHTS default of 6 significant digits would round positions to 1e-6 m.
 POSITION_COLUMNS = ("id", "mol", "x", "y", "z", "radius")
 POSITION_FORMAT = '"%d %d %.10g %.10g %.10g %.10g"'
-
-
-def youngs_modulus(shear_modulus: float, poisson: float) -> float:
-    """Young's modulus of an isotropic solid, E = 2 G (1 + nu).
-
-    Parameters
-    ----------
-    shear_modulus : float
-        Shear modulus G [Pa].
-    poisson : float
-        Poisson's ratio nu [-].
-
-    Returns
-    -------
-    float
-        Young's modulus E [Pa].
-    """
-    return 2.0 * shear_modulus * (1.0 + poisson)
 
 
 def cylinder_mass_inertia(diameter: float, length: float, density: float):
@@ -338,32 +321,6 @@ def read_ascii_stl(path) -> np.ndarray:
     if not vertices or len(vertices) % 3:
         raise InputError(f"{path}: not an ASCII STL file with whole triangles")
     return np.array(vertices).reshape(-1, 3, 3)
-
-
-# ---- seeds ------------------------------------------------------------------------------
-def _is_prime(n: int) -> bool:
-    if n < 2:
-        return False
-    if n % 2 == 0:
-        return n == 2
-    return all(n % k for k in range(3, int(math.isqrt(n)) + 1, 2))
-
-
-def liggghts_seeds(seed: int) -> tuple:
-    """Three distinct primes above 10000 derived from ``seed`` (template, distribution, insertion).
-
-    LIGGGHTS wants its random seeds to be primes larger than 10000; each demcal seed maps to
-    its own block of 30000 integers, so different seeds never share a LIGGGHTS seed.
-    """
-    if isinstance(seed, bool) or int(seed) != seed or seed < 0:
-        raise InputError(f"seed must be a non-negative integer, got {seed!r}")
-    primes = []
-    for k in range(3):
-        n = 100_003 + 30_000 * int(seed) + 10_000 * k
-        while not _is_prime(n):
-            n += 1
-        primes.append(n)
-    return tuple(primes)
 
 
 # ---- the input script -------------------------------------------------------------------

@@ -1,0 +1,81 @@
+"""``demcal export DIR --to liggghts|yade|edem|json|all [--out PATH]``: the calibrated parameters
+of a finished campaign in the input terms of another DEM code (``simulate.export``)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from demcal.errors import InputError
+from demcal.jsonio import read_json
+from demcal.provenance import code_version, sha256_file
+from demcal.simulate.export import EXPORT_FILES, export_model, render
+from demcal.simulate.params import DEMParameters
+
+
+def campaign_model(campaign_dir):
+    """The ``ExportModel`` of a finished calibration: its calibrated parameters, the 95 %
+    plausible intervals (plausible workflow) and the results file's hash."""
+    from demcal.analyse.results import CampaignResult
+
+    folder = Path(campaign_dir)
+    path = folder / "results.json"
+    if not path.is_file():
+        raise InputError(f"{folder} holds no results.json: run 'demcal calibrate WORKBOOK --out {folder}' first")
+    results = CampaignResult.from_dict(read_json(path), str(path))
+    try:
+        params = DEMParameters(**results.calibrated_parameters)
+    except TypeError as exc:
+        raise InputError(f"{path}: calibrated_parameters is not a DEM parameter set ({exc})") from exc
+    intervals = ({name: list(est.ci95) for name, est in results.calibration.parameters.items()}
+                 if results.calibration is not None else {})
+    source = {"file": str(path), "sha256": sha256_file(path), "code": code_version(),
+              "calibrated_by": results.provenance.code}
+    return export_model(params, material=results.material or "segment", source=source, intervals=intervals)
+
+
+def write_exports(campaign_dir, targets, out=None) -> list:
+    """Write each target's export; ``out`` is a file for one target, a folder for several
+    (default: the campaign's ``export/``). Returns the paths written."""
+    model = campaign_model(campaign_dir)
+    if len(targets) == 1 and out is not None and Path(out).suffix:
+        paths = {targets[0]: Path(out)}
+    else:
+        folder = Path(out) if out is not None else Path(campaign_dir) / "export"
+        if folder.is_file():
+            raise InputError(f"--out {folder}: a file; give a folder when exporting several formats")
+        paths = {t: folder / EXPORT_FILES[t] for t in targets}
+    written = []
+    for target, path in paths.items():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(render(model, target))
+        written.append(path)
+    return written
+
+
+def _targets(text: str) -> list:
+    names = list(EXPORT_FILES) if text == "all" else [t.strip() for t in text.split(",") if t.strip()]
+    unknown = [t for t in names if t not in EXPORT_FILES]
+    if unknown or not names:
+        raise InputError(f"--to {text!r}: unknown format {', '.join(unknown) or '(none)'}; "
+                         f"valid: {', '.join(EXPORT_FILES)} or all")
+    return names
+
+
+def _run(args: argparse.Namespace) -> int:
+    for path in write_exports(args.campaign, _targets(args.to), args.out):
+        print(f"wrote {path}")
+    return 0
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "export", help="write the calibrated parameters for LIGGGHTS, Yade, EDEM or as JSON",
+        description="Write the calibrated parameters of a finished calibration in the terms of "
+                    "another DEM code. Each file states the rolling-friction lever convention "
+                    "and converts mu_r where the target's differs.")
+    p.add_argument("campaign", metavar="DIR", help="a finished calibration (the --out of demcal calibrate)")
+    p.add_argument("--to", default="all", metavar="FORMAT",
+                   help=f"{', '.join(EXPORT_FILES)}, a comma list, or all (default)")
+    p.add_argument("--out", metavar="PATH", help="file (one format) or folder (default DIR/export/)")
+    p.set_defaults(handler=_run)

@@ -1,0 +1,450 @@
+"""Calibrated parameters out to other DEM codes: LIGGGHTS-PUBLIC, Yade, EDEM and JSON.
+
+``export_model(params, source)`` gathers what every target needs: the two materials (segment
+and steel), the three interactions (particle-particle, particle-wall) and the segment's clump
+template (sphere centres in the principal frame, radii, mass, principal moments), as demcal
+simulates them. ``render(model, target)`` writes it in the target's terms:
+
+``liggghts``
+    An input fragment for LIGGGHTS-PUBLIC 3.8, to include after ``create_box`` with two atom
+    types (1 = segment, 2 = steel): ``hard_particles``, the ``fix property/global`` blocks, the
+    ``pair_style gran`` of demcal's contact and rolling model, and the multisphere template
+    with the mass and inertia demcal uses.
+``yade``
+    A Python snippet for Yade: the two ``FrictMat`` materials, the Hertz-Mindlin engines with
+    the restitutions and frictions of each material pair, and a clump factory with the same
+    spheres, mass and inertia.
+``edem``
+    A CSV in EDEM's terms: materials, interactions (Hertz-Mindlin no slip, standard rolling
+    friction) and the particle template's spheres.
+``json``
+    The whole parameter set with provenance.
+
+Rolling friction. The constant-torque model T = mu_r F_n R_lever has the same mu_r only for the
+same lever R_lever (``simulate.contact.rolling``). Each export states the lever of demcal's run
+and of the target. Where they differ, mu_r is converted so that the torque is kept on average
+over the contacts a segment can make (``rolling_conversion``): exact when the levers are in a
+fixed ratio at every contact (e.g. a single sphere), an average otherwise (a clump under EDEM's
+lever, the distance from the contact point to the centre of mass, which runs from the sphere
+radius at the middle sphere to the half length at the tips), and the export says which.
+
+Engine hooks of demcal that the target codes lack (velocity-dependent restitution, a size
+distribution, multi-contact damping) are listed in every export as not carried over.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from demcal.errors import InputError
+from demcal.simulate.clump import ClumpTemplate, segment_from_parameters
+from demcal.simulate.contact.rolling import ROLLING_LEVERS
+from demcal.simulate.extensions import engine_hooks
+from demcal.simulate.params import DEMParameters
+
+#: Formats ``demcal export --to`` writes, and the file each writes by default.
+EXPORT_FILES = {"liggghts": "liggghts_materials.in", "yade": "yade_materials.py",
+                "edem": "edem_materials.csv", "json": "parameters.json"}
+
+#: Rolling lever of each target code's constant-torque model (``ROLLING_LEVERS`` names):
+#: LIGGGHTS ``rolling_friction cdt`` takes R_eff, EDEM's standard rolling friction the
+#: distance from the contact point to the centre of mass. Yade's Hertz-Mindlin law has none.
+TARGET_LEVER = {"liggghts": "liggghts_reff", "edem": "edem_com", "yade": None, "json": None}
+
+#: LIGGGHTS refuses a Young's modulus above this without ``hard_particles yes`` [Pa].
+LIGGGHTS_SOFT_LIMIT_PA = 1e9
+
+#: Points per sphere of the surface sample that averages a clump's rolling lever.
+LEVER_SAMPLE = 4000
+
+
+def youngs_modulus(shear_modulus: float, poisson: float) -> float:
+    """E = 2 G (1 + nu) of an isotropic solid [Pa]."""
+    return 2.0 * shear_modulus * (1.0 + poisson)
+
+
+def liggghts_seeds(seed: int) -> tuple:
+    """Three distinct primes above 10000 derived from ``seed`` (LIGGGHTS wants its random seeds
+    prime and larger than 10000); each seed has its own block of 30000 integers."""
+    if isinstance(seed, bool) or int(seed) != seed or seed < 0:
+        raise InputError(f"seed must be a non-negative integer, got {seed!r}")
+
+    def is_prime(n):
+        return n % 2 and all(n % k for k in range(3, math.isqrt(n) + 1, 2))
+
+    primes = []
+    for k in range(3):
+        n = 100_003 + 30_000 * int(seed) + 10_000 * k
+        while not is_prime(n):
+            n += 1
+        primes.append(n)
+    return tuple(primes)
+
+
+@dataclass(frozen=True)
+class RollingConversion:
+    """mu_r of one interaction carried from demcal's lever to a target's.
+
+    Attributes
+    ----------
+    interaction : str
+        ``particle-particle`` or ``particle-wall``.
+    source_lever, target_lever : str
+        ``ROLLING_LEVERS`` names (target None: the target has no constant-torque model).
+    factor : float
+        mu_r(target) = factor x mu_r(demcal): mean source lever over mean target lever.
+    exact : bool
+        The levers are in the same ratio at every contact, so the torque is kept at each.
+    ratio_range : tuple of float
+        Smallest and largest source / target lever over the contacts [-].
+    """
+
+    interaction: str
+    source_lever: str
+    target_lever: str | None
+    factor: float
+    exact: bool
+    ratio_range: tuple
+
+    def statement(self) -> str:
+        if self.target_lever is None:
+            return (f"{self.interaction}: the target has no constant-torque rolling friction; "
+                    f"demcal's mu_r (lever {self.source_lever}) is not carried over")
+        if self.source_lever == self.target_lever:
+            return f"{self.interaction}: same lever ({self.source_lever}), mu_r unchanged (exact)"
+        lo, hi = self.ratio_range
+        how = ("exact: the levers are in a fixed ratio at every contact" if self.exact else
+               f"not exact: the lever ratio runs from {lo:.3g} to {hi:.3g} over the segment's "
+               "contacts, so the torque is kept on average only")
+        text = (f"{self.interaction}: mu_r x {self.factor:.4g} from lever {self.source_lever} to "
+                f"{self.target_lever} ({how})")
+        if self.interaction == "particle-particle" and "liggghts_reff" in (self.source_lever, self.target_lever):
+            # LIGGGHTS' pair torque opposes the relative rotation, EDEM's each body's own
+            text += ("; the torque's direction differs too: w_i - w_j in LIGGGHTS, each body's "
+                     "own w in EDEM")
+        return text
+
+
+def _surface_points(template: ClumpTemplate, rng) -> tuple:
+    """Points spread evenly over the clump's outer surface (principal frame) and the radius of
+    the sphere each lies on: where a contact can touch the segment."""
+    points, radii = [], []
+    for c, r in zip(template.offsets, template.radii):
+        n = rng.normal(size=(LEVER_SAMPLE, 3))
+        p = c + r * n / np.linalg.norm(n, axis=1, keepdims=True)
+        inside = np.zeros(len(p), bool)
+        for c2, r2 in zip(template.offsets, template.radii):
+            if not np.array_equal(c2, c):
+                inside |= np.linalg.norm(p - c2, axis=1) < r2 * (1.0 - 1e-12)
+        points.append(p[~inside])
+        radii.append(np.full((~inside).sum(), r))
+    return np.concatenate(points), np.concatenate(radii)
+
+
+def _levers(convention: str, interaction: str, points, radii) -> np.ndarray:
+    """Lever [m] of ``convention`` at contacts on the given surface points (no overlap): R_eff
+    between two equal segments' spheres (R/2) or R against a wall (``liggghts_reff``), the
+    sphere radius (``edem_sphere``), the distance to the centre of mass (``edem_com``)."""
+    if convention == "liggghts_reff":
+        return radii / 2.0 if interaction == "particle-particle" else radii.copy()
+    if convention == "edem_sphere":
+        return radii.copy()
+    if convention == "edem_com":
+        return np.linalg.norm(points, axis=1)
+    raise InputError(f"unknown rolling_lever {convention!r}; valid: {', '.join(ROLLING_LEVERS)}")
+
+
+def rolling_conversion(params: DEMParameters, template: ClumpTemplate, target: str) -> tuple:
+    """``RollingConversion`` of each interaction from ``params.rolling_lever`` to ``target``'s.
+
+    The lever is averaged over points spread evenly on the segment's outer surface (a fixed
+    sample, so the export is reproducible); the conversion is exact when source / target lever
+    is the same at every point.
+    """
+    points, radii = _surface_points(template, np.random.default_rng(0))
+    out = []
+    for interaction in ("particle-particle", "particle-wall"):
+        target_lever = TARGET_LEVER[target]
+        if target_lever is None:
+            out.append(RollingConversion(interaction, params.rolling_lever, None, math.nan, False,
+                                         (math.nan, math.nan)))
+            continue
+        src = _levers(params.rolling_lever, interaction, points, radii)
+        tgt = _levers(target_lever, interaction, points, radii)
+        ratio = src / tgt
+        out.append(RollingConversion(interaction, params.rolling_lever, target_lever,
+                                     float(src.mean() / tgt.mean()),
+                                     bool(np.ptp(ratio) <= 1e-9 * ratio.mean()),
+                                     (float(ratio.min()), float(ratio.max()))))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class ExportModel:
+    """A calibrated parameter set as every export needs it.
+
+    Attributes
+    ----------
+    params : DEMParameters
+    template : ClumpTemplate
+        The segment's clump (spheres in the principal frame: ``template.offsets``).
+    material : str
+        Name of the bulk material.
+    source : dict
+        Provenance: the results file and its SHA-256, the code version.
+    intervals : dict
+        Parameter -> 95 % plausible interval of the calibration (empty when it has none).
+    """
+
+    params: DEMParameters
+    template: ClumpTemplate
+    material: str = "segment"
+    source: dict = field(default_factory=dict)
+    intervals: dict = field(default_factory=dict)
+
+    @property
+    def youngs_moduli(self) -> tuple:
+        """(segment, steel) Young's moduli [Pa]."""
+        p = self.params
+        return (youngs_modulus(p.shear_modulus_pa, p.poisson_ratio),
+                youngs_modulus(p.wall_shear_modulus_pa, p.wall_poisson_ratio))
+
+    def untransferred_hooks(self, target: str) -> list:
+        """demcal engine hooks in use that ``target`` has no equivalent of (LIGGGHTS has the
+        spring-dashpot rolling model, ``rolling_friction epsd``)."""
+        carried = {"rolling_spring_dashpot"} if target == "liggghts" else set()
+        return [h["extension"] for h in engine_hooks(self.params) if h["extension"] not in carried]
+
+    def spheres(self) -> np.ndarray:
+        """(x, y, z, r) of each sphere in the principal frame [m], rounding noise removed."""
+        xyz = np.where(np.abs(self.template.offsets) < 1e-12, 0.0, self.template.offsets)
+        return np.column_stack([xyz, self.template.radii])
+
+
+def export_model(params: DEMParameters, *, material: str = "segment", source: dict | None = None,
+                 intervals: dict | None = None) -> ExportModel:
+    """The ``ExportModel`` of a parameter set (the segment template built as demcal builds it)."""
+    if not isinstance(params, DEMParameters):
+        raise InputError(f"params must be a DEMParameters, got {type(params).__name__}")
+    if params.segment_sizes is not None:
+        # the template of the mean segment; the size distribution is listed as not carried over
+        params_for_template = params.with_(segment_sizes=None)
+    else:
+        params_for_template = params
+    return ExportModel(params, segment_from_parameters(params_for_template), material,
+                       dict(source or {}), dict(intervals or {}))
+
+
+# ---------------------------------------------------------------------------------------------
+# the formats
+
+def _g(x: float) -> str:
+    return f"{x:.9g}"
+
+
+def _header(model: ExportModel, target: str, title: str, comment: str) -> list:
+    """Lines every export opens with: what it is, where it came from, the rolling convention
+    and what does not carry over."""
+    src = model.source
+    lines = [f"demcal export of the calibrated {model.material} parameters for {title}",
+             f"source: {src.get('file', 'parameters given directly')}"
+             + (f" (sha256 {src['sha256']})" if src.get("sha256") else ""),
+             f"code: demcal {src.get('code', {}).get('demcal', '?')}, git {src.get('code', {}).get('git_sha')}",
+             "units: SI (m, kg, s, Pa)",
+             f"rolling friction: demcal's lever is {model.params.rolling_lever} "
+             f"(model {model.params.rolling_model})"]
+    lines += ["  " + c.statement() for c in rolling_conversion(model.params, model.template, target)]
+    for hook in model.untransferred_hooks(target):
+        lines.append(f"NOT carried over: demcal engine hook {hook} (the target has no equivalent)")
+    return [f"{comment} {line}".rstrip() for line in lines]
+
+
+def _interactions(model: ExportModel, target: str) -> dict:
+    """(restitution, static friction, rolling friction in the target's convention) per
+    interaction."""
+    p = model.params
+    conv = {c.interaction: c for c in rolling_conversion(p, model.template, target)}
+
+    def rolling(inter, mu):
+        c = conv[inter]
+        return mu if c.target_lever is None else mu * c.factor
+
+    return {"particle-particle": (p.e_pp, p.mu_s_pp, rolling("particle-particle", p.mu_r_pp)),
+            "particle-wall": (p.e_pw, p.mu_s_pw, rolling("particle-wall", p.mu_r_pw))}
+
+
+def liggghts_fragment(model: ExportModel, seed: int = 0) -> str:
+    """LIGGGHTS-PUBLIC 3.8 input lines for the materials, contact model and segment template.
+
+    Include after ``create_box 2 ...`` (type 1 = segment, type 2 = steel). The template is
+    ``fix pts``, its distribution ``fix pdd`` (for ``fix insert/...``), and ``fix ms`` the
+    multisphere integrator. Walls use the same model string: ``fix ID all wall/gran
+    ${demcal_model} primitive type 2 zplane 0.0`` or ``... mesh n_meshes 1 meshes M``.
+    """
+    p = model.params
+    e_p, e_s = model.youngs_moduli
+    inter = _interactions(model, "liggghts")
+    rolling = "epsd" if p.rolling_model == "epsd" else "cdt"
+    p_template, p_distribution, _ = liggghts_seeds(seed)
+
+    def pair(k):  # 2 x 2 type-pair matrix: the steel-steel entry is unused
+        pp, pw = inter["particle-particle"][k], inter["particle-wall"][k]
+        return f"{_g(pp)} {_g(pw)} {_g(pw)} {_g(pw)}"
+
+    i1, i2, i3 = model.template.principal_moments
+    spheres = " ".join(" ".join(_g(v) for v in row) for row in model.spheres())
+    out = _header(model, "liggghts", "LIGGGHTS-PUBLIC 3.8", "#")
+    out += [""]
+    if max(e_p, e_s) > LIGGGHTS_SOFT_LIMIT_PA:
+        out.append(f"hard_particles yes  # E up to {_g(max(e_p, e_s))} Pa exceeds LIGGGHTS' default limit of 1e9 Pa")
+    out += [
+        f"fix m1 all property/global youngsModulus peratomtype {_g(e_p)} {_g(e_s)}",
+        f"fix m2 all property/global poissonsRatio peratomtype {_g(p.poisson_ratio)} {_g(p.wall_poisson_ratio)}",
+        f"fix m3 all property/global coefficientRestitution peratomtypepair 2 {pair(0)}",
+        f"fix m4 all property/global coefficientFriction peratomtypepair 2 {pair(1)}",
+        f"fix m5 all property/global coefficientRollingFriction peratomtypepair 2 {pair(2)}",
+    ]
+    if rolling == "epsd":
+        eta = _g(p.rolling_damping_ratio)
+        out.append(f"fix m6 all property/global coefficientRollingViscousDamping peratomtypepair 2 "
+                   f"{eta} {eta} {eta} {eta}")
+    out += [
+        "",
+        f"variable demcal_model string \"model hertz tangential history rolling_friction {rolling}\"",
+        "pair_style      gran ${demcal_model}",
+        "pair_coeff      * *",
+        "",
+        f"# the segment: {len(model.template.radii)} spheres in its principal frame, with demcal's mass "
+        f"({model.template.mass_model}) and principal moments",
+        f"fix pts all particletemplate/multisphere {p_template} atom_type 1 density constant "
+        f"{_g(p.particle_density_kg_m3)} nspheres {len(model.template.radii)} ntry 1000000 spheres {spheres} "
+        f"type 1 mass {_g(model.template.mass)} inertia_tensor {_g(i1)} 0 0 {_g(i2)} 0 {_g(i3)} use_volume",
+        f"fix pdd all particledistribution/discrete {p_distribution} 1 pts 1.0",
+        "fix ms all multisphere",
+        "",
+    ]
+    return "\n".join(out)
+
+
+def yade_snippet(model: ExportModel) -> str:
+    """A Python snippet for Yade: materials, Hertz-Mindlin engines and a clump factory."""
+    p = model.params
+    e_p, e_s = model.youngs_moduli
+    inter = _interactions(model, "yade")
+    (e_pp, mu_pp, _), (e_pw, mu_pw, _) = inter["particle-particle"], inter["particle-wall"]
+    spheres = ",\n    ".join(f"(({_g(x)}, {_g(y)}, {_g(z)}), {_g(r)})" for x, y, z, r in model.spheres())
+    i1, i2, i3 = model.template.principal_moments
+    out = _header(model, "yade", "Yade", "#")
+    out += [
+        "# Hertz-Mindlin: Ip2_FrictMat_FrictMat_MindlinPhys with the restitution en of each",
+        "# material pair and Law2_ScGeom_MindlinPhys_Mindlin; the friction angle of each pair is",
+        "# atan(mu_s). Yade's Mindlin law has no constant-torque rolling friction (see above).",
+        "import math",
+        "from yade import *",
+        "",
+        f"segment = O.materials.append(FrictMat(young={_g(e_p)}, poisson={_g(p.poisson_ratio)}, "
+        f"density={_g(p.particle_density_kg_m3)}, frictionAngle=math.atan({_g(mu_pp)}), label='segment'))",
+        f"steel = O.materials.append(FrictMat(young={_g(e_s)}, poisson={_g(p.wall_poisson_ratio)}, "
+        f"density={_g(p.wall_density_kg_m3)}, frictionAngle=math.atan({_g(mu_pw)}), label='steel'))",
+        "",
+        "O.engines = [",
+        "    ForceResetter(),",
+        "    InsertionSortCollider([Bo1_Sphere_Aabb(), Bo1_Facet_Aabb(), Bo1_Box_Aabb()]),",
+        "    InteractionLoop(",
+        "        [Ig2_Sphere_Sphere_ScGeom(), Ig2_Facet_Sphere_ScGeom(), Ig2_Box_Sphere_ScGeom()],",
+        "        [Ip2_FrictMat_FrictMat_MindlinPhys(",
+        f"            en=MatchMaker(matches=((segment, segment, {_g(e_pp)}), (segment, steel, {_g(e_pw)}))),",
+        f"            es=MatchMaker(matches=((segment, segment, {_g(e_pp)}), (segment, steel, {_g(e_pw)}))),",
+        "            frictAngle=MatchMaker(matches=((segment, segment, math.atan("
+        f"{_g(mu_pp)})), (segment, steel, math.atan({_g(mu_pw)})))))],",
+        "        [Law2_ScGeom_MindlinPhys_Mindlin()]),",
+        "    NewtonIntegrator(gravity=(0, 0, -9.81), damping=0.0),",
+        "]",
+        "",
+        "# the segment: spheres (centre, radius) in its principal frame [m]",
+        f"SEGMENT_SPHERES = [\n    {spheres},\n]",
+        f"SEGMENT_MASS = {_g(model.template.mass)}  # kg, demcal's ({model.template.mass_model})",
+        f"SEGMENT_INERTIA = ({_g(i1)}, {_g(i2)}, {_g(i3)})  # kg m2, principal",
+        "",
+        "",
+        "def add_segment(position, orientation=Quaternion((1, 0, 0), 0)):",
+        "    \"\"\"Append one segment clump at ``position`` with demcal's mass and inertia.\"\"\"",
+        "    members = [sphere(position + orientation * Vector3(*c), r, material=segment)",
+        "               for c, r in SEGMENT_SPHERES]",
+        "    clump_id, member_ids = O.bodies.appendClumped(members)",
+        "    state = O.bodies[clump_id].state",
+        "    state.mass, state.inertia = SEGMENT_MASS, Vector3(*SEGMENT_INERTIA)",
+        "    # Yade's Hertz-Mindlin dashpot takes the touching member's mass; demcal's (and",
+        "    # LIGGGHTS') the whole segment's. The clump moves with its own mass and inertia.",
+        "    for i in member_ids:",
+        "        O.bodies[i].state.mass = SEGMENT_MASS",
+        "    return clump_id",
+        "",
+    ]
+    return "\n".join(out)
+
+
+def edem_table(model: ExportModel) -> str:
+    """A CSV in EDEM's terms: one section each for materials, interactions and the template."""
+    p = model.params
+    e_p, e_s = model.youngs_moduli
+    inter = _interactions(model, "edem")
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    for line in _header(model, "edem", "EDEM (Hertz-Mindlin no slip, standard rolling friction)", "#"):
+        buf.write(line + "\n")
+    w.writerow(["section", "name", "Poisson's ratio", "Shear Modulus (Pa)", "Density (kg/m3)"])
+    w.writerow(["material", model.material, _g(p.poisson_ratio), _g(p.shear_modulus_pa),
+                _g(p.particle_density_kg_m3)])
+    w.writerow(["material", "steel", _g(p.wall_poisson_ratio), _g(p.wall_shear_modulus_pa),
+                _g(p.wall_density_kg_m3)])
+    w.writerow(["section", "interaction", "Coefficient of Restitution", "Coefficient of Static Friction",
+                "Coefficient of Rolling Friction"])
+    names = {"particle-particle": f"{model.material}-{model.material}",
+             "particle-wall": f"{model.material}-steel"}
+    for key, (e, mu_s, mu_r) in inter.items():
+        w.writerow(["interaction", names[key], _g(e), _g(mu_s), _g(mu_r)])
+    w.writerow(["section", "sphere", "X (m)", "Y (m)", "Z (m)", "Radius (m)"])
+    for k, row in enumerate(model.spheres()):
+        w.writerow(["template", k + 1, *(_g(v) for v in row)])
+    i1, i2, i3 = model.template.principal_moments
+    w.writerow(["section", "property", "value"])
+    w.writerow(["template", "Mass (kg)", _g(model.template.mass)])
+    w.writerow(["template", "Moment of inertia Ixx Iyy Izz (kg m2)", f"{_g(i1)} {_g(i2)} {_g(i3)}"])
+    return buf.getvalue()
+
+
+def json_document(model: ExportModel) -> dict:
+    """The whole parameter set with provenance, the template and the rolling conventions."""
+    e_p, e_s = model.youngs_moduli
+    return {"material": model.material, "parameters": model.params.to_dict(),
+            "intervals_95": model.intervals,
+            "youngs_modulus_pa": {"particle": e_p, "wall": e_s},
+            "template": {"spheres_xyzr_m": model.spheres().tolist(), "mass_kg": model.template.mass,
+                         "principal_moments_kg_m2": list(map(float, model.template.principal_moments)),
+                         "mass_model": model.template.mass_model, "frame": "principal axes, origin at the centre of mass"},
+            "rolling": {"lever": model.params.rolling_lever, "model": model.params.rolling_model,
+                        "for_targets": {t: [c.statement() for c in rolling_conversion(model.params, model.template, t)]
+                                        for t in ("liggghts", "edem", "yade")}},
+            "engine_hooks": engine_hooks(model.params),
+            "source": model.source}
+
+
+def render(model: ExportModel, target: str) -> str:
+    """The export of ``model`` for ``target`` (a key of ``EXPORT_FILES``) as text."""
+    import json
+    if target == "liggghts":
+        return liggghts_fragment(model)
+    if target == "yade":
+        return yade_snippet(model)
+    if target == "edem":
+        return edem_table(model)
+    if target == "json":
+        from demcal.jsonio import to_jsonable
+        return json.dumps(to_jsonable(json_document(model)), indent=2) + "\n"
+    raise InputError(f"unknown export format {target!r}; valid: {', '.join(EXPORT_FILES)}")
