@@ -12,7 +12,8 @@ from demcal.errors import DemcalError
 
 #: Stage modules that contribute sub-commands, in the order of the pipeline.
 STAGE_CLIS = ("demcal.measure.cli", "demcal.measure.repose_cli", "demcal.simulate.cli",
-              "demcal.analyse.cli", "demcal.calibrate", "demcal.analyse.critique.cli",
+              "demcal.simulate.virtual_lab_cli", "demcal.analyse.cli", "demcal.calibrate",
+              "demcal.analyse.critique.cli", "demcal.analyse.critique.plan_cli",
               "demcal.report.cli", "demcal.export")
 
 EXIT_INPUT = 2     # bad input or a domain error
