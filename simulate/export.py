@@ -36,12 +36,14 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from demcal.errors import InputError
+from demcal.jsonio import to_jsonable
 from demcal.simulate.clump import ClumpTemplate, segment_from_parameters
 from demcal.simulate.contact.rolling import ROLLING_LEVERS
 from demcal.simulate.extensions import engine_hooks
@@ -231,13 +233,9 @@ def export_model(params: DEMParameters, *, material: str = "segment", source: di
     """The ``ExportModel`` of a parameter set (the segment template built as demcal builds it)."""
     if not isinstance(params, DEMParameters):
         raise InputError(f"params must be a DEMParameters, got {type(params).__name__}")
-    if params.segment_sizes is not None:
-        # the template of the mean segment; the size distribution is listed as not carried over
-        params_for_template = params.with_(segment_sizes=None)
-    else:
-        params_for_template = params
-    return ExportModel(params, segment_from_parameters(params_for_template), material,
-                       dict(source or {}), dict(intervals or {}))
+    # the template of the mean segment; a size distribution is listed as not carried over
+    template = segment_from_parameters(params.with_(segment_sizes=None))
+    return ExportModel(params, template, material, dict(source or {}), dict(intervals or {}))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -392,7 +390,6 @@ def yade_snippet(model: ExportModel) -> str:
 def edem_table(model: ExportModel) -> str:
     """A CSV in EDEM's terms: one section each for materials, interactions and the template."""
     p = model.params
-    e_p, e_s = model.youngs_moduli
     inter = _interactions(model, "edem")
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
@@ -437,7 +434,6 @@ def json_document(model: ExportModel) -> dict:
 
 def render(model: ExportModel, target: str) -> str:
     """The export of ``model`` for ``target`` (a key of ``EXPORT_FILES``) as text."""
-    import json
     if target == "liggghts":
         return liggghts_fragment(model)
     if target == "yade":
@@ -445,6 +441,5 @@ def render(model: ExportModel, target: str) -> str:
     if target == "edem":
         return edem_table(model)
     if target == "json":
-        from demcal.jsonio import to_jsonable
         return json.dumps(to_jsonable(json_document(model)), indent=2) + "\n"
     raise InputError(f"unknown export format {target!r}; valid: {', '.join(EXPORT_FILES)}")

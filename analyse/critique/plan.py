@@ -53,7 +53,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
+from statsmodels.stats.proportion import proportion_confint
 
 from demcal.analyse.critique.diagnosis import CORRECTIONS, DEFAULT_ALPHA
 from demcal.errors import InputError
@@ -103,10 +103,8 @@ def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple:
     """Exact (Clopper-Pearson) interval of a binomial proportion, k successes in n trials."""
     if n <= 0:
         return (math.nan, math.nan)
-    tail = (1.0 - level) / 2.0
-    lo = float(stats.beta.ppf(tail, k, n - k + 1)) if k > 0 else 0.0
-    hi = float(stats.beta.ppf(1.0 - tail, k + 1, n - k)) if k < n else 1.0
-    return (lo, hi)
+    lo, hi = proportion_confint(k, n, alpha=1.0 - level, method="beta")
+    return (float(lo), float(hi))
 
 
 @dataclass(frozen=True)

@@ -1,16 +1,14 @@
 """``demcal plan``: the smallest detectable effect it prints is detected as often as it says when
 the effect is planted in fresh virtual workbooks and the critique run on each; its search and
-intervals against hand-made curves and statsmodels; the design it reads from a workbook."""
+intervals against hand-made curves and the binomial tails; the design it reads from a workbook."""
 
 import json
 import math
 import re
 
-import numpy as np
 import pytest
 import yaml
 from scipy import stats
-from statsmodels.stats.proportion import proportion_confint
 
 from demcal.analyse.critique import run_critique
 from demcal.analyse.critique.plan import (choose_target, clopper_pearson, design_from_workbook, read_design,
@@ -27,9 +25,13 @@ SMALL = {"design": {"pairs": ["particle-steel"], "drop_heights_mm": [200, 400, 6
 
 
 @pytest.mark.parametrize("k,n", [(0, 20), (3, 20), (16, 20), (20, 20), (117, 150)])
-def test_clopper_pearson_matches_statsmodels(k, n):
-    lo, hi = proportion_confint(k, n, alpha=0.05, method="beta")
-    assert clopper_pearson(k, n) == pytest.approx((lo, hi), abs=1e-12)
+def test_clopper_pearson_bounds_have_their_defining_binomial_tails(k, n):
+    """The exact interval's bounds are where each binomial tail of k holds 2.5 %: P(X >= k | lo)
+    and P(X <= k | hi); 0 and 1 at the edges."""
+    lo, hi = clopper_pearson(k, n)
+    assert lo == 0.0 if k == 0 else stats.binom.sf(k - 1, n, lo) == pytest.approx(0.025, abs=1e-9)
+    assert hi == 1.0 if k == n else stats.binom.cdf(k, n, hi) == pytest.approx(0.025, abs=1e-9)
+    assert clopper_pearson(k, n, level=0.99)[0] <= lo and clopper_pearson(k, n, level=0.99)[1] >= hi
 
 
 def _probit_rate(x80, n=1000, slope=4.0):
