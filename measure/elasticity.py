@@ -37,8 +37,8 @@ from demcal.units import MM
 
 POISSON_METHOD = ("nu = (|dw| / w0) / (|dt| / t0), normalised strains (docs/workbook.md); "
                   "source paper eq. (1) |dw| / |dt| in extra")
-MODULUS_METHOD = ("E = (dF/dd) t0 / A over the longest initial window with R^2 >= {r2:g} "
-                  "(nominal stress F/A, strain d/t0; Mohsenin 1986)")
+MODULUS_METHOD = ("E = (dF/dd) t0 / A over the initial window up to the yield point (line then "
+                  "parabola, BIC), R^2 >= {r2:g} (nominal stress F/A, strain d/t0; Mohsenin 1986)")
 
 
 def poisson_ratio(width_before, width_after, thickness_before, thickness_after):
@@ -105,14 +105,54 @@ class LinearRegion:
         return asdict(self)
 
 
+def _line_sums(x, y):
+    """Cumulative least-squares sums of the windows x[:m], y[:m], m = 1 .. n."""
+    m = np.arange(1, x.size + 1, dtype=float)
+    sx, sy = np.cumsum(x), np.cumsum(y)
+    sxx = np.cumsum(x * x) - sx * sx / m
+    syy = np.cumsum(y * y) - sy * sy / m
+    sxy = np.cumsum(x * y) - sx * sy / m
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope = np.where(sxx > 0, sxy / sxx, 0.0)
+    rss = np.maximum(syy - slope * sxy, 0.0)
+    return m, sx, sy, sxx, syy, sxy, slope, rss
+
+
+def _suffix_parabolas(x, y):
+    """Residual sum of squares and starting slope of the least-squares parabola through each
+    suffix x[i:], y[i:] (NaN where fewer than 6 samples remain)."""
+    u = (x - x[0]) / (x[-1] - x[0])             # scaled for the normal equations
+    pw = np.stack([u ** k for k in range(5)])
+    su = np.cumsum(pw[:, ::-1], axis=1)[:, ::-1]            # suffix sums of u^0 .. u^4
+    suy = np.cumsum((pw[:3] * y)[:, ::-1], axis=1)[:, ::-1]
+    syy = np.cumsum((y * y)[::-1])[::-1]
+    A = np.stack([su[i: i + 3] for i in range(3)]).transpose(2, 0, 1)
+    b = suy.T
+    n = x.size
+    ok = np.arange(n) <= n - 6
+    coef = np.full((n, 3), np.nan)
+    coef[ok] = np.linalg.solve(A[ok], b[ok][..., None])[..., 0]
+    rss = np.maximum(syy - np.einsum("ij,ij->i", coef, b), 0.0)
+    slope = (coef[:, 1] + 2 * coef[:, 2] * u) / (x[-1] - x[0])
+    return np.where(ok, rss, np.nan), slope
+
+
 def initial_linear_region(displacement, force, *, r2_min=0.995, min_points=5,
                           trigger=0.01) -> LinearRegion:
-    """The longest initial window of a loading curve that a straight line fits with R^2 >= r2_min.
+    """The straight initial part of a loading curve, ending where the specimen starts to yield.
 
-    Only the loading branch (up to the peak force) is used. The window starts at the first
-    sample whose force reaches ``trigger`` times the peak force (as a texture analyser's
-    trigger force ignores the approach) and ends at the last sample for which the
-    least-squares line through the window still has R^2 >= r2_min.
+    Only the loading branch (from the trigger force to the peak force) is used; the window
+    starts at the first sample whose force reaches ``trigger`` times the peak force, as a
+    texture analyser's trigger force ignores the approach. The yield point is the breakpoint
+    of a piecewise least-squares fit of the branch, a line before it and a parabola after it
+    (the yielding tissue softens gradually): the split that minimises the summed residuals,
+    among splits after which the curve starts softer. The split is kept only if the Bayesian information criterion prefers the two
+    pieces (6 parameters, the breakpoint counted) to one line over the whole branch; otherwise
+    the whole branch is the window.
+
+    A longest-window rule (extend while R^2 >= r2_min) reads a curve that softens after its
+    linear part low: the large range of a long window tolerates the bend, and the window runs
+    past the yield point. Here ``r2_min`` only guards against a window that is not straight.
 
     Parameters
     ----------
@@ -121,15 +161,19 @@ def initial_linear_region(displacement, force, *, r2_min=0.995, min_points=5,
     force : array_like
         Force [N].
     r2_min : float
-        Least coefficient of determination accepted.
+        Least coefficient of determination accepted for the window.
     min_points : int
-        Fewest samples in the window.
+        Fewest samples in the window (and after the breakpoint).
     trigger : float
         Start threshold as a fraction of the peak force.
 
     Returns
     -------
     LinearRegion
+
+    References
+    ----------
+    Schwarz, G. (1978). Estimating the dimension of a model. Ann. Stat. 6, 461-464 (BIC).
     """
     x = np.asarray(displacement, dtype=float)
     F = np.asarray(force, dtype=float)
@@ -144,28 +188,36 @@ def initial_linear_region(displacement, force, *, r2_min=0.995, min_points=5,
         raise InputError("the curve has no positive force")
     start = int(np.argmax(F[: peak + 1] >= trigger * F[peak]))
     xs, ys = x[start: peak + 1], F[start: peak + 1]
-    if xs.size < min_points:
-        raise InputError(f"only {xs.size} samples between the trigger force and the peak "
+    n_all = xs.size
+    if n_all < min_points:
+        raise InputError(f"only {n_all} samples between the trigger force and the peak "
                          f"(need {min_points})")
-    m = np.arange(1, xs.size + 1, dtype=float)
-    sx, sy = np.cumsum(xs), np.cumsum(ys)
-    sxx = np.cumsum(xs * xs) - sx * sx / m
-    syy = np.cumsum(ys * ys) - sy * sy / m
-    sxy = np.cumsum(xs * ys) - sx * sy / m
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r2 = np.where((sxx > 0) & (syy > 0), sxy * sxy / (sxx * syy), 0.0)
-    ok = np.flatnonzero((r2 >= r2_min) & (m >= min_points) & (sxy > 0))
-    if ok.size == 0:
-        raise InputError(f"no initial window of {min_points} or more samples is linear "
-                         f"with R^2 >= {r2_min:g}")
-    j = int(ok[-1])
-    n = j + 1
-    slope = sxy[j] / sxx[j]
-    intercept = (sy[j] - slope * sx[j]) / n
-    rss = max(syy[j] - slope * sxy[j], 0.0)
-    se = math.sqrt(rss / (n - 2) / sxx[j]) if n > 2 else math.nan
-    return LinearRegion(slope=float(slope), slope_se=se, intercept=float(intercept),
-                        r2=float(r2[j]), start=start, stop=start + n)
+    m, sx, sy, sxx, syy, sxy, slope, rss = _line_sums(xs, ys)
+    n = n_all
+    if n_all >= min_points + 3 * 2:
+        # split after sample j: a line through [0, j], a parabola through [j + 1, end]
+        j = np.arange(min_points - 1, n_all - 6)
+        q_rss, q_slope = _suffix_parabolas(xs, ys)
+        after = j + 1
+        softer = q_slope[after] < slope[j]
+        if np.any(softer):
+            split_rss = rss[j] + q_rss[after]
+            best = int(j[softer][int(np.argmin(split_rss[softer]))])
+            floor = 1e-12 * max(syy[-1], 1e-300)    # an exact line would make log(0)
+            bic_one = n_all * math.log(max(rss[-1], floor) / n_all) + 2 * math.log(n_all)
+            bic_two = (n_all * math.log(max(rss[best] + q_rss[best + 1], floor) / n_all)
+                       + 6 * math.log(n_all))
+            if bic_two < bic_one:
+                n = best + 1
+    k = n - 1
+    r2 = sxy[k] * sxy[k] / (sxx[k] * syy[k]) if sxx[k] > 0 and syy[k] > 0 else 0.0
+    if not (r2 >= r2_min and sxy[k] > 0):
+        raise InputError(f"the initial window of {n} samples is not linear: R^2 = {r2:.4f} "
+                         f"< {r2_min:g}")
+    intercept = (sy[k] - slope[k] * sx[k]) / n
+    se = math.sqrt(rss[k] / (n - 2) / sxx[k]) if n > 2 else math.nan
+    return LinearRegion(slope=float(slope[k]), slope_se=se, intercept=float(intercept),
+                        r2=float(r2), start=start, stop=start + n)
 
 
 def contact_area(axis: str, width, length=None):
