@@ -39,7 +39,7 @@ from demcal.analyse.results import CampaignResult
 from demcal.errors import DemcalError, InputError
 from demcal.jsonio import read_json, to_jsonable
 from demcal.provenance import sha256_file
-from demcal.report.tables import (PAPER_FILE, RESULT_TABLE_IDS, Campaign, build_tables,
+from demcal.report.tables import (PAPER_FILE, PAPER_NAME, RESULT_TABLE_IDS, Campaign, build_tables,
                                   load_campaign, load_critique, load_paper, normalised, run_keys)
 
 #: Relative and absolute tolerance of a float cell.
@@ -256,7 +256,7 @@ def check_files(inputs: dict, out_dir: Path) -> list[FileCheck]:
     """Compare each recorded SHA-256 with the file's present one."""
     checks = []
     for name, stored in inputs.items():
-        p = Path(name)
+        p = PAPER_FILE if name == PAPER_NAME else Path(name)
         if not p.is_absolute():
             p = out_dir / p
         if not p.is_file():
@@ -605,8 +605,7 @@ def audit(out_dir) -> AuditResult:
     files = check_files(stored_doc.get("inputs", {}), out)
     # a missing workbook file (absolute path) stops the measurement; run records, critique.json
     # (relative) and the paper's numbers only stop the tables that use them
-    missing_inputs = [f.file for f in files if f.status == "missing" and Path(f.file).is_absolute()
-                      and f.file != str(PAPER_FILE)]
+    missing_inputs = [f.file for f in files if f.status == "missing" and Path(f.file).is_absolute()]
     if missing_inputs:
         campaign, problems = None, ["workbook input(s) missing: " + ", ".join(missing_inputs)]
     else:

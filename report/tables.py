@@ -31,6 +31,9 @@ from demcal.provenance import sha256_file
 
 #: The source paper's printed numbers (its text; its Tables 1-9 are not available).
 PAPER_FILE = Path(__file__).resolve().parents[1] / "data" / "paper_defaults.json"
+#: How reports name the paper's numbers: the same on every install, so that a report audits
+#: on another machine (``report.audit`` resolves it to PAPER_FILE).
+PAPER_NAME = "demcal:data/paper_defaults.json"
 
 #: The paper's significance note, printed under both ANOVA tables.
 SIGNIFICANCE_NOTE = ("Note: 0.01<P<0.05, significant effect (*); P<0.01, highly significant "
@@ -170,7 +173,7 @@ def load_paper() -> tuple[dict, dict]:
     """The paper's numbers and ``{"file", "sha256"}`` of their file (empty if it is absent)."""
     if not PAPER_FILE.exists():
         return {}, {}
-    return read_json(PAPER_FILE), {"file": str(PAPER_FILE), "sha256": sha256_file(PAPER_FILE)}
+    return read_json(PAPER_FILE), {"file": PAPER_NAME, "sha256": sha256_file(PAPER_FILE)}
 
 
 def run_stages(results: CampaignResult) -> list[tuple[str, list]]:

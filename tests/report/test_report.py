@@ -17,6 +17,7 @@ from demcal.analyse.campaign import CampaignConfig, calibrate
 from demcal.cli import main
 from demcal.provenance import sha256_file
 from demcal.report.render import build_report, write_tables
+from demcal.report.tables import PAPER_FILE, PAPER_NAME
 from tests.analyse.standin import standin_runner
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -205,6 +206,21 @@ def test_audit_names_a_changed_table_cell(campaign, capsys, tmp_path):
     assert repr(true_r2 * 0.99) in line and repr(true_r2) in line
     assert re.search(r"^Table 9 \(.*\): OK$", text, re.M)  # the others still match
     assert "audit: FAILED" in text
+
+
+def test_audit_finds_the_papers_numbers_on_any_install(campaign, capsys, tmp_path, monkeypatch):
+    """The report names the paper's numbers by the package, not by this install's path, so a
+    copy audits elsewhere; a changed copy of the file is named."""
+    doc = json.loads((campaign["out"] / "tables.json").read_text())
+    assert doc["inputs"][PAPER_NAME] == sha256_file(PAPER_FILE)
+    assert str(PAPER_FILE) not in (campaign["out"] / "tables.json").read_text()
+    moved = tmp_path / "elsewhere" / "paper_defaults.json"
+    moved.parent.mkdir()
+    moved.write_text(PAPER_FILE.read_text().replace("35.79", "35.80"))
+    monkeypatch.setattr("demcal.report.audit.PAPER_FILE", moved)
+    code, text = _audit(capsys, campaign["out"])
+    assert code == 1
+    assert f"CHANGED  {PAPER_NAME}: SHA-256 recorded {sha256_file(PAPER_FILE)}" in text
 
 
 def _copy(campaign, tmp_path) -> Path:
