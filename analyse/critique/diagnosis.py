@@ -464,8 +464,9 @@ def _random_effects_fit(y, X, groups):
     return quasi(A), quasi(y[:, None])[:, 0], s_b2, msw
 
 
-def _clustered(y, X, groups, between: bool):
-    """Fit and F-test of the columns X (beyond the intercept) with a random specimen intercept.
+def _clustered(y, X, groups, between: bool, controls: int = 0):
+    """Fit and F-test of the columns X (beyond the intercept and the first ``controls`` columns
+    of X, which the null model keeps) with a random specimen intercept.
     Degrees of freedom by the between-within rule: a covariate constant within specimens has
     specimens - 1 - columns and is judged against the scatter between specimens; one varying
     within them has trials - specimens - columns, or, with no specimen variance estimated, the
@@ -473,16 +474,18 @@ def _clustered(y, X, groups, between: bool):
     y = np.asarray(y, dtype=float)
     X = np.asarray(X, dtype=float).reshape(y.size, -1)
     As, ys, s_b2, _ = _random_effects_fit(y, X, groups)
-    q = X.shape[1]
+    k = X.shape[1]
+    q = k - controls
     G = np.unique(groups).size
     # a covariate of the specimen is judged against the specimens whatever the variance
     # estimate says (fitted first, it has taken up the between-specimen scatter itself)
-    dof = G - 1 - q if between else (y.size - 1 - q if s_b2 == 0 else y.size - G - q)
+    dof = G - 1 - k if between else (y.size - 1 - k if s_b2 == 0 else y.size - G - k)
     coef, *_ = np.linalg.lstsq(As, ys, rcond=None)
     rss1 = float(np.sum((ys - As @ coef) ** 2))
-    c0, *_ = np.linalg.lstsq(As[:, :1], ys, rcond=None)
-    rss0 = float(np.sum((ys - As[:, :1] @ c0) ** 2))
-    s2 = rss1 / (y.size - 1 - q)
+    null = As[:, : 1 + controls]
+    c0, *_ = np.linalg.lstsq(null, ys, rcond=None)
+    rss0 = float(np.sum((ys - null @ c0) ** 2))
+    s2 = rss1 / (y.size - 1 - k)
     if between and dof > 0:
         # a specimen covariate is judged against the scatter between specimens alone: in a
         # balanced design this is the regression on the specimens' means, exactly
@@ -496,7 +499,8 @@ def _clustered(y, X, groups, between: bool):
         p = 0.0 if rss0 > rss1 else 1.0
     else:
         p = float(stats.f.sf((rss0 - rss1) / q / s2, q, dof))
-    return coef[1:], cov[1:, 1:], p, dof
+    lead = 1 + controls
+    return coef[lead:], cov[lead:, lead:], p, dof
 
 
 def clustered_trend_test(x, y, groups, between: bool) -> dict:
@@ -718,17 +722,38 @@ def _columns(raw, keep) -> np.ndarray | None:
 
 
 def partial_pvalue(series: Series, covariate: str, control: str) -> float:
-    """p-value of ``covariate`` in a least-squares model of the series that already holds
-    ``control`` (F-test of the covariate's columns, ``_columns``), on the rows having both."""
+    """p-value of ``covariate`` in a model of the series that already holds ``control`` (F-test
+    of the covariate's columns, ``_columns``), on the rows having both.
+
+    With repeated trials on a specimen (``specimen_groups``) the model carries a random
+    specimen intercept and the degrees of freedom of the level the covariate varies at, as in
+    ``series_tests``; otherwise it is ordinary least squares."""
     a, b = series.covariates[covariate], series.covariates[control]
     keep = [i for i in range(len(series.values)) if a[i] is not None and b[i] is not None]
     y = np.asarray(series.values, dtype=float)[keep]
     Xc = np.column_stack([np.ones(len(keep)), _columns(b, keep)])
     Xf = np.column_stack([Xc, _columns(a, keep)])
     rank_c, rank_f = np.linalg.matrix_rank(Xc), np.linalg.matrix_rank(Xf)
-    dof = len(keep) - rank_f
-    if rank_f <= rank_c or dof <= 0:
+    if rank_f <= rank_c:
         return 1.0              # the covariate adds nothing the control does not hold
+    groups = specimen_groups(series)
+    if groups is not None:
+        g = groups[keep]
+        per: dict = {}
+        for lab, v in zip(g, (a[i] for i in keep)):
+            per.setdefault(lab, set()).add(str(v))
+        between = all(len(v) == 1 for v in per.values())
+        # a full-rank design: columns in order, each kept if it adds to the rank
+        cols, kept = Xf[:, 1:], []
+        for j in range(cols.shape[1]):
+            if np.linalg.matrix_rank(np.column_stack([np.ones(len(keep)), cols[:, kept + [j]]])) == len(kept) + 2:
+                kept.append(j)
+        n_control = sum(j < Xc.shape[1] - 1 for j in kept)
+        *_, p, dof = _clustered(y, cols[:, kept], g, between, controls=n_control)
+        return 1.0 if not dof > 0 or not math.isfinite(p) else p
+    dof = len(keep) - rank_f
+    if dof <= 0:
+        return 1.0
     rss = [float(np.sum((y - X @ np.linalg.lstsq(X, y, rcond=None)[0]) ** 2)) for X in (Xc, Xf)]
     if rss[1] <= 0:
         return 0.0
