@@ -394,9 +394,14 @@ def restitution_estimates(workbook, *, outliers="none", g=GRAVITY) -> dict:
         used = [rec for rec in est.per_row if rec["used"] and rec["method"] == "heights"]
         h1 = [rec["drop_height_m"] for rec in used]
         if len(used) >= 3 and len(set(h1)) >= 2:
-            reg = from_height_regression(h1, [rec["rebound_height_m"] for rec in used])
-            regression = dict(reg.to_dict(), rows=[rec["row"] for rec in used],
-                              method="e = sqrt(slope of h2 on h1), ordinary least squares")
+            rows_used = [rec["row"] for rec in used]
+            try:
+                reg = from_height_regression(h1, [rec["rebound_height_m"] for rec in used])
+                regression = dict(reg.to_dict(), rows=rows_used,
+                                  method="e = sqrt(slope of h2 on h1), ordinary least squares")
+            except InputError as exc:
+                # a cross-check beside the per-drop values, never a reason to refuse them
+                regression = {"rows": rows_used, "unavailable": str(exc)}
             est = replace(est, extra=dict(est.extra, height_regression=regression))
         out[est.name] = est
     return out

@@ -77,6 +77,19 @@ def test_hand_values(campaign):
     assert rep.extra["flank_mean_deg"] == {"left": 34.0, "right": 35.0}
 
 
+
+def test_rebounds_that_do_not_grow_with_height_keep_their_per_drop_values(campaign):
+    # 200 mm drops rebound 45 and 50 mm, higher than the 400 mm ones (49, 36): the height
+    # regression has a negative slope; the per-drop values still stand, the regression says why not
+    def edit(sheets):
+        sheets["drop"][2]["rebound_height_mm"] = 45
+        sheets["drop"][3]["rebound_height_mm"] = 50
+    steel = run(campaign(edit)).quantities["restitution.particle-steel"]
+    assert steel.value == pytest.approx((0.35 + 0.30 + (45 / 200) ** 0.5 + (50 / 200) ** 0.5 + 0.40) / 5,
+                                        abs=1e-6)
+    reg = steel.extra["height_regression"]
+    assert reg["rows"] == [1, 2, 3, 4] and "does not grow with drop height" in reg["unavailable"]
+
 def test_sources_name_sheet_file_and_hash(campaign, fmt):
     path = campaign()
     m = run(path)
