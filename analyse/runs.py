@@ -1,8 +1,8 @@
 """The run store and executor of a calibration campaign.
 
 Every DEM run of a campaign is one JSON record in ``DIR/runs/<key>.json``; the key is the
-SHA-256 of the run's canonical inputs (rig, parameters, profile, seed, extensions), so the same
-inputs always map to the same record. Records are written atomically the moment a run ends,
+SHA-256 of the run's canonical inputs (rig, parameters, profile, seed, extensions) and of the
+DEM's model version, so the same inputs always map to the same record. Records are written atomically the moment a run ends,
 so a campaign killed midway loses at most the runs that were in flight, and a rerun skips
 every run whose record says ``"status": "ok"``. A failed run is recorded with its error and
 retried once; a run that fails twice stays recorded as failed and the campaign reports it.
@@ -37,15 +37,17 @@ from tqdm.auto import tqdm
 
 from demcal.errors import InputError
 from demcal.jsonio import read_json, to_jsonable, write_json
-from demcal.provenance import Provenance
+from demcal.provenance import MODEL_VERSION, Provenance
 
 #: How many times a failed run is attempted in all (the first try and one retry).
 MAX_ATTEMPTS = 2
 
 
 def run_key(inputs: dict) -> str:
-    """SHA-256 of the canonical JSON of a run's inputs (sorted keys, no whitespace)."""
-    text = json.dumps(to_jsonable(inputs), sort_keys=True, separators=(",", ":"))
+    """SHA-256 of the canonical JSON (sorted keys, no whitespace) of a run's inputs and the
+    DEM's ``MODEL_VERSION``: a record made by other physics is never reused."""
+    text = json.dumps({"model_version": MODEL_VERSION, "run": to_jsonable(inputs)},
+                      sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()
 
 

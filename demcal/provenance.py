@@ -12,6 +12,12 @@ from pathlib import Path
 
 from demcal import __version__
 
+#: Revision of what the DEM computes. Raise it with any change that alters the result of a run
+#: with unchanged inputs: it is part of every run-store key, so a store or cache never serves a
+#: record computed by other physics (``analyse.runs.run_key``). Revision 2: shared normal
+#: damping (``multi_contact_damping``) damps the effective mass at each contact.
+MODEL_VERSION = 2
+
 
 def sha256_file(path, chunk: int = 1 << 20) -> str:
     """SHA-256 hex digest of a file's bytes."""
@@ -41,7 +47,7 @@ def git_sha() -> str | None:
 
 def code_version() -> dict:
     """demcal version, git sha, Python and platform: enough to find the code again."""
-    return {"demcal": __version__, "git_sha": git_sha(),
+    return {"demcal": __version__, "git_sha": git_sha(), "model_version": MODEL_VERSION,
             "python": platform.python_version(), "platform": platform.platform()}
 
 

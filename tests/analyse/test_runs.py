@@ -55,6 +55,23 @@ def test_rerun_reuses_finished_runs(tmp_path):
     assert rec["provenance"]["seed"] == 2 and rec["provenance"]["code"]["demcal"]
 
 
+def test_records_of_another_model_version_are_not_reused(tmp_path, monkeypatch):
+    """A change of what the DEM computes (MODEL_VERSION) changes every key: the runs are made
+    again beside the old records, which stay on disk."""
+    import demcal.analyse.runs as runs
+
+    store = RunStore(tmp_path / "runs")
+    log = tmp_path / "calls.log"
+    tasks = [{"x": x, "seed": x, "log": str(log)} for x in range(3)]
+    first = run_all(tasks, square_runner, store, progress=False)
+    assert first.records[0]["provenance"]["code"]["model_version"] == runs.MODEL_VERSION
+    monkeypatch.setattr(runs, "MODEL_VERSION", runs.MODEL_VERSION + 1)
+    second = run_all(tasks, square_runner, store, progress=False)
+    assert (second.ran, second.reused) == (3, 0)
+    assert {r["key"] for r in second.records}.isdisjoint(r["key"] for r in first.records)
+    assert len(list((tmp_path / "runs").glob("*.json"))) == 6
+
+
 def test_failed_run_is_recorded_and_retried_once(tmp_path):
     store = RunStore(tmp_path / "runs")
     out = run_all([{"x": 3, "seed": 0, "fail_always": True}], square_runner, store, progress=False)
