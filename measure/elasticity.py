@@ -146,9 +146,9 @@ def initial_linear_region(displacement, force, *, r2_min=0.995, min_points=5,
     texture analyser's trigger force ignores the approach. The yield point is the breakpoint
     of a piecewise least-squares fit of the branch, a line before it and a parabola after it
     (the yielding tissue softens gradually): the split that minimises the summed residuals,
-    among splits after which the curve starts softer. The split is kept only if the Bayesian information criterion prefers the two
-    pieces (6 parameters, the breakpoint counted) to one line over the whole branch; otherwise
-    the whole branch is the window.
+    among splits after which the curve starts softer. The split is kept only if the Bayesian
+    information criterion prefers the two pieces (6 parameters, the breakpoint counted) to one
+    line over the whole branch; otherwise the whole branch is the window.
 
     A longest-window rule (extend while R^2 >= r2_min) reads a curve that softens after its
     linear part low: the large range of a long window tolerates the bend, and the window runs
@@ -163,7 +163,7 @@ def initial_linear_region(displacement, force, *, r2_min=0.995, min_points=5,
     r2_min : float
         Least coefficient of determination accepted for the window.
     min_points : int
-        Fewest samples in the window (and after the breakpoint).
+        Fewest samples in the window (the parabola after a breakpoint takes at least 6).
     trigger : float
         Start threshold as a fraction of the peak force.
 
@@ -194,7 +194,7 @@ def initial_linear_region(displacement, force, *, r2_min=0.995, min_points=5,
                          f"(need {min_points})")
     m, sx, sy, sxx, syy, sxy, slope, rss = _line_sums(xs, ys)
     n = n_all
-    if n_all >= min_points + 3 * 2:
+    if n_all >= min_points + 6:
         # split after sample j: a line through [0, j], a parabola through [j + 1, end]
         j = np.arange(min_points - 1, n_all - 6)
         q_rss, q_slope = _suffix_parabolas(xs, ys)
