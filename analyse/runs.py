@@ -24,7 +24,6 @@ Record layout::
 from __future__ import annotations
 
 import concurrent.futures as cf
-import hashlib
 import json
 import multiprocessing as mp
 import time
@@ -37,18 +36,10 @@ from tqdm.auto import tqdm
 
 from demcal.errors import InputError
 from demcal.jsonio import read_json, to_jsonable, write_json
-from demcal.provenance import MODEL_VERSION, Provenance
+from demcal.provenance import Provenance, run_key
 
 #: How many times a failed run is attempted in all (the first try and one retry).
 MAX_ATTEMPTS = 2
-
-
-def run_key(inputs: dict) -> str:
-    """SHA-256 of the canonical JSON (sorted keys, no whitespace) of a run's inputs and the
-    DEM's ``MODEL_VERSION``: a record made by other physics is never reused."""
-    text = json.dumps({"model_version": MODEL_VERSION, "run": to_jsonable(inputs)},
-                      sort_keys=True, separators=(",", ":"))
-    return hashlib.sha256(text.encode()).hexdigest()
 
 
 class RunStore:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
+import json
 import platform
 import subprocess
 from dataclasses import asdict, dataclass, field
@@ -11,12 +12,22 @@ from functools import lru_cache
 from pathlib import Path
 
 from demcal import __version__
+from demcal.jsonio import to_jsonable
 
 #: Revision of what the DEM computes. Raise it with any change that alters the result of a run
 #: with unchanged inputs: it is part of every run-store key, so a store or cache never serves a
-#: record computed by other physics (``analyse.runs.run_key``). Revision 2: shared normal
+#: record computed by other physics (``run_key``). Revision 2: shared normal
 #: damping (``multi_contact_damping``) damps the effective mass at each contact.
 MODEL_VERSION = 2
+
+
+def run_key(inputs: dict) -> str:
+    """SHA-256 of the canonical JSON (sorted keys, no whitespace) of a DEM run's inputs and
+    ``MODEL_VERSION``: the key of its record in a run store or cache, never shared with a run
+    computed by other physics."""
+    text = json.dumps({"model_version": MODEL_VERSION, "run": to_jsonable(inputs)},
+                      sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def sha256_file(path, chunk: int = 1 << 20) -> str:

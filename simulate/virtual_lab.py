@@ -61,8 +61,6 @@ effect, the true size of what the diagnosis estimates (``VirtualWorkbook.expecte
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 import os
 from dataclasses import asdict, dataclass, field
@@ -73,7 +71,7 @@ import pandas as pd
 
 from demcal.errors import DemcalError, InputError, SimulationError
 from demcal.jsonio import read_json, write_json
-from demcal.provenance import MODEL_VERSION, Provenance
+from demcal.provenance import Provenance, run_key
 from demcal.simulate.params import DEMParameters
 from demcal.units import GRAVITY
 
@@ -319,8 +317,7 @@ def _drop_point(params: DEMParameters, pair: str, height_m: float, orientation_d
     """Apparent restitution of the drop twin at one orientation (cached in memory and on disk)."""
     inputs = {"params": params.to_dict(), "pair": pair, "height": round(float(height_m), 6),
               "orientation_deg": round(float(orientation_deg), 6)}
-    key = hashlib.sha256(json.dumps({"model_version": MODEL_VERSION, **inputs},
-                                    sort_keys=True).encode()).hexdigest()
+    key = run_key(inputs)
     if key in _DROP_CACHE:
         return _DROP_CACHE[key]
     path = Path(cache_dir) / f"drop-{key}.json" if cache_dir else None

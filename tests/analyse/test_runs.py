@@ -58,14 +58,14 @@ def test_rerun_reuses_finished_runs(tmp_path):
 def test_records_of_another_model_version_are_not_reused(tmp_path, monkeypatch):
     """A change of what the DEM computes (MODEL_VERSION) changes every key: the runs are made
     again beside the old records, which stay on disk."""
-    import demcal.analyse.runs as runs
+    import demcal.provenance as provenance
 
     store = RunStore(tmp_path / "runs")
     log = tmp_path / "calls.log"
     tasks = [{"x": x, "seed": x, "log": str(log)} for x in range(3)]
     first = run_all(tasks, square_runner, store, progress=False)
-    assert first.records[0]["provenance"]["code"]["model_version"] == runs.MODEL_VERSION
-    monkeypatch.setattr(runs, "MODEL_VERSION", runs.MODEL_VERSION + 1)
+    assert first.records[0]["provenance"]["code"]["model_version"] == provenance.MODEL_VERSION
+    monkeypatch.setattr(provenance, "MODEL_VERSION", provenance.MODEL_VERSION + 1)
     second = run_all(tasks, square_runner, store, progress=False)
     assert (second.ran, second.reused) == (3, 0)
     assert {r["key"] for r in second.records}.isdisjoint(r["key"] for r in first.records)
