@@ -233,6 +233,8 @@ class LabDesign:
         ``truth file`` or ``workbook``.
     notes : tuple of str
         What the reader should know (pairs the virtual lab cannot drop, ...).
+    inputs : dict
+        File -> SHA-256 of what the design was read from (every file of a workbook).
     """
 
     truth: object
@@ -241,11 +243,12 @@ class LabDesign:
     source: str
     kind: str
     notes: tuple = ()
+    inputs: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return {"truth": self.truth.to_dict(), "design": dict(self.design),
                 "varied": {k: sorted(v) for k, v in self.varied.items()}, "source": self.source,
-                "kind": self.kind, "notes": list(self.notes)}
+                "kind": self.kind, "notes": list(self.notes), "inputs": dict(self.inputs)}
 
 
 def _virtual_varied(truth, design: dict) -> dict:
@@ -276,13 +279,16 @@ def design_from_truth_file(path, *, photos: str = "none") -> LabDesign:
     """The design and truth of a truth file (heap photos as ``photos`` asks)."""
     from demcal.simulate.truth_file import read_truth_file
 
+    from demcal.provenance import sha256_file
+
     spec = read_truth_file(path)
     design = dict(spec.design, photos=photos)
     notes = []
     if spec.design["photos"] != photos:
         notes.append(f"heap photos: {photos} (the truth file's design has {spec.design['photos']})")
     return LabDesign(truth=spec.truth, design=design, varied=_virtual_varied(spec.truth, design),
-                     source=str(path), kind="truth file", notes=tuple(notes))
+                     source=str(path), kind="truth file", notes=tuple(notes),
+                     inputs={str(path): sha256_file(path)})
 
 
 def _levels(frame, column) -> list:
@@ -429,7 +435,7 @@ def design_from_workbook(path, *, photos: str = "none") -> LabDesign:
     elif photos != "none":
         design["n_photos"] = 0
     return LabDesign(truth=truth, design=design, varied=varied, source=str(path), kind="workbook",
-                     notes=tuple(notes))
+                     notes=tuple(notes), inputs=dict(measurement.provenance.inputs))
 
 
 def read_design(source, *, photos: str = "none") -> LabDesign:
@@ -495,14 +501,10 @@ def choose_target(kind: str, lab: LabDesign) -> tuple:
 
 def detected_mechanisms(path, *, alpha: float = DEFAULT_ALPHA, correction: str = "bh") -> set:
     """Mechanisms the critique's data diagnosis names in a workbook (``demcal critique --no-twins``)."""
-    from demcal.analyse.critique.diagnosis import measured_series, run_tests
-    from demcal.analyse.critique.mechanisms import judge
-    from demcal.measure.pipeline import measure_workbook
-    from demcal.measure.workbook import read_workbook
+    from demcal.analyse.critique.loop import run_critique
 
-    wb = read_workbook(path)
-    tests, untestable = run_tests(measured_series(measure_workbook(wb), wb), method=correction, alpha=alpha)
-    return {f.mechanism for f in judge(tests, untestable) if f.verdict == "found"}
+    critique = run_critique(path, twins=False, extensions=(), alpha=alpha, correction=correction)
+    return {f.mechanism for f in critique.found()}
 
 
 @dataclass(frozen=True)
@@ -632,12 +634,34 @@ class Plan:
     provenance: Provenance
 
     def to_dict(self) -> dict:
-        return {"source": self.lab.source, "kind": self.lab.kind, "power": self.power, "reps": self.reps,
-                "seed": self.seed, "seeds": f"numpy.random.SeedSequence({self.seed}).spawn({self.reps})",
+        lab = self.lab.to_dict()
+        del lab["inputs"]                    # in the provenance
+        return {**lab, "power": self.power, "reps": self.reps, "seed": self.seed,
+                "seeds": f"numpy.random.SeedSequence({self.seed}).spawn({self.reps})",
                 "alpha": self.alpha, "correction": self.correction,
-                "mechanisms": [m.to_dict() for m in self.mechanisms], "design": self.lab.design,
-                "truth": self.lab.truth.to_dict(), "varied": {k: sorted(v) for k, v in self.lab.varied.items()},
-                "notes": list(self.lab.notes), "provenance": self.provenance.to_dict()}
+                "mechanisms": [m.to_dict() for m in self.mechanisms], "provenance": self.provenance.to_dict()}
+
+
+def check_options(*, mechanisms=None, reps: int = 20, steps: int = 4, power: float = DEFAULT_POWER,
+                  alpha: float = DEFAULT_ALPHA, correction: str = "bh") -> tuple:
+    """Refuse options :func:`plan_design` cannot use; the mechanisms to plan (default all)."""
+    from demcal.simulate.virtual_lab import EFFECT_KINDS
+
+    kinds = tuple(mechanisms) if mechanisms else EFFECT_KINDS
+    unknown = [k for k in kinds if k not in EFFECT_KINDS]
+    if unknown:
+        raise InputError(f"unknown mechanism(s) {', '.join(unknown)}; valid: {', '.join(EFFECT_KINDS)}")
+    if int(reps) != reps or reps < 2:
+        raise InputError(f"reps must be an integer >= 2, got {reps!r}")
+    if int(steps) != steps or steps < 0:
+        raise InputError(f"steps must be an integer >= 0, got {steps!r}")
+    if correction not in CORRECTIONS:
+        raise InputError(f"correction must be one of {', '.join(CORRECTIONS)}, got {correction!r}")
+    if not 0 < alpha < 1:
+        raise InputError(f"alpha must be in (0, 1), got {alpha!r}")
+    if not 0 < power < 1:
+        raise InputError(f"power must be in (0, 1), got {power!r}")
+    return kinds
 
 
 def plan_design(lab: LabDesign, *, mechanisms=None, reps: int = 20, seed: int = 0,
@@ -671,20 +695,8 @@ def plan_design(lab: LabDesign, *, mechanisms=None, reps: int = 20, seed: int = 
     """
     from demcal.simulate.virtual_lab import EFFECT_KINDS
 
-    kinds = tuple(mechanisms) if mechanisms else EFFECT_KINDS
-    unknown = [k for k in kinds if k not in EFFECT_KINDS]
-    if unknown:
-        raise InputError(f"unknown mechanism(s) {', '.join(unknown)}; valid: {', '.join(EFFECT_KINDS)}")
-    if int(reps) != reps or reps < 2:
-        raise InputError(f"reps must be an integer >= 2, got {reps!r}")
-    if int(steps) != steps or steps < 0:
-        raise InputError(f"steps must be an integer >= 0, got {steps!r}")
-    if correction not in CORRECTIONS:
-        raise InputError(f"correction must be one of {', '.join(CORRECTIONS)}, got {correction!r}")
-    if not 0 < alpha < 1:
-        raise InputError(f"alpha must be in (0, 1), got {alpha!r}")
-    if not 0 < power < 1:
-        raise InputError(f"power must be in (0, 1), got {power!r}")
+    kinds = check_options(mechanisms=mechanisms, reps=reps, steps=steps, power=power, alpha=alpha,
+                          correction=correction)
     seeds = np.random.SeedSequence(seed).spawn(int(reps))
     out = []
     with tempfile.TemporaryDirectory(prefix="demcal-plan-") as workdir:
@@ -697,12 +709,8 @@ def plan_design(lab: LabDesign, *, mechanisms=None, reps: int = 20, seed: int = 
                                  correction=correction, progress=progress))
     options = {"mechanisms": list(kinds), "reps": reps, "power": power, "steps": steps, "alpha": alpha,
                "correction": correction, "photos": lab.design["photos"]}
-    inputs = {}
-    if Path(lab.source).is_file():
-        from demcal.provenance import sha256_file
-        inputs[lab.source] = sha256_file(lab.source)
     return Plan(lab=lab, mechanisms=out, reps=int(reps), seed=seed, power=power, alpha=alpha,
-                correction=correction, provenance=Provenance(inputs=inputs, seed=seed, options=options))
+                correction=correction, provenance=Provenance(inputs=dict(lab.inputs), seed=seed, options=options))
 
 
 def _plan_one(lab, target: Target, seeds, workdir, *, power, steps, alpha, correction, progress) -> MechanismPower:

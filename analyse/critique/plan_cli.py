@@ -13,15 +13,12 @@ Clopper-Pearson 95 % interval.
 
 from __future__ import annotations
 
-from demcal.errors import InputError
 from demcal.jsonio import write_json
 
 
 def register(subparsers) -> None:
-    """Add the ``plan`` sub-command."""
-    from demcal.analyse.critique.diagnosis import DEFAULT_ALPHA
-    from demcal.analyse.critique.plan import DEFAULT_POWER
-
+    """Add the ``plan`` sub-command (the defaults written out: importing the planner at start-up
+    would load the whole critique for every command)."""
     p = subparsers.add_parser(
         "plan", help="smallest effect of each mechanism a lab design detects with 80 %% power",
         description="For each data-effect mechanism of the critique's catalogue, plant it in virtual "
@@ -33,12 +30,12 @@ def register(subparsers) -> None:
                    help="mechanisms to plan (default: every one the virtual lab can plant)")
     p.add_argument("--reps", type=int, default=20, help="virtual workbooks per effect size (%(default)s)")
     p.add_argument("--seed", type=int, default=0, help="seed of the virtual workbooks (%(default)s)")
-    p.add_argument("--power", type=float, default=DEFAULT_POWER, help="detection rate to reach (%(default)s)")
+    p.add_argument("--power", type=float, default=0.8, help="detection rate to reach (%(default)s)")
     p.add_argument("--steps", type=int, default=4, help="bisections of the effect size (%(default)s)")
     p.add_argument("--photos", choices=("none", "analytic"), default="none",
                    help="heap photos in the virtual workbooks: none (default, fast) or analytic "
                         "(plans camera_tilt too; slower)")
-    p.add_argument("--alpha", type=float, default=DEFAULT_ALPHA,
+    p.add_argument("--alpha", type=float, default=0.01,
                    help="the critique's significance after correction (%(default)s)")
     p.add_argument("--correction", choices=("bh", "holm"), default="bh",
                    help="the critique's multiple-testing correction (%(default)s)")
@@ -82,25 +79,13 @@ def _design_text(d: dict) -> str:
     return "; ".join(parts)
 
 
-def _mechanisms(text: str) -> tuple:
-    items = tuple(s.strip() for s in text.split(",") if s.strip())
-    if text.strip() and not items:
-        raise InputError(f"--mechanisms must be a comma-separated list, got {text!r}")
-    return items
-
-
 def run(args) -> int:
-    from demcal.analyse.critique.plan import plan_design, read_design
-    from demcal.simulate.virtual_lab import EFFECT_KINDS
+    from demcal.analyse.critique.cli import _list
+    from demcal.analyse.critique.plan import check_options, plan_design, read_design
 
-    mechanisms = _mechanisms(args.mechanisms)
-    unknown = [m for m in mechanisms if m not in EFFECT_KINDS]
-    if unknown:
-        raise InputError(f"--mechanisms: unknown {', '.join(unknown)}; valid: {', '.join(EFFECT_KINDS)}")
-    if args.reps < 2:
-        raise InputError(f"--reps must be >= 2, got {args.reps}")
-    if args.steps < 0:
-        raise InputError(f"--steps must be >= 0, got {args.steps}")
+    mechanisms = _list(args.mechanisms, "--mechanisms")
+    check_options(mechanisms=mechanisms, reps=args.reps, steps=args.steps, power=args.power, alpha=args.alpha,
+                  correction=args.correction)
     lab = read_design(args.source, photos=args.photos)
     print(f"plan of {lab.kind} {lab.source}: {args.reps} virtual workbooks per size, seed {args.seed}, "
           f"critique alpha {args.alpha:g} ({args.correction})")
