@@ -142,17 +142,23 @@ def parse_params(values, where: str = "params") -> DEMParameters:
     if unknown:
         raise InputError(f"{where}: unknown DEM parameter {unknown[0]!r}; valid: {', '.join(names)}")
     defaults = {f.name: f.default for f in dataclasses.fields(DEMParameters)}
-    params = DEMParameters()
     for name, value in values.items():
         default = defaults[name]
         if isinstance(value, bool) != isinstance(default, bool) and isinstance(default, (int, float)):
             raise InputError(f"{where}.{name}: must be a "
                              f"{'true or false' if isinstance(default, bool) else 'number'}, got {value!r}")
-        try:
-            params = params.with_(**{name: value})
-        except (InputError, TypeError, ValueError) as exc:
-            raise InputError(f"{where}.{name}: {exc}") from None
-    return params
+    errors = (InputError, TypeError, ValueError)
+    try:
+        # all at once: checks between fields (diameter <= length, a mass for mass_model) see the
+        # file's values, not a mix of them and the defaults
+        return DEMParameters.from_names(values)
+    except errors as exc:
+        for name, value in values.items():       # name the field when one alone is wrong
+            try:
+                DEMParameters.from_names({name: value})
+            except errors as one:
+                raise InputError(f"{where}.{name}: {one}") from None
+        raise InputError(f"{where}: {exc}") from None
 
 
 def parse_design(values, where: str = "design") -> dict:

@@ -11,7 +11,7 @@ from scipy import stats
 
 from demcal.cli import main
 from demcal.errors import InputError
-from demcal.simulate.truth_file import design_defaults, parse_truth, read_truth_file
+from demcal.simulate.truth_file import design_defaults, parse_params, parse_truth, read_truth_file
 from demcal.simulate.virtual_lab import EFFECT_KINDS, Truth
 from demcal.simulate.virtual_lab_cli import parse_plant
 
@@ -100,6 +100,17 @@ def test_coverage_over_seeds_is_binomial(tmp_path, capsys):
     overall = stats.binom.ppf(0.999, len(seeds) * len(truth), 0.05)
     assert max(misses.values()) <= per_quantity, misses
     assert sum(misses.values()) <= overall, misses
+
+
+def test_params_are_checked_together_not_one_by_one():
+    # each alone breaks a check between fields against the defaults (diameter 11 mm > length
+    # 10 mm; a scaled mass model without a mass); together they are valid
+    p = parse_params({"segment_length_m": 0.01, "segment_diameter_m": 0.008})
+    assert (p.segment_length_m, p.segment_diameter_m) == (0.01, 0.008)
+    p = parse_params({"mass_model": "scaled", "mean_mass_kg": 0.002})
+    assert (p.mass_model, p.mean_mass_kg) == ("scaled", 0.002)
+    with pytest.raises(InputError, match=r"^params: segment_diameter_m \(0.02\) must not exceed"):
+        parse_params({"segment_length_m": 0.015, "segment_diameter_m": 0.02})
 
 
 def test_hand_released_segments_are_compared_with_their_apparent_restitution(tmp_path, capsys):
