@@ -761,6 +761,36 @@ def _meta(truth: Truth, effects, geometry=None) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["key", "value"])
 
 
+def check_design(effects, *, photos, n_specimens, n_density, n_drop, n_incline, n_compression, n_photos,
+                 n_tracks, trials_per_specimen, orientation_range_deg, drop_heights_mm, **_) -> None:
+    """Refuse a design (the options of ``write_virtual_workbook``) it cannot write, before
+    anything is written; the options not checked here (``pairs``, ``surfaces``...) are ignored."""
+    effects = tuple(e if isinstance(e, PlantedEffect) else PlantedEffect(str(e)) for e in effects)
+    if photos not in PHOTO_MODES:
+        raise InputError(f"photos must be one of {', '.join(PHOTO_MODES)}, got {photos!r}")
+    for name, value, least in (("n_specimens", n_specimens, 3), ("n_density", n_density, 2),
+                               ("n_drop", n_drop, 1), ("n_incline", n_incline, 2),
+                               ("n_compression", n_compression, 0), ("n_photos", n_photos, 0),
+                               ("n_tracks", n_tracks, 0)):
+        if int(value) != value or value < least:
+            raise InputError(f"{name} must be an integer >= {least}, got {value!r}")
+    if trials_per_specimen is not None:
+        if int(trials_per_specimen) != trials_per_specimen or trials_per_specimen < 1:
+            raise InputError(f"trials_per_specimen must be a positive integer, got {trials_per_specimen!r}")
+        need = max(n_drop * len(drop_heights_mm), n_incline)
+        if math.ceil(need / trials_per_specimen) > n_specimens:
+            raise InputError(f"trials_per_specimen {trials_per_specimen}: {need} trials need "
+                             f"{math.ceil(need / trials_per_specimen)} specimens, the workbook has {n_specimens}")
+    lo, hi = (float(v) for v in orientation_range_deg)
+    if not 0 <= lo <= hi <= 90:
+        raise InputError(f"orientation_range_deg must satisfy 0 <= low <= high <= 90, got {orientation_range_deg!r}")
+    if not drop_heights_mm or any(not h > 0 for h in drop_heights_mm):
+        raise InputError(f"drop_heights_mm must be positive heights, got {drop_heights_mm!r}")
+    for e in effects:
+        if e.sheet == "repose" and (photos == "none" or n_photos < 2):
+            raise InputError(f"planted effect {e.kind} is in the repose sheet: needs photos and n_photos >= 2")
+
+
 def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: str = "analytic",
                            n_specimens: int = 30, n_density: int = 5,
                            pairs=("particle-particle", "particle-steel"),
@@ -822,29 +852,11 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
     seed = int(rng) if isinstance(rng, (int, np.integer)) else None
     rng = np.random.default_rng(rng)
     effects = tuple(e if isinstance(e, PlantedEffect) else PlantedEffect(str(e)) for e in effects)
-    if photos not in PHOTO_MODES:
-        raise InputError(f"photos must be one of {', '.join(PHOTO_MODES)}, got {photos!r}")
-    for name, value, least in (("n_specimens", n_specimens, 3), ("n_density", n_density, 2),
-                               ("n_drop", n_drop, 1), ("n_incline", n_incline, 2),
-                               ("n_compression", n_compression, 0), ("n_photos", n_photos, 0),
-                               ("n_tracks", n_tracks, 0)):
-        if int(value) != value or value < least:
-            raise InputError(f"{name} must be an integer >= {least}, got {value!r}")
-    if trials_per_specimen is not None:
-        if int(trials_per_specimen) != trials_per_specimen or trials_per_specimen < 1:
-            raise InputError(f"trials_per_specimen must be a positive integer, got {trials_per_specimen!r}")
-        need = max(n_drop * len(drop_heights_mm), n_incline)
-        if math.ceil(need / trials_per_specimen) > n_specimens:
-            raise InputError(f"trials_per_specimen {trials_per_specimen}: {need} trials need "
-                             f"{math.ceil(need / trials_per_specimen)} specimens, the workbook has {n_specimens}")
+    check_design(effects, photos=photos, n_specimens=n_specimens, n_density=n_density, n_drop=n_drop,
+                 n_incline=n_incline, n_compression=n_compression, n_photos=n_photos, n_tracks=n_tracks,
+                 trials_per_specimen=trials_per_specimen, orientation_range_deg=orientation_range_deg,
+                 drop_heights_mm=drop_heights_mm)
     lo, hi = (float(v) for v in orientation_range_deg)
-    if not 0 <= lo <= hi <= 90:
-        raise InputError(f"orientation_range_deg must satisfy 0 <= low <= high <= 90, got {orientation_range_deg!r}")
-    if not drop_heights_mm or any(not h > 0 for h in drop_heights_mm):
-        raise InputError(f"drop_heights_mm must be positive heights, got {drop_heights_mm!r}")
-    for e in effects:
-        if e.sheet == "repose" and (photos == "none" or n_photos < 2):
-            raise InputError(f"planted effect {e.kind} is in the repose sheet: needs photos and n_photos >= 2")
 
     path = Path(path)
     xlsx = path.suffix.lower() == ".xlsx"

@@ -161,13 +161,14 @@ def _fmt(x: float) -> str:
 
 def run(args) -> int:
     from demcal.simulate.truth_file import read_truth_file
-    from demcal.simulate.virtual_lab import EFFECT_DEFAULTS, write_virtual_workbook
+    from demcal.simulate.virtual_lab import EFFECT_DEFAULTS, check_design, write_virtual_workbook
 
     spec = read_truth_file(args.truth)
     effects = parse_plant(args.plant)
+    design = spec.design
+    check_design(effects, **design)          # before a workbook in --out is replaced
     out = Path(args.out)
     _clear(out, args.force)
-    design = spec.design
     if design["photos"] == "dem" and design["n_photos"]:
         print(f"pouring {design['n_photos']} heaps in the repose rig for the photos: this takes minutes",
               file=sys.stderr)

@@ -214,3 +214,8 @@ def test_errors_are_one_line_and_an_earlier_workbook_is_replaced_only_when_asked
     (other / "notes.txt").write_text("mine")
     assert main(["virtual-lab", str(truth), "--out", str(other), "--force"]) == 2
     assert "holds other files" in capsys.readouterr().err and (other / "notes.txt").exists()
+    # a design the virtual lab refuses leaves the earlier workbook in place, even with --force
+    before = sorted(p.name for p in lab.iterdir())
+    assert main(["virtual-lab", str(truth), "--out", str(lab), "--force", "--plant", "camera_tilt"]) == 2
+    assert "needs photos" in capsys.readouterr().err
+    assert sorted(p.name for p in lab.iterdir()) == before
