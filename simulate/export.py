@@ -47,6 +47,7 @@ from demcal.jsonio import to_jsonable
 from demcal.simulate.clump import ClumpTemplate, segment_from_parameters
 from demcal.simulate.contact.rolling import ROLLING_LEVERS
 from demcal.simulate.extensions import engine_hooks
+from demcal.simulate.materials import youngs_modulus
 from demcal.simulate.params import DEMParameters
 
 #: Formats ``demcal export --to`` writes, and the file each writes by default.
@@ -63,11 +64,6 @@ LIGGGHTS_SOFT_LIMIT_PA = 1e9
 
 #: Points per sphere of the surface sample that averages a clump's rolling lever.
 LEVER_SAMPLE = 4000
-
-
-def youngs_modulus(shear_modulus: float, poisson: float) -> float:
-    """E = 2 G (1 + nu) of an isotropic solid [Pa]."""
-    return 2.0 * shear_modulus * (1.0 + poisson)
 
 
 def liggghts_seeds(seed: int) -> tuple:

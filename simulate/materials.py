@@ -34,6 +34,11 @@ from demcal.simulate.contact.hertz_mindlin import damping_ratio, effective_modul
 from demcal.simulate.contact.rolling import EPSD_DAMPING_RATIO, rolling_model_index
 
 
+def youngs_modulus(shear_modulus: float, poisson: float) -> float:
+    """E = 2 G (1 + nu) of an isotropic solid [Pa]."""
+    return 2.0 * shear_modulus * (1.0 + poisson)
+
+
 @dataclass(frozen=True)
 class Material:
     """A solid material.
@@ -57,7 +62,7 @@ class Material:
     @property
     def youngs_modulus(self) -> float:
         """E = 2 G (1 + nu) [Pa]."""
-        return 2.0 * self.shear_modulus * (1.0 + self.poisson_ratio)
+        return youngs_modulus(self.shear_modulus, self.poisson_ratio)
 
     def to_dict(self) -> dict:
         return {"name": self.name, "density": self.density, "poisson_ratio": self.poisson_ratio,

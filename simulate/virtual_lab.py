@@ -72,6 +72,7 @@ import pandas as pd
 from demcal.errors import DemcalError, InputError, SimulationError
 from demcal.jsonio import read_json, write_json
 from demcal.provenance import Provenance, run_key
+from demcal.simulate.materials import youngs_modulus
 from demcal.simulate.params import DEMParameters
 from demcal.units import GRAVITY
 
@@ -637,7 +638,7 @@ def _compression(truth: Truth, rng, specimens, n: int, root: Path) -> pd.DataFra
     for i in range(min(n, len(specimens))):
         spec = specimens.iloc[i]
         nu = float(np.clip(rng.normal(p.poisson_ratio, truth.poisson_sd), 0.05, 0.45))
-        E = 2.0 * p.shear_modulus_pa * (1.0 + p.poisson_ratio) * (1.0 + truth.modulus_sd_rel * rng.standard_normal())
+        E = youngs_modulus(p.shear_modulus_pa, p.poisson_ratio) * (1.0 + truth.modulus_sd_rel * rng.standard_normal())
         t0 = float(spec["diameter_mm"]) * (1.0 + 0.01 * rng.standard_normal())
         w0 = float(spec["diameter_mm"]) * (1.0 + 0.01 * rng.standard_normal())
         eps_t = 0.30 * (0.55 + 0.1 * rng.random())

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from demcal.errors import InputError
+from demcal.simulate.materials import youngs_modulus
 
 #: Attachment folders the virtual lab writes beside the sheets, and the files it names there.
 ATTACHMENTS = {"photos": "heap_*.jpg", "tracks": "T*.csv", "curves": "C*.csv"}
@@ -98,7 +99,7 @@ def true_quantities(truth, design: dict, effects=()) -> dict:
         out[f"rolling_friction.{surface}"] = (truth.friction(surface, "roll"), "1")
     if design["n_compression"]:
         out["poisson_ratio"] = (p.poisson_ratio, "1")
-        out["elastic_modulus_pa"] = (2.0 * p.shear_modulus_pa * (1.0 + p.poisson_ratio), "Pa")
+        out["elastic_modulus_pa"] = (youngs_modulus(p.shear_modulus_pa, p.poisson_ratio), "Pa")
         out["shear_modulus_pa"] = (p.shear_modulus_pa, "Pa")
     if design["photos"] != "none" and design["n_photos"]:
         out["repose_angle_deg"] = (truth.repose_angle_deg, "deg")

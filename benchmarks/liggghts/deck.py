@@ -46,7 +46,8 @@ from pathlib import Path
 import numpy as np
 
 from demcal.errors import InputError
-from demcal.simulate.export import liggghts_seeds, youngs_modulus
+from demcal.simulate.export import liggghts_seeds
+from demcal.simulate.materials import youngs_modulus
 from demcal.units import GRAVITY
 
 #: File names inside a run folder.
