@@ -677,3 +677,17 @@ class CampaignResult(Record):
                          f"mean of {v.n_runs} runs [{lo:.2f}, {hi:.2f}]: the target lies "
                          + ("inside" if conf["target_inside"] else "outside"))
         return "\n".join(lines)
+
+
+def read_campaign_results(folder) -> CampaignResult:
+    """``CampaignResult`` of a campaign folder's ``results.json``; a folder without one is
+    refused with the command that makes it."""
+    from pathlib import Path
+
+    from demcal.jsonio import read_json
+
+    path = Path(folder) / "results.json"
+    if not path.is_file():
+        raise InputError(f"{Path(folder)} holds no results.json: run 'demcal calibrate WORKBOOK "
+                         f"--out {Path(folder)}' first")
+    return CampaignResult.from_dict(read_json(path), str(path))

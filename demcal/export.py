@@ -7,7 +7,6 @@ import argparse
 from pathlib import Path
 
 from demcal.errors import InputError
-from demcal.jsonio import read_json
 from demcal.provenance import code_version, sha256_file
 from demcal.simulate.export import EXPORT_FILES, export_model, render
 from demcal.simulate.params import DEMParameters
@@ -16,17 +15,14 @@ from demcal.simulate.params import DEMParameters
 def campaign_model(campaign_dir):
     """The ``ExportModel`` of a finished calibration: its calibrated parameters, the 95 %
     plausible intervals (plausible workflow) and the results file's hash."""
-    from demcal.analyse.results import CampaignResult
+    from demcal.analyse.results import read_campaign_results
 
-    folder = Path(campaign_dir)
-    path = folder / "results.json"
-    if not path.is_file():
-        raise InputError(f"{folder} holds no results.json: run 'demcal calibrate WORKBOOK --out {folder}' first")
-    results = CampaignResult.from_dict(read_json(path), str(path))
+    path = Path(campaign_dir) / "results.json"
+    results = read_campaign_results(campaign_dir)
     try:
-        params = DEMParameters(**results.calibrated_parameters)
-    except TypeError as exc:
-        raise InputError(f"{path}: calibrated_parameters is not a DEM parameter set ({exc})") from exc
+        params = DEMParameters.from_names(results.calibrated_parameters)
+    except InputError as exc:
+        raise InputError(f"{path}: calibrated_parameters is not a DEM parameter set ({exc})") from None
     intervals = ({name: list(est.ci95) for name, est in results.calibration.parameters.items()}
                  if results.calibration is not None else {})
     source = {"file": str(path), "sha256": sha256_file(path), "code": code_version(),

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from demcal.analyse.critique.loop import Critique
-from demcal.analyse.results import CampaignResult, Validation
+from demcal.analyse.results import CampaignResult, Validation, read_campaign_results
 from demcal.errors import InputError
 from demcal.jsonio import read_json, to_jsonable
 from demcal.provenance import sha256_file
@@ -207,16 +207,13 @@ def load_campaign(out_dir) -> Campaign:
         ``results.json`` is missing, or a run record it names is missing from ``runs/``.
     """
     out = Path(out_dir)
-    res_path = out / "results.json"
-    if not res_path.exists():
-        raise InputError(f"{out} holds no results.json: run 'demcal calibrate WORKBOOK --out {out}' first")
-    results = CampaignResult.from_dict(read_json(res_path), str(res_path))
+    results = read_campaign_results(out)
     measurement = results.measurement or read_json(out / "measure.json")
     runs = {}
     for key in run_keys(results):
         p = out / "runs" / f"{key}.json"
         if not p.exists():
-            raise InputError(f"run record {p} named in {res_path} is missing")
+            raise InputError(f"run record {p} named in {out / 'results.json'} is missing")
         runs[key] = read_json(p)
     paper, paper_source = load_paper()
     critique, critique_source = load_critique(out)

@@ -693,8 +693,6 @@ def plan_design(lab: LabDesign, *, mechanisms=None, reps: int = 20, seed: int = 
     -------
     Plan
     """
-    from demcal.simulate.virtual_lab import EFFECT_KINDS
-
     kinds = check_options(mechanisms=mechanisms, reps=reps, steps=steps, power=power, alpha=alpha,
                           correction=correction)
     seeds = np.random.SeedSequence(seed).spawn(int(reps))
