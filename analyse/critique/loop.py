@@ -60,7 +60,7 @@ from demcal.analyse.critique.twins import (Discrepancy, TwinRunner, constant_dis
                                     incline_twin_runner, independent_discrepancy, paired_discrepancy,
                                     repose_validation_angles, rig_pair, run_drop_twins, twin_parameters,
                                     wall_of)
-from demcal.analyse.results import CampaignResult
+from demcal.analyse.results import read_campaign_results
 from demcal.errors import InputError
 from demcal.jsonio import check_schema, read_json, to_jsonable
 from demcal.provenance import Provenance
@@ -192,7 +192,7 @@ def load_source(source):
 
     path = Path(source)
     if path.is_dir() and (path / "results.json").is_file():
-        results = CampaignResult.from_dict(read_json(path / "results.json"), str(path / "results.json"))
+        results = read_campaign_results(path)
         if (path / "measure.json").is_file():
             measurement = Measurement.from_dict(read_json(path / "measure.json"))
         elif results.measurement:
