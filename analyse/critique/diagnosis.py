@@ -592,6 +592,12 @@ def specimen_groups(series: Series) -> np.ndarray | None:
     return labels if counts.max() >= 2 else None
 
 
+def of_specimen(groups, values) -> bool:
+    """Whether a covariate is constant within every specimen (a covariate of the specimen)."""
+    seen: dict = {}
+    return all(seen.setdefault(g, v) == v for g, v in zip(groups, values))
+
+
 def series_tests(series: Series) -> tuple[list, list]:
     """Test one series against each of its covariates (or its mean).
 
@@ -649,12 +655,10 @@ def series_tests(series: Series) -> tuple[list, list]:
         level = "trial"
         if groups is not None:
             g = groups[keep]
-            per = {}
-            for lab, v in zip(g, vals):
-                per.setdefault(lab, set()).add(v if numeric else str(v))
-            level = "specimen" if all(len(v) == 1 for v in per.values()) else "trial within specimens"
-            if level == "specimen" and len(per) < MIN_ROWS:
-                skip(cov, f"a specimen-level covariate over {len(per)} specimens; at least {MIN_ROWS} needed",
+            level = "specimen" if of_specimen(g, vals) else "trial within specimens"
+            n_specimens = np.unique(g).size
+            if level == "specimen" and n_specimens < MIN_ROWS:
+                skip(cov, f"a specimen-level covariate over {n_specimens} specimens; at least {MIN_ROWS} needed",
                      "numeric" if numeric else "categorical")
                 continue
         if numeric:
@@ -739,10 +743,7 @@ def partial_pvalue(series: Series, covariate: str, control: str) -> float:
     groups = specimen_groups(series)
     if groups is not None:
         g = groups[keep]
-        per: dict = {}
-        for lab, v in zip(g, (a[i] for i in keep)):
-            per.setdefault(lab, set()).add(str(v))
-        between = all(len(v) == 1 for v in per.values())
+        between = of_specimen(g, [a[i] for i in keep])
         # a full-rank design: columns in order, each kept if it adds to the rank
         cols, kept = Xf[:, 1:], []
         for j in range(cols.shape[1]):
