@@ -9,6 +9,7 @@ import sys
 
 from demcal import __version__
 from demcal.errors import DemcalError
+from demcal.text import one_line
 
 #: Stage modules that contribute sub-commands, in the order of the pipeline.
 STAGE_CLIS = ("demcal.measure.cli", "demcal.measure.repose_cli", "demcal.simulate.cli",
@@ -18,6 +19,9 @@ STAGE_CLIS = ("demcal.measure.cli", "demcal.measure.repose_cli", "demcal.simulat
 
 EXIT_INPUT = 2     # bad input or a domain error
 EXIT_FAILURE = 1   # the job ran but failed a check (e.g. audit found differences)
+
+#: Longest error message printed [characters]: long enough for any message of demcal's own.
+ERROR_LIMIT = 2000
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -44,10 +48,12 @@ def main(argv=None) -> int:
     try:
         return int(args.handler(args) or 0)
     except DemcalError as exc:
-        print(f"demcal {args.command}: error: {exc}", file=sys.stderr)
+        # the message may quote workbook text: one line, whatever that text holds
+        print(f"demcal {args.command}: error: {one_line(exc, limit=ERROR_LIMIT)}", file=sys.stderr)
         return EXIT_INPUT
     except FileNotFoundError as exc:
-        print(f"demcal {args.command}: error: file not found: {exc.filename}", file=sys.stderr)
+        print(f"demcal {args.command}: error: file not found: {one_line(exc.filename, limit=ERROR_LIMIT)}",
+              file=sys.stderr)
         return EXIT_INPUT
     except ModuleNotFoundError as exc:
         print(f"demcal {args.command}: error: this installation lacks {exc.name!r} ({exc}); "

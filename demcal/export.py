@@ -44,7 +44,7 @@ def write_exports(campaign_dir, targets, out=None) -> list:
     written = []
     for target, path in paths.items():
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(render(model, target))
+        path.write_text(render(model, target), encoding="utf-8")
         written.append(path)
     return written
 

@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 from demcal.jsonio import write_json
+from demcal.text import control_characters, one_line
 
 EXIT_DIFFERENCES = 1
 
@@ -45,7 +46,9 @@ def _run_audit(args) -> int:
 
     result = audit(args.dir)
     for line in result.lines():
-        print(line)
+        # a line quoting a table's text (a workbook id) is reduced only when that text could
+        # break it: the others keep their layout
+        print(one_line(line, limit=2000) if control_characters(line) else line)
     if args.json:
         write_json(args.json, result.to_dict())
     sys.stdout.flush()

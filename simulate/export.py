@@ -30,6 +30,11 @@ radius at the middle sphere to the half length at the tips), and the export says
 
 Engine hooks of demcal that the target codes lack (velocity-dependent restitution, a size
 distribution, multi-contact damping) are listed in every export as not carried over.
+
+The material name comes from the workbook and the results file's name from the command line:
+the JSON keeps them exact, the other formats write them as one line (``demcal.text.one_line``)
+in a comment, without the characters LIGGGHTS acts on there, and as CSV cells no spreadsheet
+runs as a formula.
 """
 
 from __future__ import annotations
@@ -49,6 +54,7 @@ from demcal.simulate.contact.rolling import ROLLING_LEVERS
 from demcal.simulate.extensions import engine_hooks
 from demcal.simulate.materials import youngs_modulus
 from demcal.simulate.params import DEMParameters
+from demcal.text import one_line
 
 #: Formats ``demcal export --to`` writes, and the file each writes by default.
 EXPORT_FILES = {"liggghts": "liggghts_materials.in", "yade": "yade_materials.py",
@@ -64,6 +70,14 @@ LIGGGHTS_SOFT_LIMIT_PA = 1e9
 
 #: Points per sphere of the surface sample that averages a clump's rolling lever.
 LEVER_SAMPLE = 4000
+
+#: Characters LIGGGHTS' input parser acts on: ``&`` at the end of a line joins the next line to
+#: it (even to a comment), ``$`` substitutes a variable.
+_LIGGGHTS_SPECIAL = str.maketrans({"&": " ", "$": " "})
+
+#: First characters that make a spreadsheet run a cell as a formula (tab and carriage return,
+#: the others of that kind, never survive ``one_line``).
+_FORMULA_START = ("=", "+", "-", "@")
 
 
 def liggghts_seeds(seed: int) -> tuple:
@@ -192,7 +206,8 @@ class ExportModel:
     template : ClumpTemplate
         The segment's clump (spheres in the principal frame: ``template.offsets``).
     material : str
-        Name of the bulk material.
+        Name of the bulk material, from the workbook: the JSON keeps it exact, the other
+        formats write it as one line safe in their syntax.
     source : dict
         Provenance: the results file and its SHA-256, the code version.
     intervals : dict
@@ -241,12 +256,26 @@ def _g(x: float) -> str:
     return f"{x:.9g}"
 
 
+def _text(text, target: str) -> str:
+    """Untrusted text (the material name, a file name) as it may stand in a comment of
+    ``target``'s file: one line, and for LIGGGHTS without ``&`` and ``$``."""
+    if target == "liggghts":
+        text = str(text).translate(_LIGGGHTS_SPECIAL)
+    return one_line(text)
+
+
+def _no_formula(cell: str) -> str:
+    """A CSV cell of text a spreadsheet shows as text: a leading ``'`` where it would otherwise
+    run the cell as a formula."""
+    return "'" + cell if cell.startswith(_FORMULA_START) else cell
+
+
 def _header(model: ExportModel, target: str, title: str, comment: str) -> list:
     """Lines every export opens with: what it is, where it came from, the rolling convention
     and what does not carry over."""
     src = model.source
-    lines = [f"demcal export of the calibrated {model.material} parameters for {title}",
-             f"source: {src.get('file', 'parameters given directly')}"
+    lines = [f"demcal export of the calibrated {_text(model.material, target)} parameters for {title}",
+             f"source: {_text(src.get('file', 'parameters given directly'), target)}"
              + (f" (sha256 {src['sha256']})" if src.get("sha256") else ""),
              f"code: demcal {src.get('code', {}).get('demcal', '?')}, git {src.get('code', {}).get('git_sha')}",
              "units: SI (m, kg, s, Pa)",
@@ -333,7 +362,8 @@ def yade_snippet(model: ExportModel) -> str:
     (e_pp, mu_pp, _), (e_pw, mu_pw, _) = inter["particle-particle"], inter["particle-wall"]
     spheres = ",\n    ".join(f"(({_g(x)}, {_g(y)}, {_g(z)}), {_g(r)})" for x, y, z, r in model.spheres())
     i1, i2, i3 = model.template.principal_moments
-    out = _header(model, "yade", "Yade", "#")
+    # declared first, so that no text of the header can declare another encoding (PEP 263)
+    out = ["# -*- coding: utf-8 -*-", *_header(model, "yade", "Yade", "#")]
     out += [
         "# Hertz-Mindlin: Ip2_FrictMat_FrictMat_MindlinPhys with the restitution en of each",
         "# material pair and Law2_ScGeom_MindlinPhys_Mindlin; the friction angle of each pair is",
@@ -390,16 +420,16 @@ def edem_table(model: ExportModel) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     for line in _header(model, "edem", "EDEM (Hertz-Mindlin no slip, standard rolling friction)", "#"):
-        buf.write(line + "\n")
+        w.writerow([line])       # one cell: a comma or quote in the text cannot add a field
+    name = one_line(model.material)
     w.writerow(["section", "name", "Poisson's ratio", "Shear Modulus (Pa)", "Density (kg/m3)"])
-    w.writerow(["material", model.material, _g(p.poisson_ratio), _g(p.shear_modulus_pa),
+    w.writerow(["material", _no_formula(name), _g(p.poisson_ratio), _g(p.shear_modulus_pa),
                 _g(p.particle_density_kg_m3)])
     w.writerow(["material", "steel", _g(p.wall_poisson_ratio), _g(p.wall_shear_modulus_pa),
                 _g(p.wall_density_kg_m3)])
     w.writerow(["section", "interaction", "Coefficient of Restitution", "Coefficient of Static Friction",
                 "Coefficient of Rolling Friction"])
-    names = {"particle-particle": f"{model.material}-{model.material}",
-             "particle-wall": f"{model.material}-steel"}
+    names = {"particle-particle": _no_formula(f"{name}-{name}"), "particle-wall": _no_formula(f"{name}-steel")}
     for key, (e, mu_s, mu_r) in inter.items():
         w.writerow(["interaction", names[key], _g(e), _g(mu_s), _g(mu_r)])
     w.writerow(["section", "sphere", "X (m)", "Y (m)", "Z (m)", "Radius (m)"])

@@ -14,6 +14,10 @@ Clopper-Pearson 95 % interval.
 from __future__ import annotations
 
 from demcal.jsonio import write_json
+from demcal.text import one_line
+
+#: Longest note printed [characters].
+NOTE_LIMIT = 2000
 
 
 def register(subparsers) -> None:
@@ -55,7 +59,8 @@ def table(plan) -> str:
     lines = [head]
     for m in plan.mechanisms:
         if m.sheet is None:
-            lines.append(f"{m.mechanism:<31} {'-':<8} {'-':<15} {'-':>30}  {'-':>9}  {'-':<13} {m.note}")
+            lines.append(f"{m.mechanism:<31} {'-':<8} {'-':<15} {'-':>30}  {'-':>9}  {'-':<13} "
+                         f"{one_line(m.note, limit=NOTE_LIMIT)}")
             continue
         size = _num(m.size) if m.reached else f"not reached at {_num(m.size)}"
         if m.at_floor:
@@ -91,13 +96,13 @@ def run(args) -> int:
           f"critique alpha {args.alpha:g} ({args.correction})")
     print(f"design: {_design_text(lab.design)}")
     for note in lab.notes:
-        print(f"note: {note}")
+        print(f"note: {one_line(note, limit=NOTE_LIMIT)}")     # may name the workbook's pairs
     plan = plan_design(lab, mechanisms=mechanisms or None, reps=args.reps, seed=args.seed, power=args.power,
                        steps=args.steps, alpha=args.alpha, correction=args.correction, progress=True)
     print(table(plan))
     for m in plan.mechanisms:
         if m.sheet is not None and m.note:
-            print(f"{m.mechanism}: {m.note}")
+            print(f"{m.mechanism}: {one_line(m.note, limit=NOTE_LIMIT)}")
     if args.json:
         print(f"written: {write_json(args.json, plan.to_dict())}")
     return 0

@@ -1,4 +1,5 @@
-"""The front door: one namespace, and a missing stage is an error, never a silent success."""
+"""The front door: one namespace, a missing stage is an error, never a silent success, and an
+error is one line on stderr."""
 
 from __future__ import annotations
 
@@ -13,6 +14,16 @@ def test_a_missing_stage_is_an_error_naming_it(monkeypatch, capsys):
     assert demcal.cli.main(["audit", "anywhere"]) == demcal.cli.EXIT_FAILURE
     err = capsys.readouterr().err
     assert "demcal.no_such_stage" in err and "reinstall" in err
+
+
+def test_an_error_quoting_text_with_line_breaks_is_one_line(tmp_path, capsys):
+    folder = tmp_path / "campaign\ndemcal export: wrote everything\r\u2028\x1b[2J"
+    folder.mkdir()
+    assert demcal.cli.main(["export", str(folder)]) == demcal.cli.EXIT_INPUT
+    err = capsys.readouterr().err
+    assert err.endswith("\n") and err[:-1].isprintable()         # one line, no control character
+    assert err.startswith("demcal export: error: ") and "holds no results.json" in err
+    assert "wrote everything" in err
 
 
 def test_nothing_generic_is_importable_from_outside_the_repository(tmp_path):

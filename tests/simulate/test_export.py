@@ -2,12 +2,17 @@
 
 The LIGGGHTS fragment is checked by running LIGGGHTS-PUBLIC (Debian package ``liggghts``) on
 segments dropped on a steel plate, built from the exported fragment alone, against demcal's own
-drop twin. The other formats are checked against hand calculations.
+drop twin; the Yade snippet likewise with Yade. The other formats are checked against hand
+calculations. A hostile material name (workbook text) must change nothing but comment text:
+checked by line counts, Python's parser, the csv module and both binaries.
 """
 
 from __future__ import annotations
 
+import ast
 import collections
+import csv
+import io
 import json
 import math
 import shutil
@@ -91,6 +96,74 @@ def test_engine_hooks_the_target_lacks_are_listed_as_not_carried_over():
 
 
 # ---------------------------------------------------------------------------------------------
+# a hostile material name changes comment text only
+
+HOSTILE_NAMES = ["Soy\nshell touch x", "Soy\r\nimport os", "a&", "Soy &\nfix m9 all gravity 1 vector 0 0 1",
+                 "${x} $x", "=cmd|' /C calc'!A0", "+1,\"2\"\n-3", "@SUM(A1)", "\tx", "\u2028import os",
+                 "Soy\x85import os\x1b[2J", "coding: utf-7", "x" * 10_000]
+
+
+def _model(material, source_file="results.json"):
+    return export_model(DEMParameters(), material=material, source={"file": source_file})
+
+
+@pytest.mark.parametrize("name", HOSTILE_NAMES)
+def test_a_hostile_material_name_adds_no_line_to_the_liggghts_fragment(name):
+    """Same lines as for a plain name (no line break of any kind added), the commands
+    unchanged, no line ending in the continuation character, no variable reference added."""
+    plain, text = render(_model("Soy"), "liggghts"), render(_model(name, name), "liggghts")
+    assert len(text.splitlines()) == len(plain.splitlines())
+    commands = [ln for ln in text.splitlines() if not ln.startswith("#")]
+    assert commands == [ln for ln in plain.splitlines() if not ln.startswith("#")]
+    assert not any(ln.rstrip().endswith("&") for ln in text.splitlines())
+    assert text.count("$") == plain.count("$")
+    assert len(text) < len(plain) + 500                    # the name is cut, not pasted whole
+
+
+@pytest.mark.parametrize("name", HOSTILE_NAMES)
+def test_a_hostile_material_name_leaves_the_yade_snippets_python_unchanged(name):
+    """Python parses the snippet, read as bytes (so a coding declaration would apply), to the
+    same module as for a plain name: the name stays in comments."""
+    plain, text = render(_model("Soy"), "yade"), render(_model(name, name), "yade")
+    assert len(text.splitlines()) == len(plain.splitlines())
+    assert ast.dump(ast.parse(text.encode())) == ast.dump(ast.parse(plain.encode()))
+
+
+def test_the_yade_snippets_encoding_cannot_be_declared_by_the_header():
+    """A coding declaration in the material name with UTF-7 in the next line (+AAo- is a line
+    break there) would otherwise put a statement in the file."""
+    hostile = render(_model("coding: utf-7", "+AAo-open('PWNED', 'w')"), "yade")
+    assert ast.dump(ast.parse(hostile.encode())) == ast.dump(ast.parse(render(_model("Soy"), "yade").encode()))
+    assert ast.parse(b"# coding: utf-7\n# +AAo-open('PWNED', 'w')\n").body     # what it guards against
+
+
+#: Material cell of the EDEM table for names a spreadsheet would run as a formula.
+FORMULA_CELLS = {"=cmd|' /C calc'!A0": "'=cmd|' /C calc'!A0", "@SUM(A1)": "'@SUM(A1)",
+                 "+1,\"2\"\n-3": "'+1,\"2\" -3"}
+
+
+@pytest.mark.parametrize("name", HOSTILE_NAMES)
+def test_a_hostile_material_name_keeps_the_edem_tables_rows_and_runs_no_formula(name):
+    """The csv module reads back as many rows of as many fields as for a plain name; every cell
+    is printable, and only numbers start with a formula character."""
+    plain = list(csv.reader(io.StringIO(render(_model("Soy"), "edem"))))
+    rows = list(csv.reader(io.StringIO(render(_model(name, name), "edem"))))
+    assert [len(r) for r in rows] == [len(r) for r in plain]
+    for cell in (c for r in rows for c in r):
+        assert cell.isprintable() and len(cell) < 500
+        if cell.startswith(("=", "+", "-", "@", "\t", "\r")):
+            float(cell)
+    material = next(r for r in rows if r[0] == "material")[1]
+    assert material == FORMULA_CELLS.get(name, material)
+    assert next(r for r in rows if r[0] == "interaction")[1] == material + "-" + material.lstrip("'")
+
+
+@pytest.mark.parametrize("name", HOSTILE_NAMES)
+def test_the_json_export_keeps_a_hostile_material_name_exact(name):
+    assert json.loads(render(_model(name), "json"))["material"] == name
+
+
+# ---------------------------------------------------------------------------------------------
 # the command, on a finished calibration
 
 @pytest.fixture(scope="module")
@@ -124,6 +197,30 @@ def test_export_command_writes_all_four_formats_with_provenance(campaign, capsys
     one = campaign / "one.in"
     assert main(["export", str(campaign), "--to", "liggghts", "--out", str(one)]) == 0
     assert one.read_text() == text
+
+
+def test_export_command_writes_a_hostile_material_name_of_results_json_as_comment_text(campaign, tmp_path):
+    """The name read from results.json: exact in the JSON; the other files have the lines (CSV:
+    the rows and fields) of the campaign's own export and the same LIGGGHTS and Python lines."""
+    name = "Soy\nshell touch x\r\nimport os\u2028=1+1 &"
+    hostile = tmp_path / "hostile"
+    hostile.mkdir()
+    results = json.loads((campaign / "results.json").read_text())
+    (hostile / "results.json").write_text(json.dumps({**results, "material": name}))
+    assert main(["export", str(hostile), "--out", str(tmp_path / "h")]) == 0
+    assert main(["export", str(campaign), "--out", str(tmp_path / "p")]) == 0
+    assert json.loads((tmp_path / "h" / "parameters.json").read_text())["material"] == name
+
+    def read(folder, target):
+        return (tmp_path / folder / EXPORT_FILES[target]).read_text(encoding="utf-8")
+
+    for target in ("liggghts", "yade"):
+        h, p = read("h", target).splitlines(), read("p", target).splitlines()
+        assert len(h) == len(p)
+        assert [ln for ln in h if not ln.startswith("#")] == [ln for ln in p if not ln.startswith("#")]
+    assert ast.dump(ast.parse(read("h", "yade").encode())) == ast.dump(ast.parse(read("p", "yade").encode()))
+    h, p = (list(csv.reader(io.StringIO(read(f, "edem")))) for f in ("h", "p"))
+    assert [len(r) for r in h] == [len(r) for r in p]
 
 
 def test_export_command_refuses_an_unknown_format_and_a_folder_without_results(campaign, tmp_path, capsys):
@@ -187,11 +284,13 @@ def _rebound_ratios(dump: Path, radius: float) -> list:
 @pytest.mark.skipif(LIGGGHTS is None, reason="LIGGGHTS-PUBLIC is not installed (Debian package liggghts)")
 def test_liggghts_run_from_the_exported_fragment_rebounds_like_demcals_drop_twin(tmp_path):
     """Three segments dropped end on at 2.8 m/s onto a steel plate in LIGGGHTS, from the
-    exported fragment alone: their rebound ratio agrees with demcal's drop twin within 5 %."""
+    exported fragment alone: their rebound ratio agrees with demcal's drop twin within 5 %.
+    The material name holds a line break and a LIGGGHTS command, which does not run."""
     from demcal.simulate.rigs import run_rig
 
     params = DEMParameters(e_pw=0.36)
-    (tmp_path / "materials.in").write_text(render(export_model(params), "liggghts"))
+    model = export_model(params, material="Soy\nshell touch x", source={"file": "results.json &"})
+    (tmp_path / "materials.in").write_text(render(model, "liggghts"), encoding="utf-8")
     height = 0.4
     half = math.sqrt(0.5)
     (tmp_path / "in.drop").write_text(DROP_DECK.format(
@@ -204,6 +303,7 @@ def test_liggghts_run_from_the_exported_fragment_rebounds_like_demcals_drop_twin
     demcal = run_rig("drop", params, 0, height=height, orientation_deg=90.0).observable["velocity_ratio"]
     assert len(liggghts) == 3
     assert np.array(liggghts) == pytest.approx(demcal, rel=0.05)
+    assert not (tmp_path / "x").exists()
 
 
 YADE = shutil.which("yade")
@@ -226,11 +326,13 @@ json.dump(rows, open("rows.json", "w"))
 @pytest.mark.skipif(YADE is None, reason="Yade is not installed (Debian package yade)")
 def test_yade_run_from_the_exported_snippet_rebounds_like_demcals_drop_twin(tmp_path):
     """A segment dropped end on at 2.8 m/s onto a steel box in Yade, from the exported snippet
-    alone: its rebound ratio agrees with demcal's drop twin within 5 %."""
+    alone: its rebound ratio agrees with demcal's drop twin within 5 %. The material name holds
+    line breaks and Python statements, which do not run."""
     from demcal.simulate.rigs import run_rig
 
     params = DEMParameters(e_pw=0.36)
-    (tmp_path / "yade_materials.py").write_text(render(export_model(params), "yade"))
+    model = export_model(params, material="Soy\nimport os\r\nopen('PWNED', 'w').close()  #")
+    (tmp_path / "yade_materials.py").write_text(render(model, "yade"), encoding="utf-8")
     height = 0.4
     half_length = params.segment_length_m / 2
     (tmp_path / "drop.py").write_text(YADE_DROP.format(z0=half_length + 1e-4, vz=-math.sqrt(2 * 9.81 * height)))
@@ -243,3 +345,4 @@ def test_yade_run_from_the_exported_snippet_rebounds_like_demcals_drop_twin(tmp_
     yade = -vz[touching[-1] + 1] / vz[touching[0] - 1]
     demcal = run_rig("drop", params, 0, height=height, orientation_deg=90.0).observable["velocity_ratio"]
     assert yade == pytest.approx(demcal, rel=0.05)
+    assert not (tmp_path / "PWNED").exists()
