@@ -2,8 +2,9 @@
 
     measure (demcal.measure) -> DEM campaign (demcal.analyse) -> report (demcal.report)
 
-The workbook is measured before any DEM run, so a bad workbook costs nothing; finished DEM runs
-are kept in ``DIR/runs`` and never redone, so a killed campaign resumes where it stopped.
+The workbook is measured, and the parts of the report that rest on it rendered
+(``report.render.preflight``), before any DEM run, so a bad workbook costs nothing; finished DEM
+runs are kept in ``DIR/runs`` and never redone, so a killed campaign resumes where it stopped.
 """
 
 from __future__ import annotations
@@ -56,7 +57,8 @@ def register(subparsers) -> None:
                      help="switch a model extension on for every run (repeatable), e.g. --set "
                           "multi_contact_damping=true; only the extensions' parameters "
                           "(simulate.extensions.ENGINE_HOOKS)")
-    cal.add_argument("--no-report", action="store_true", help="skip the HTML/PDF report")
+    cal.add_argument("--no-report", action="store_true",
+                     help="skip the HTML/PDF report (and its check of the workbook text before the campaign)")
     cal.set_defaults(handler=_run_calibrate)
 
 
@@ -74,7 +76,7 @@ def _run_calibrate(args) -> int:
     from demcal.analyse.campaign import CampaignConfig, calibrate
     from demcal.measure.pipeline import measure_workbook
     from demcal.measure.workbook import resolve_workbook
-    from demcal.report.render import build_report
+    from demcal.report.render import build_report, preflight
 
     workbook = resolve_workbook(args.workbook)
     optional = {name: getattr(args, name) for name in ("workers", "budget_runs", "tolerance")
@@ -88,8 +90,11 @@ def _run_calibrate(args) -> int:
                             **optional)
     if config.workers < 1:
         raise InputError(f"--workers must be >= 1, got {config.workers}")
-    # measure first: a bad workbook stops before any DEM run
+    # measure first: a bad workbook stops before any DEM run, and so does workbook text that
+    # the report, made after the campaign, could not render
     measurement = measure_workbook(workbook, annotate_dir=args.out / "annotated")
+    if not args.no_report:
+        preflight(measurement, args.out)
     results = calibrate(workbook, args.out, config, measurement=measurement)
     print(results.summary())
     print(f"results: {args.out / 'results.json'}")

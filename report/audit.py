@@ -17,7 +17,9 @@ Steps:
 5. compare the replayed results with ``results.json`` field by field (except the fields that
    record how the campaign ran rather than what it found: ``VOLATILE_RESULTS`` and the time and
    code version inside each ``provenance``);
-6. render the report again from the stored results and the re-derived tables and compare what
+6. build ``runs.csv`` again from the run records and compare it cell by cell, and its SHA-256
+   with the one ``tables.json`` records (``artefacts``);
+7. render the report again from the stored results and the re-derived tables and compare what
    a reader reads: the text of every cell and paragraph of ``report.html``, and the text of
    ``report.pdf`` read back with a PDF text extractor (pypdf) against a PDF rendered afresh.
 
@@ -39,6 +41,7 @@ from demcal.analyse.results import CampaignResult
 from demcal.errors import DemcalError, InputError
 from demcal.jsonio import read_json, to_jsonable
 from demcal.provenance import sha256_file
+from demcal.report.runs_csv import RUNS_CSV, read_runs_csv, run_list
 from demcal.report.tables import (PAPER_FILE, PAPER_NAME, RESULT_TABLE_IDS, Campaign, build_tables,
                                   load_campaign, load_critique, load_paper, normalised, run_keys)
 
@@ -185,8 +188,8 @@ class AuditResult:
         n_cells = sum(len(t.differences) for t in self.tables)
         n_tables = sum(t.status != "ok" for t in self.tables)
         n_art = [a.artefact for a in self.artefacts if a.status != "ok"]
-        out.append("audit: OK, every table re-derived from its sources, and results.json, report.html "
-                   "and report.pdf agree with them" if self.ok else
+        out.append("audit: OK, every table re-derived from its sources, and results.json, runs.csv, "
+                   "report.html and report.pdf agree with them" if self.ok else
                    f"audit: FAILED ({len(bad)} missing or changed file(s), {n_tables} table(s) not "
                    f"matching, {n_cells} differing cell(s)"
                    + (f"; differs: {', '.join(n_art)}" if n_art else "") + ")")
@@ -216,7 +219,8 @@ class PlaceDifference:
 
 @dataclass(frozen=True)
 class ArtefactCheck:
-    """The audit of one artefact a reader receives (results.json, report.html, report.pdf).
+    """The audit of one artefact a reader receives (results.json, runs.csv, report.html,
+    report.pdf).
 
     Attributes
     ----------
@@ -497,14 +501,38 @@ def compare_pdf(stored_pdf, derived_pdf) -> list[PlaceDifference]:
     return _word_differences(pdf_words(stored_pdf), pdf_words(derived_pdf), describe)
 
 
-def check_artefacts(out: Path, campaign: Campaign, derived_tables: list[dict],
-                    reason: str = "") -> list[ArtefactCheck]:
-    """Compare results.json, report.html and report.pdf with what the sources give.
+def compare_runs_csv(path: Path, campaign: Campaign, recorded: str | None) -> list[PlaceDifference]:
+    """Where ``runs.csv`` differs from the rows re-derived from the run records (``campaign``:
+    re-derived), cell by cell, rows counted from 1 under the header; when every cell agrees,
+    whether its bytes still have the SHA-256 ``recorded`` in tables.json."""
+    header, rows = run_list(campaign)
+    stored_header, stored_rows = read_runs_csv(path)
+    diffs = []
+    if stored_header != header:
+        diffs.append(PlaceDifference("header", stored_header, header))
+    if len(stored_rows) != len(rows):
+        diffs.append(PlaceDifference("number of rows", len(stored_rows), len(rows)))
+    for i, (a, b) in enumerate(zip(stored_rows, rows), 1):
+        for j in range(max(len(a), len(b))):
+            x, y = (a[j] if j < len(a) else None), (b[j] if j < len(b) else None)
+            if x != y:
+                column = header[j] if j < len(header) else f"#{j + 1}"
+                diffs.append(PlaceDifference(f"row {i} (key {b[0]}), column '{column}'", x, y))
+    current = sha256_file(path)
+    if not diffs and current != recorded:
+        diffs.append(PlaceDifference("SHA-256 (re-derived: the one tables.json records)", current, recorded))
+    return diffs
 
-    ``campaign`` is the re-derived campaign (``rederive``). The report is rendered again from
-    the re-derived results (with the stored values of the fields that record how the campaign
-    ran) and the re-derived tables, so that a change in any one artefact is reported in that
-    artefact only.
+
+def check_artefacts(out: Path, campaign: Campaign, derived_tables: list[dict],
+                    reason: str = "", recorded: dict | None = None) -> list[ArtefactCheck]:
+    """Compare results.json, runs.csv, report.html and report.pdf with what the sources give.
+
+    ``campaign`` is the re-derived campaign (``rederive``); ``recorded`` the SHA-256 of the
+    report's files as tables.json records them (``artefacts``). The report is rendered again
+    from the re-derived results (with the stored values of the fields that record how the
+    campaign ran) and the re-derived tables, so that a change in any one artefact is reported
+    in that artefact only.
     """
     from demcal.report.figures import make_figures
     from demcal.report.render import render_html, write_pdf
@@ -512,10 +540,13 @@ def check_artefacts(out: Path, campaign: Campaign, derived_tables: list[dict],
     if campaign.results is None:
         why = reason or "the analysis was not replayed"
         return [ArtefactCheck(name, "not checked", reason=why)
-                for name in ("results.json", "report.html", "report.pdf")]
+                for name in ("results.json", RUNS_CSV, "report.html", "report.pdf")]
     stored = read_json(out / "results.json")
     derived = campaign.results.to_dict()
     checks = [_check("results.json", compare_results(stored, derived))]
+    runs_csv = out / RUNS_CSV
+    checks.append(_check(RUNS_CSV, compare_runs_csv(runs_csv, campaign, (recorded or {}).get(RUNS_CSV)))
+                  if runs_csv.is_file() else ArtefactCheck(RUNS_CSV, "missing", reason=f"{runs_csv} not found"))
     html_path, pdf_path = out / "report.html", out / "report.pdf"
     if not html_path.is_file():
         return checks + [ArtefactCheck("report.html", "missing", reason=f"{html_path} not found"),
@@ -629,5 +660,6 @@ def audit(out_dir) -> AuditResult:
     for tid, t in derived.items():
         if tid not in stored_ids:
             checks.append(TableCheck(tid, t["title"], "missing", reason="re-derived but not in tables.json"))
-    artefacts = check_artefacts(out, campaign, list(derived.values()), problems[0] if problems else "")
+    artefacts = check_artefacts(out, campaign, list(derived.values()), problems[0] if problems else "",
+                                stored_doc.get("artefacts", {}))
     return AuditResult(str(out), tuple(files), tuple(checks), tuple(problems), tuple(artefacts))

@@ -134,7 +134,7 @@ def table_design_runs(c: Campaign) -> Table:
                  notes=(f"{d.initial_points} points of a Latin hypercube through the prior's quantiles, then "
                         f"rounds of {d.batch} points where it was least certain whether the mean angle equals "
                         f"the target (at most {d.budget_runs} runs of design and rounds); stopped: "
-                        f"{d.stopped_because}. Every run has its own seed (Table A2).",),
+                        f"{d.stopped_because}. Every run has its own seed (runs.csv, Table A2).",),
                  sources=({"kind": "runs", "keys": [run["key"] for p in d.points for run in p.runs]},
                           _results_source("design.points")),
                  formats=("d", "", *[".3g"] * len(names), "d", ".4g", ".3g"))

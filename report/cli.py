@@ -16,8 +16,8 @@ def register(subparsers) -> None:
         "report", help="rebuild the HTML and PDF report of a campaign from its stored results",
         description="Render DIR/results.json, the run records in DIR/runs and, when present, "
         "DIR/critique.json as a report laid out like the source paper: DIR/tables.json (every "
-        "table with its sources), DIR/figures/, DIR/report.html and DIR/report.pdf (A4). "
-        "Nothing is recomputed.")
+        "table with its sources), DIR/runs.csv (every DEM run, one row each), DIR/figures/, "
+        "DIR/report.html and DIR/report.pdf (A4). Nothing is recomputed.")
     rep.add_argument("dir", type=Path, help="campaign folder made by 'demcal calibrate'")
     rep.add_argument("--no-pdf", action="store_true", help="write the HTML only")
     rep.set_defaults(handler=_run_report)
@@ -26,8 +26,9 @@ def register(subparsers) -> None:
         "audit", help="re-derive every table of a report from the workbook and the run store",
         description="Check the SHA-256 of every source file, measure the workbook again, replay "
         "the analysis from the stored DEM runs (no DEM is run), rebuild every table and compare "
-        "it cell by cell with DIR/tables.json. Prints OK or the differing cells per table; exits "
-        "1 on any difference or on a missing or changed source file.")
+        "it cell by cell with DIR/tables.json, and DIR/runs.csv with the run records. Prints OK or "
+        "the differing cells per table; exits 1 on any difference or on a missing or changed "
+        "source file.")
     aud.add_argument("dir", type=Path, help="campaign folder holding tables.json")
     aud.add_argument("--json", type=Path, help="also write the findings as JSON to this file")
     aud.set_defaults(handler=_run_audit)

@@ -20,9 +20,16 @@ from matplotlib.image import imread
 
 from demcal.analyse.results import CampaignResult, NoiseStudy
 from demcal.report.tables import parameter_label
+from demcal.text import one_line
 
 #: Resolution of every PNG [dots per inch].
 DPI = 200
+
+#: Text properties of a label holding workbook text: drawn as typed, never as mathtext (a photo
+#: id such as ``heap $\frac$ 1`` is not a formula, and matplotlib would fail to parse it).
+PLAIN_TEXT = {"parse_math": False}
+#: Longest workbook text in a figure label [characters].
+LABEL_CHARS = 40
 
 _BLUE, _RED, _GREY, _GREEN = "#1f4e79", "#b22222", "#7f7f7f", "#2e7d32"
 
@@ -55,10 +62,16 @@ def _new(width_in: float, height_in: float) -> _MplFigure:
     return fig
 
 
-def _save(fig: _MplFigure, path: Path) -> Path:
+def _save(fig: _MplFigure, path: Path, dpi: int) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=DPI)
+    fig.savefig(path, dpi=dpi)
     return path
+
+
+def workbook_label(text) -> str:
+    """Workbook text (a photo id) for a figure label: one line of at most ``LABEL_CHARS``
+    characters; draw it with ``PLAIN_TEXT``."""
+    return one_line(text, limit=LABEL_CHARS)
 
 
 def annotated_photos(measurement: dict, folder) -> list[tuple[dict, Path]]:
@@ -77,7 +90,7 @@ def annotated_photos(measurement: dict, folder) -> list[tuple[dict, Path]]:
     return out
 
 
-def heap_photos(measurement: dict, path: Path, folder=None) -> Path | None:
+def heap_photos(measurement: dict, path: Path, folder=None, *, dpi: int = DPI) -> Path | None:
     """The heap photos as processed by the measure stage (boundary, floor and fitted flank lines
     drawn on each), side by side with the angle found. None when no annotated photo exists."""
     rows = annotated_photos(measurement, folder)
@@ -90,13 +103,14 @@ def heap_photos(measurement: dict, path: Path, folder=None) -> Path | None:
         ax.imshow(imread(image))
         flanks = ", ".join(f"{k} {v:.2f}°" for k, v in (rec.get("flanks") or {}).items() if v is not None)
         used = "" if rec.get("used", True) else " (rejected)"
-        ax.set_title(f"{rec.get('id', '')}: {rec['value']:.2f}°{used}\n{flanks}", fontsize=7)
+        ax.set_title(f"{workbook_label(rec.get('id', ''))}: {rec['value']:.2f}°{used}\n{flanks}", fontsize=7,
+                     **PLAIN_TEXT)
     for ax in axes:
         ax.set_axis_off()
-    return _save(fig, path)
+    return _save(fig, path, dpi)
 
 
-def pareto_chart(results: CampaignResult, path: Path) -> Path | None:
+def pareto_chart(results: CampaignResult, path: Path, *, dpi: int = DPI) -> Path | None:
     """Pareto chart of the Plackett-Burman effects: |t| of each factor, sorted, with the
     t-value and Bonferroni limits (Design-Expert's chart)."""
     p = results.plackett_burman.screening.pareto if results.plackett_burman else None
@@ -118,7 +132,7 @@ def pareto_chart(results: CampaignResult, path: Path) -> Path | None:
     ax.set_ylim(0, max(float(t.max()), p["bonferroni_limit"]) * 1.15)
     for spine in ("top", "right"):
         ax.spines[spine].set_visible(False)
-    return _save(fig, path)
+    return _save(fig, path, dpi)
 
 
 def _term_value(term: str, x: dict) -> np.ndarray | float:
@@ -139,7 +153,7 @@ def polynomial(coefficients: dict, x: dict):
 
 
 def response_surfaces(results: CampaignResult, path: Path, target: float | None = None,
-                      labels: dict | None = None) -> Path | None:
+                      labels: dict | None = None, *, dpi: int = DPI) -> Path | None:
     """Contours of the fitted quadratic over each pair of Box-Behnken factors, in actual
     units, the remaining factors held at the preferred solution (at their centre when there is
     none), so the preferred solution lies on the drawn target contour. Box-Behnken runs of the
@@ -194,10 +208,10 @@ def response_surfaces(results: CampaignResult, path: Path, target: float | None 
         ax.set_title("angle [deg]" + (f", {', '.join(others)} (coded)" if others else ""), fontsize=7)
     for ax in axes[len(pairs):]:
         ax.set_axis_off()
-    return _save(fig, path)
+    return _save(fig, path, dpi)
 
 
-def climb_curve(results: CampaignResult, path: Path) -> Path | None:
+def climb_curve(results: CampaignResult, path: Path, *, dpi: int = DPI) -> Path | None:
     """Relative error of the simulated angle along the steepest climb, the chosen centre and
     its neighbours marked."""
     sc = results.steepest_climb
@@ -223,7 +237,7 @@ def climb_curve(results: CampaignResult, path: Path) -> Path | None:
     ax2.set_ylabel("simulated angle [deg]", color=_GREEN)
     ax2.tick_params(axis="y", colors=_GREEN)
     ax.legend(loc="upper center", fontsize=7, frameon=False)
-    return _save(fig, path)
+    return _save(fig, path, dpi)
 
 
 def heap_profile(record: dict) -> dict | None:
@@ -257,7 +271,7 @@ def _flank_midpoint(x: np.ndarray, z: np.ndarray) -> tuple[float, float, int]:
 
 
 def validation_heaps(results: CampaignResult, runs: dict, measurement: dict, path: Path,
-                     paper: dict | None = None, folder=None) -> Path | None:
+                     paper: dict | None = None, folder=None, *, dpi: int = DPI) -> Path | None:
     """Simulated heap profiles of the validation runs against the photographed heap: one
     annotated photo, the profiles with the photo's mean angle drawn through their flank, and
     the simulated angles against the measured one (the paper's values beside)."""
@@ -276,7 +290,8 @@ def validation_heaps(results: CampaignResult, runs: dict, measurement: dict, pat
     if photo_rows:
         ax = axes.pop(0)
         ax.imshow(imread(photo_rows[0][1]))
-        ax.set_title(f"photographed heap {photo_rows[0][0].get('id', '')}", fontsize=7)
+        ax.set_title(f"photographed heap {workbook_label(photo_rows[0][0].get('id', ''))}", fontsize=7,
+                     **PLAIN_TEXT)
         ax.set_axis_off()
     if any(profiles):
         ax = axes.pop(0)
@@ -317,10 +332,10 @@ def validation_heaps(results: CampaignResult, runs: dict, measurement: dict, pat
     ax.set_ylabel("angle of repose [deg]", fontsize=7)
     ax.tick_params(labelsize=6)
     ax.legend(fontsize=6, frameon=False)
-    return _save(fig, path)
+    return _save(fig, path, dpi)
 
 
-def noise_panels(results: CampaignResult, path: Path) -> Path | None:
+def noise_panels(results: CampaignResult, path: Path, *, dpi: int = DPI) -> Path | None:
     """Plausible workflow: the same-seed pairs of the noise measurement, and every design
     point's runs around its mean against the pooled noise."""
     n = results.noise
@@ -349,10 +364,11 @@ def noise_panels(results: CampaignResult, path: Path) -> Path | None:
     ax2.set_xlabel("deviation [deg]", fontsize=7)
     for ax in (ax1, ax2):
         ax.tick_params(labelsize=6)
-    return _save(fig, path)
+    return _save(fig, path, dpi)
 
 
-def plausible_set(results: CampaignResult, path: Path, labels: dict, panels: int = 4) -> Path | None:
+def plausible_set(results: CampaignResult, path: Path, labels: dict, panels: int = 4, *,
+                  dpi: int = DPI) -> Path | None:
     """Plausible workflow: pairwise panels of the ``panels`` parameters the heap narrows most:
     prior samples (grey), the plausible ones (light blue, implausibility < 3), posterior draws
     (blue), the prior mean (+) and the recommended point (red star)."""
@@ -386,10 +402,10 @@ def plausible_set(results: CampaignResult, path: Path, labels: dict, panels: int
         ax.tick_params(labelsize=6)
     for ax in axes[len(pairs):]:
         ax.set_axis_off()
-    return _save(fig, path)
+    return _save(fig, path, dpi)
 
 
-def validation_runs(results: CampaignResult, path: Path) -> Path | None:
+def validation_runs(results: CampaignResult, path: Path, *, dpi: int = DPI) -> Path | None:
     """Plausible workflow: every validation run, the running mean with the interval of each
     look, the target and the tolerance band."""
     v = results.validation
@@ -414,11 +430,12 @@ def validation_runs(results: CampaignResult, path: Path) -> Path | None:
     ax.set_title(f"verdict: {v.verdict}", fontsize=7)
     ax.tick_params(labelsize=6)
     ax.legend(fontsize=6, frameon=False, ncol=3)
-    return _save(fig, path)
+    return _save(fig, path, dpi)
 
 
-def make_figures(campaign, fig_dir) -> list[Figure]:
-    """Draw every figure the stored results allow into ``fig_dir``; return them in order."""
+def make_figures(campaign, fig_dir, *, dpi: int = DPI) -> list[Figure]:
+    """Draw every figure the stored results allow into ``fig_dir`` at ``dpi``; return them in
+    order."""
     fig_dir = Path(fig_dir)
     m, r = campaign.measurement, campaign.results
     target = r.target_angle_deg if r else None
@@ -428,37 +445,37 @@ def make_figures(campaign, fig_dir) -> list[Figure]:
         if path is not None:
             out.append(Figure(fid, path, caption))
 
-    add("photos", heap_photos(m, fig_dir / "heap_photos.png", campaign.folder),
+    add("photos", heap_photos(m, fig_dir / "heap_photos.png", campaign.folder, dpi=dpi),
         "Image processing of the heap photos: heap boundary, floor line and the straight line fitted "
         "to each measured flank (measure stage, annotated images).")
     wall = str(m.get("meta", {}).get("contact_material", "steel")).lower()
     if r and r.workflow == "plausible":
         labels = {n: parameter_label(n, wall)[1] for n in r.prior}
-        add("noise", noise_panels(r, fig_dir / "noise.png"),
+        add("noise", noise_panels(r, fig_dir / "noise.png", dpi=dpi),
             "Seed-to-seed noise: runs with the same seed at two nearby points (dotted: equal angles), "
             "and every design point's runs about their mean with the pooled noise (red).")
-        add("plausible", plausible_set(r, fig_dir / "plausible_set.png", labels),
+        add("plausible", plausible_set(r, fig_dir / "plausible_set.png", labels, dpi=dpi),
             "The plausible set for the parameters the heap narrows most: prior samples (grey), those "
             "not ruled out by the measured angle (light blue, implausibility < 3), posterior draws "
             "(blue), the measured means (+) and the recommended point (red star).")
-        add("validation", validation_runs(r, fig_dir / "validation.png"),
+        add("validation", validation_runs(r, fig_dir / "validation.png", dpi=dpi),
             "Validation: every run at the recommended point, their running mean, and at each look the "
             "interval of the difference from the lab (red), against the lab's angle and the "
             "equivalence tolerance (green).")
     elif r:
-        add("pareto", pareto_chart(r, fig_dir / "pareto.png"),
+        add("pareto", pareto_chart(r, fig_dir / "pareto.png", dpi=dpi),
             "Pareto chart of the Plackett-Burman effects (|t| of each factor; dashed: t limit at "
             "p = 0.05, dotted: Bonferroni limit).")
-        add("climb", climb_curve(r, fig_dir / "steepest_climb.png"),
+        add("climb", climb_curve(r, fig_dir / "steepest_climb.png", dpi=dpi),
             "Steepest climb: relative error between simulated and measured angle at each level "
             "(circle: the Box-Behnken centre, dotted: its -1/+1 neighbours).")
         labels = {f: parameter_label(v["parameter"], wall)[1] for f, v in r.factors.items()}
-        add("surfaces", response_surfaces(r, fig_dir / "response_surfaces.png", target, labels),
+        add("surfaces", response_surfaces(r, fig_dir / "response_surfaces.png", target, labels, dpi=dpi),
             "Response surfaces of the fitted quadratic model for each factor pair, the remaining "
             "factor held at the preferred solution (dashed red: the measured angle; star: the "
             "preferred solution; circles: Box-Behnken runs of the plane through the centre).")
         add("validation", validation_heaps(r, campaign.runs, m, fig_dir / "validation.png", campaign.paper,
-                                           campaign.folder),
+                                           campaign.folder, dpi=dpi),
             "Validation: the photographed heap, the simulated heap profiles of the validation runs "
             "with the photos' mean angle (± SD, dotted) drawn through their flank (grey dotted: the "
             "carton's end plate, when recorded), and the "

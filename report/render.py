@@ -2,10 +2,13 @@
 
 ``build_report(DIR)`` reads ``DIR/results.json`` (with the measurement), the run records in
 ``DIR/runs/`` and, when present, ``DIR/critique.json``; writes the tables to
-``DIR/tables.json``, the figures to ``DIR/figures/``, then renders ``DIR/report.html``
-(jinja2; figures embedded as data URIs, no network resource, system fonts only) and
-``DIR/report.pdf`` (weasyprint, A4) from those tables. Nothing is computed that the
-campaign did not store: the text and tables print stored numbers, the figures draw them.
+``DIR/tables.json``, every DEM run to ``DIR/runs.csv``, the figures to ``DIR/figures/``, then
+renders ``DIR/report.html`` (jinja2; figures embedded as data URIs, no network resource, system
+fonts only) and ``DIR/report.pdf`` (weasyprint, A4) from those tables. Nothing is computed that
+the campaign did not store: the text and tables print stored numbers, the figures draw them.
+
+``preflight(measurement)`` renders the parts that rest on the workbook alone before the DEM
+campaign starts, so that workbook text the report cannot render costs no DEM run.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ import base64
 import html
 import math
 import re
+import tempfile
 from pathlib import Path
 
 import jinja2
@@ -23,8 +27,11 @@ from demcal.analyse.results import CampaignResult
 from demcal.errors import InputError
 from demcal.jsonio import read_json, write_json
 from demcal.provenance import sha256_file
-from demcal.report.figures import make_figures
-from demcal.report.tables import Campaign, build_tables, load_campaign, parameter_label, tables_document
+from demcal.report.figures import DPI, make_figures
+from demcal.report.runs_csv import RUNS_CSV, write_runs_csv
+from demcal.report.tables import (Campaign, build_tables, load_campaign, load_paper, parameter_label,
+                                  tables_document)
+from demcal.text import one_line
 
 HERE = Path(__file__).resolve().parent
 
@@ -103,7 +110,7 @@ def format_unit(unit: str) -> str:
     return unit.replace("^2", "²").replace("^3", "³")
 
 
-#: Run keys printed under a table; the rest are in Table A2.
+#: Run keys printed under a table; the rest are in runs.csv.
 MAX_KEYS_SHOWN = 24
 
 
@@ -141,11 +148,11 @@ def describe_sources(sources) -> list[str]:
         out.append("files read by those rows (SHA-256, first 16 hex digits; all in Table A1): "
                    + ", ".join(files))
     if runs:
-        # a long list of keys says nothing to a reader: Table A2 lists every run with its stage
+        # a long list of keys says nothing to a reader: runs.csv lists every run with its stage
         shown = runs if len(runs) <= MAX_KEYS_SHOWN else runs[:MAX_KEYS_SHOWN]
-        out.append(f"{len(runs)} DEM run record(s), runs/<key>.json (Table A2): "
+        out.append(f"{len(runs)} DEM run record(s), runs/<key>.json (each in runs.csv): "
                    + ", ".join(k[:10] for k in shown)
-                   + (f", ... ({len(runs) - len(shown)} more in Table A2)" if len(shown) < len(runs) else ""))
+                   + (f", ... ({len(runs) - len(shown)} more in runs.csv)" if len(shown) < len(runs) else ""))
     return out + lines
 
 
@@ -525,39 +532,68 @@ def input_hashes(c: Campaign, out_dir: Path) -> dict:
 
 
 def render_html(c: Campaign, tables: list[dict], figures: list) -> str:
-    """The report as one HTML document (figures embedded, no external resource)."""
+    """The report as one HTML document (figures embedded, no external resource).
+
+    Without ``c.results`` (a measurement alone, see :func:`preflight`) only what rests on the
+    workbook is rendered: the title, the measurements with their tables and heap photos, and
+    the input files.
+    """
     by_id = {t["id"]: t for t in tables}
     figs = {f.id: {"n": i, "src": _data_uri(f.path), "caption": f.caption} for i, f in enumerate(figures, 1)}
     css = Markup((HERE / "report.css").read_text())
     r = c.results
-    runner_text, runner_warn = _runner_text(r)
     context = {
-        "material": c.measurement.get("material", ""), "css": css, "t": by_id, "fig": figs,
-        "tables": tables, "abstract": abstract(c),
-        "equations": equations(c) if r.workflow != "plausible" else {},
-        "differences": differences(c), "rig": rig_text(c), "runner_text": runner_text,
-        "runner_warn": runner_warn,
+        "material": one_line(c.measurement.get("material", "")), "css": css, "t": by_id, "fig": figs,
+        "tables": tables, "rig": rig_text(c), "runner_warn": False,
         "synthetic": c.measurement.get("meta", {}).get("synthetic"),
         "notes": c.measurement.get("notes", []), "critique": c.critique is not None,
         "critique_text": critique_text(c.critique),
         "marked": {t["id"]: marked_rows(t) for t in tables},
-        "provenance": provenance(c), "references": REFERENCES, "results": r,
+        "references": REFERENCES, "results": r,
         "critique_ids": [t["id"] for t in tables if t["id"].startswith("C")],
     }
+    if r is not None:
+        runner_text, runner_warn = _runner_text(r)
+        context.update(abstract=abstract(c), equations=equations(c) if r.workflow != "plausible" else {},
+                       differences=differences(c), runner_text=runner_text, runner_warn=runner_warn,
+                       provenance=provenance(c))
     return _environment().get_template("report.html.j2").render(**context)
+
+
+def _write_tables(c: Campaign, out: Path) -> list[dict]:
+    """Write ``runs.csv`` (when the campaign has results) and ``tables.json`` (with the SHA-256
+    of every file the tables rest on and of runs.csv) in ``out``; return the tables as written."""
+    artefacts = {}
+    if c.results is not None:
+        artefacts[RUNS_CSV] = sha256_file(write_runs_csv(c, out / RUNS_CSV))
+    write_json(out / "tables.json", tables_document(build_tables(c), input_hashes(c, out), artefacts))
+    return read_json(out / "tables.json")["tables"]
 
 
 def write_tables(out_dir) -> Path:
     """Build every table from the stored results and write ``out_dir/tables.json`` (with the
-    SHA-256 of every file they rest on). Returns its path."""
+    SHA-256 of every file they rest on) and ``out_dir/runs.csv``. Returns the path of
+    tables.json."""
     out = Path(out_dir)
-    campaign = load_campaign(out)
-    return write_json(out / "tables.json",
-                      tables_document(build_tables(campaign), input_hashes(campaign, out)))
+    _write_tables(load_campaign(out), out)
+    return out / "tables.json"
+
+
+def _render(c: Campaign, out: Path, pdf: bool, dpi: int = DPI) -> tuple[Path, ...]:
+    """Write the tables, figures (at ``dpi``), HTML and (``pdf``) PDF of ``c`` in ``out``."""
+    # rendered from what was written, so the report shows exactly what audit checks
+    stored = _write_tables(c, out)
+    text = render_html(c, stored, make_figures(c, out / "figures", dpi=dpi))
+    html_path = out / "report.html"
+    html_path.write_text(text, encoding="utf-8")
+    if not pdf:
+        return (html_path,)
+    return html_path, write_pdf(text, out / "report.pdf", base_url=out)
 
 
 def build_report(out_dir, *, pdf: bool = True) -> tuple[Path, ...]:
-    """Write ``tables.json``, ``figures/``, ``report.html`` and ``report.pdf`` in ``out_dir``.
+    """Write ``tables.json``, ``runs.csv``, ``figures/``, ``report.html`` and ``report.pdf`` in
+    ``out_dir``.
 
     Parameters
     ----------
@@ -572,17 +608,43 @@ def build_report(out_dir, *, pdf: bool = True) -> tuple[Path, ...]:
         ``(report.html, report.pdf)`` (only the HTML when ``pdf`` is False).
     """
     out = Path(out_dir)
-    campaign = load_campaign(out)
-    write_json(out / "tables.json", tables_document(build_tables(campaign), input_hashes(campaign, out)))
-    # rendered from what was written, so the report shows exactly what audit checks
-    stored = read_json(out / "tables.json")["tables"]
-    figures = make_figures(campaign, out / "figures")
-    text = render_html(campaign, stored, figures)
-    html_path = out / "report.html"
-    html_path.write_text(text, encoding="utf-8")
-    if not pdf:
-        return (html_path,)
-    return html_path, write_pdf(text, out / "report.pdf", base_url=out)
+    return _render(load_campaign(out), out, pdf)
+
+
+#: Resolution of the figures :func:`preflight` draws [dots per inch]: it checks their labels,
+#: and a coarse raster keeps it quick.
+PREFLIGHT_DPI = 30
+
+
+def preflight(measurement, folder=None) -> None:
+    """Render the parts of the report that rest on the workbook alone (its text in the title,
+    the measurement tables, the heap photos with their labels), HTML and PDF, into a temporary
+    folder, with the code of the final report (the figures at ``PREFLIGHT_DPI``).
+
+    ``demcal calibrate`` calls it between the measurement and the DEM campaign, so that workbook
+    text the report cannot render is refused at the start instead of after the campaign.
+
+    Parameters
+    ----------
+    measurement : measure.pipeline.Measurement
+    folder : str or Path, optional
+        The campaign folder (where the measure stage wrote the annotated photos).
+
+    Raises
+    ------
+    InputError
+        The report cannot be rendered from this workbook; the message says why, on one line.
+    """
+    paper, paper_source = load_paper()
+    c = Campaign(measurement=measurement.to_dict(), results=None, paper=paper, paper_source=paper_source,
+                 folder=None if folder is None else Path(folder))
+    with tempfile.TemporaryDirectory(prefix="demcal-preflight-") as tmp:
+        try:
+            _render(c, Path(tmp), pdf=True, dpi=PREFLIGHT_DPI)
+        except Exception as exc:  # whatever breaks the report here would break it after the campaign
+            source = measurement.workbook.get("source")
+            raise InputError(f"the report cannot be rendered from the workbook {source}: "
+                             f"{type(exc).__name__}: {one_line(exc)}") from exc
 
 
 def write_pdf(text: str, path: Path, base_url) -> Path:

@@ -19,6 +19,7 @@ text, or None for "not available"; the ``formats`` only say how to print them.
 from __future__ import annotations
 
 import json
+import math
 import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -323,8 +324,8 @@ def _replicate_cells(runs: list, angles: list) -> tuple[str, str]:
 
 def _replicate_note(k: int) -> str:
     return (f"Each design point was simulated with {k} seeds; its angle is their median (the "
-            "replicate angles and seeds are listed). Every run's key is in Table A2."
-            if k > 1 else "Every run's key is in Table A2.")
+            "replicate angles and seeds are listed). Every run's key is in runs.csv (Table A2)."
+            if k > 1 else "Every run's key is in runs.csv (Table A2).")
 
 
 def _paper_measured(campaign: Campaign, name: str):
@@ -1118,23 +1119,60 @@ def table_inputs(c: Campaign) -> Table:
                  formats=("", "", "mono"))
 
 
+def run_observable(inputs: dict, response: str) -> str:
+    """The reading the campaign takes from a run: the response of a heap, the apparent
+    restitution of a drop twin, the apparent friction of an incline twin's mode
+    (``analyse.twin_likelihood``)."""
+    rig = inputs.get("rig")
+    if rig == "drop":
+        return "apparent_restitution"
+    if rig == "incline":
+        return "static_friction_apparent" if inputs.get("mode") == "slide" else "rolling_friction_apparent"
+    return response
+
+
+def _finite(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _run_counts(records: list) -> tuple:
+    """Runs, finished, failed, distinct seeds, total and median wall time of some run records."""
+    ok = sum(rec.get("status") == "ok" for rec in records)
+    seeds = {_get(rec, "inputs", "seed") for rec in records}
+    wall = [rec["wall_s"] for rec in records if _finite(rec.get("wall_s"))]
+    return (len(records), ok, len(records) - ok, len(seeds), math.fsum(wall),
+            statistics.median(wall) if wall else None)
+
+
 def table_runs(c: Campaign) -> Table:
-    """Table A2: every DEM run with its key, seed and wall time (from the run store)."""
+    """Table A2: the DEM runs summed up by stage, from the run store (every run, with its key,
+    is in runs.csv)."""
     r = c.results
+    response = r.response["name"]
     rows, keys = [], []
     for stage, runs in run_stages(r):
-        for i, run in enumerate(runs, 1):
-            rec = c.runs.get(run["key"], {})
-            rows.append((stage, i, run["key"], _get(rec, "inputs", "seed", default=run.get("seed")),
-                         rec.get("wall_s"), rec.get("status"), rec.get("attempts")))
-            keys.append(run["key"])
-    return Table("A2", "DEM runs", ("Stage", "#", "Run key (SHA-256 of the inputs)", "Seed", "Wall time",
-                                    "Status", "Attempts"),
-                 ("", "", "", "", "s", "", ""), tuple(rows),
-                 notes=("Each run's record is runs/<key>.json in the campaign folder; a key repeated "
-                        "within or across stages is one run used again.",),
-                 sources=({"kind": "runs", "keys": list(dict.fromkeys(keys))},),
-                 formats=("", "d", "mono", "d", ".4f", "", "d"))
+        named = list(dict.fromkeys(run["key"] for run in runs))
+        records = [c.runs.get(key, {}) for key in named]
+        observables = {run_observable(rec.get("inputs") or {}, response) for rec in records}
+        name = observables.pop() if len(observables) == 1 else None
+        values = [v for rec in records if _finite(v := _get(rec, "result", "observable", name))]
+        rows.append((stage, *_run_counts(records), name, statistics.fmean(values) if values else None,
+                     statistics.stdev(values) if len(values) > 1 else None))
+        keys += named
+    keys = list(dict.fromkeys(keys))
+    rows.append(("all runs", *_run_counts([c.runs.get(key, {}) for key in keys]), None, None, None))
+    return Table("A2", "DEM runs by stage (every run, with its key, is listed in runs.csv)",
+                 ("Stage", "Runs", "Finished", "Failed", "Seeds", "Wall time, total", "Wall time, median",
+                  "Observable", "Mean", "SD"),
+                 ("", "", "", "", "", "s", "s", "", "", ""), tuple(rows),
+                 notes=("Every run is listed in runs.csv beside this report, one row each: its key (the "
+                        "SHA-256 of its inputs; its record is runs/<key>.json), stage(s), rig, seed, status, "
+                        "attempts, wall time and observables.",
+                        "Runs: the distinct run records of the stage; a run used by several stages counts in "
+                        "each, and once in 'all runs'. Seeds: distinct seeds. Observable: what the campaign "
+                        "reads from the stage's runs, with its mean and SD (n - 1) over the runs that gave it."),
+                 sources=({"kind": "runs", "keys": keys},),
+                 formats=("", "d", "d", "d", "d", ".4g", ".3g", "", ".4g", ".3g"))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1169,9 +1207,10 @@ def build_tables(c: Campaign) -> list[Table]:
     return tables
 
 
-def tables_document(tables: list[Table], inputs: dict) -> dict:
-    """The content of ``tables.json``: the tables and the SHA-256 of every file they rest on."""
-    return {"format": "demcal-tables/1", "inputs": dict(inputs),
+def tables_document(tables: list[Table], inputs: dict, artefacts: dict | None = None) -> dict:
+    """The content of ``tables.json``: the tables, the SHA-256 of every file they rest on
+    (``inputs``) and of the report's files written beside them (``artefacts``: runs.csv)."""
+    return {"format": "demcal-tables/1", "inputs": dict(inputs), "artefacts": dict(artefacts or {}),
             "tables": [t.to_dict() for t in tables]}
 
 

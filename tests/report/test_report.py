@@ -1,11 +1,16 @@
 """The report of the example campaign (analytic stand-in rig): the PDF holds the paper's tables,
-equation and figures; the tables agree with independent recomputations from the workbook and
-the run records; ``demcal audit`` passes on a fresh report and names the table and cell, or
-the file, that was changed; the HTML needs no network."""
+equation and figures, and sums the runs up by stage in at most 15 pages while runs.csv lists
+every run; the tables agree with independent recomputations from the workbook and the run
+records; ``demcal audit`` passes on a fresh report and names the table and cell, or the file,
+that was changed; the HTML needs no network; workbook text of any kind is printed as typed, and
+text the report could not render stops ``demcal calibrate`` before its first DEM run."""
 
+import csv
+import hashlib
 import json
 import re
 import shutil
+from html import unescape
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -18,7 +23,7 @@ from demcal.cli import main
 from demcal.provenance import sha256_file
 from demcal.report.render import build_report, write_tables
 from demcal.report.tables import PAPER_FILE, PAPER_NAME
-from tests.analyse.standin import standin_runner
+from tests.analyse.standin import heap_standin_runner, standin_runner
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "data" / "astragalus"
@@ -89,9 +94,120 @@ def test_pdf_holds_the_nine_tables_the_equation_and_the_figures(campaign):
     assert images >= 5
     width, height = (float(v) for v in reader.pages[0].mediabox.upper_right)
     assert (round(width), round(height)) == (595, 842)  # A4 [pt]
-    # every DEM run appears in the appendix with its full key
-    for run in campaign["results"]["validation"]["runs"]:
-        assert run["key"] in flat.replace(" ", "")
+
+
+#: The stages of the paper's procedure: name in the report, section of results.json.
+STAGES = (("Plackett-Burman", "plackett_burman"), ("noise", "noise"), ("steepest climb", "steepest_climb"),
+          ("Box-Behnken", "box_behnken"), ("validation", "validation"))
+
+
+def _records(out: Path) -> dict:
+    return {p.stem: json.loads(p.read_text()) for p in (out / "runs").glob("*.json")}
+
+
+def _read_csv(path: Path) -> list[list[str]]:
+    with open(path, newline="", encoding="utf-8") as f:
+        return list(csv.reader(f))
+
+
+def test_pdf_sums_the_runs_up_by_stage_in_at_most_15_pages(campaign):
+    """Table A2 has one row per stage, recomputed here from the run records; no run key is
+    printed in full (runs.csv lists them)."""
+    from pypdf import PdfReader
+
+    reader = PdfReader(str(campaign["pdf"]))
+    assert len(reader.pages) <= 15
+    text = "\n".join(page.extract_text() for page in reader.pages)
+    squeezed = re.sub(r"\s+", "", text)
+    a2 = campaign["tables"]["A2"]
+    assert re.sub(r"\s+", "", f"Table A2{a2['title']}") in squeezed and "runs.csv" in a2["title"]
+    assert re.sub(r"\s+", "", a2["notes"][0]) in squeezed and a2["notes"][0].startswith(
+        "Every run is listed in runs.csv beside this report, one row each: its key")
+    records = _records(campaign["out"])
+    assert not [key for key in records if key in squeezed]
+    assert _column(a2, "Stage") == [name for name, _ in STAGES] + ["all runs"]
+    for name, part in STAGES:
+        keys = list(dict.fromkeys(run["key"] for run in campaign["results"][part]["runs"]))
+        wall = [records[k]["wall_s"] for k in keys]
+        angles = [records[k]["result"]["observable"]["angle_deg"] for k in keys]
+        row = _row(a2, name)
+        assert (row["Runs"], row["Finished"], row["Failed"]) == (len(keys), len(keys), 0)
+        assert row["Seeds"] == len({records[k]["inputs"]["seed"] for k in keys})
+        assert row["Wall time, total"] == pytest.approx(sum(wall), rel=1e-12)
+        assert row["Wall time, median"] == pytest.approx(np.median(wall), rel=1e-12)
+        assert row["Observable"] == "angle_deg"
+        assert row["Mean"] == pytest.approx(np.mean(angles), rel=1e-12)
+        assert row["SD"] == pytest.approx(np.std(angles, ddof=1), rel=1e-9)
+        assert f"{name} {len(keys)} {len(keys)} 0 " in text                  # the row as printed
+    assert _row(a2, "all runs")["Runs"] == len(records)
+
+
+def test_runs_csv_has_one_row_per_run_record(campaign):
+    out = campaign["out"]
+    rows = _read_csv(out / "runs.csv")
+    header, rows = rows[0], [dict(zip(rows[0], r)) for r in rows[1:]]
+    assert header[:8] == ["key", "stage", "rig", "seed", "status", "attempts", "wall_s", "error"]
+    records = _records(out)
+    assert sorted(r["key"] for r in rows) == sorted(records)
+    for row in rows:
+        rec = records[row["key"]]
+        assert int(row["seed"]) == rec["inputs"]["seed"] and row["status"] == rec["status"] == "ok"
+        assert float(row["wall_s"]) == rec["wall_s"] and int(row["attempts"]) == rec["attempts"]
+        for name, value in rec["result"]["observable"].items():
+            assert float(row[name]) == value
+    # each run names every stage of results.json that used it
+    stages = {row["key"]: row["stage"].split("; ") for row in rows}
+    for name, part in STAGES:
+        assert all(name in stages[run["key"]] for run in campaign["results"][part]["runs"]), name
+    doc = json.loads((out / "tables.json").read_text())
+    assert doc["artefacts"]["runs.csv"] == hashlib.sha256((out / "runs.csv").read_bytes()).hexdigest()
+
+
+def test_runs_csv_keeps_a_run_on_one_row_and_no_cell_a_formula(campaign, tmp_path):
+    """A failed run whose error holds line breaks and starts like a formula stays on its row,
+    its error one line and quoted; Table A2 counts it as failed."""
+    from dataclasses import replace
+
+    from demcal.report.runs_csv import write_runs_csv
+    from demcal.report.tables import load_campaign, table_runs
+
+    c = load_campaign(campaign["out"])
+    key = campaign["results"]["validation"]["runs"][0]["key"]
+    failed = {**c.runs[key], "status": "failed", "error": "=cmd|' /C calc'!A0\nValueError: two\r\nlines"}
+    c = replace(c, runs={**c.runs, key: failed})
+    path = write_runs_csv(c, tmp_path / "runs.csv")
+    rows = _read_csv(path)
+    assert len(rows) == 1 + len(c.runs)
+    assert path.read_bytes().count(b"\n") == len(rows)          # no line break inside a cell
+    row = dict(zip(rows[0], next(r for r in rows if r[0] == key)))
+    assert (row["status"], row["error"]) == ("failed", "'=cmd|' /C calc'!A0 ValueError: two lines")
+    validation = _row(table_runs(c).to_dict(), "validation")
+    assert (validation["Finished"], validation["Failed"]) == (validation["Runs"] - 1, 1)
+
+
+def test_plausible_pdf_fits_in_15_pages_and_runs_csv_lists_its_runs(tmp_path):
+    """The plausible workflow (noisy stand-in heap and twins) makes hundreds of runs: the PDF
+    sums them up, each twin stage by its own observable; runs.csv lists every one."""
+    from pypdf import PdfReader
+
+    data = tmp_path / "data"
+    shutil.copytree(EXAMPLE, data)
+    out = tmp_path / "plausible"
+    results = calibrate(data / "workbook.xlsx", out, CampaignConfig(workers=1, progress=False, seed=3),
+                        runner=heap_standin_runner)
+    _, pdf = build_report(out)
+    assert len(PdfReader(str(pdf)).pages) <= 15
+    records = _records(out)
+    assert sorted(r[0] for r in _read_csv(out / "runs.csv")[1:]) == sorted(records)
+    a2 = {t["id"]: t for t in json.loads((out / "tables.json").read_text())["tables"]}["A2"]
+    for name, observable in (("e_pp", "apparent_restitution"), ("mu_s_pp", "static_friction_apparent"),
+                             ("mu_r_pw", "rolling_friction_apparent")):
+        twin = results.calibration.twins[name]
+        values = [records[run["key"]]["result"]["observable"][observable] for run in twin["runs"]]
+        row = _row(a2, f"{twin['rig']} twins, {name}")
+        assert (row["Runs"], row["Observable"]) == (len(values), observable)
+        assert row["Mean"] == pytest.approx(np.mean(values), rel=1e-12)
+    assert _row(a2, "all runs")["Runs"] == len(records)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -149,8 +265,8 @@ def test_design_tables_match_the_run_records(campaign):
         x = np.array(_column(tables["4"], f))
         assert effects[f] == pytest.approx(y[x > 0].mean() - y[x < 0].mean(), rel=1e-9)
     # validation: relative error of the mean of the validation points (medians of their runs)
-    val = [r for r in tables["A2"]["rows"] if r[0] == "validation"]
-    mean = np.mean(np.median(np.array([angle(r[2]) for r in val]).reshape(-1, k), axis=1))
+    val = [run["key"] for run in campaign["results"]["validation"]["runs"]]
+    mean = np.mean(np.median(np.array([angle(key) for key in val]).reshape(-1, k), axis=1))
     target = _row(tables["12"], "measured angle (target)")["Angle compared (angle_deg)"]
     err = _row(tables["12"], "relative error of the mean [%]")["Angle compared (angle_deg)"]
     assert err == pytest.approx(100 * abs(mean - target) / target, rel=1e-9)
@@ -186,6 +302,8 @@ def test_audit_passes_on_a_fresh_report(campaign, capsys):
     assert code == 0, out
     for tid in ("1", "2", "3", "4", "5", "6", "7", "8", "9", "A1", "A2"):
         assert re.search(rf"^Table {tid} \(.*\): OK$", out, re.M), tid
+    for artefact in ("results.json", "runs.csv", "report.html", "report.pdf"):
+        assert re.search(rf"^{re.escape(artefact)}: OK$", out, re.M), artefact
     assert "audit: OK" in out
 
 
@@ -277,6 +395,39 @@ def test_audit_names_a_changed_number_in_report_pdf(campaign, capsys, tmp_path):
     line = next(ln for ln in text.splitlines() if ln.strip().startswith("report.pdf, page"))
     assert f"{changed}°" in line and f"{true}°" in line
     assert re.search(r"^report\.html: OK$", text, re.M) and re.search(r"^results\.json: OK$", text, re.M)
+
+
+def test_audit_names_a_changed_number_in_runs_csv(campaign, capsys, tmp_path):
+    out = _copy(campaign, tmp_path)
+    rows = _read_csv(out / "runs.csv")
+    j = rows[0].index("angle_deg")
+    true = rows[3][j]
+    rows[3][j] = repr(float(true) + 0.5)
+    with open(out / "runs.csv", "w", newline="", encoding="utf-8") as f:
+        csv.writer(f).writerows(rows)
+    code, text = _audit(capsys, out)
+    assert code == 1
+    assert (f"runs.csv, row 3 (key {rows[3][0]}), column 'angle_deg': reads {rows[3][j]!r}, "
+            f"re-derived {true!r}") in text
+    assert re.search(r"^results\.json: OK$", text, re.M) and re.search(r"^report\.pdf: OK$", text, re.M)
+    assert "audit: FAILED" in text and "differs: runs.csv" in text
+
+
+def test_audit_finds_runs_csv_rewritten_with_the_same_cells(campaign, tmp_path):
+    """Every cell the same, the bytes not: the SHA-256 recorded in tables.json tells."""
+    from demcal.report.audit import compare_runs_csv
+    from demcal.report.tables import load_campaign
+
+    out = _copy(campaign, tmp_path)
+    recorded = json.loads((out / "tables.json").read_text())["artefacts"]["runs.csv"]
+    c = load_campaign(out)
+    assert compare_runs_csv(out / "runs.csv", c, recorded) == []
+    rows = _read_csv(out / "runs.csv")
+    with open(out / "runs.csv", "w", newline="", encoding="utf-8") as f:
+        csv.writer(f, quoting=csv.QUOTE_ALL).writerows(rows)
+    diffs = compare_runs_csv(out / "runs.csv", c, recorded)
+    assert [(d.stored, d.derived) for d in diffs] == [
+        (hashlib.sha256((out / "runs.csv").read_bytes()).hexdigest(), recorded)]
 
 
 def test_audit_names_a_missing_run_record(campaign, capsys, tmp_path):
@@ -600,3 +751,138 @@ def test_audit_rederives_the_critique_tables(critique_report, capsys, tmp_path):
     code, text = _audit(capsys, out)
     assert code == 1
     assert "Table C4, row 1 (3), column 'Adjusted p': stored 0.5, re-derived 0.00042" in text
+
+
+# ----------------------------------------------------------------------------------------------
+# workbook text: printed as typed, and checked before the campaign
+
+#: Workbook text a report could trip over: mathtext, markup, template syntax, quotes, a
+#: backslash, Unicode (no control character: the workbook reader refuses those).
+MATERIAL = "Astragalus $\\frac$ $$ <script>alert(1)</script> {{ x }} {% raw %} \"q\" 'q' 100% \\ ü–µ"
+PHOTO_IDS = ("heap $\\frac$ 1", "a$b$c$", "$$ <b>{{ x }}</b> {% raw %}")
+PHOTO_FILE = "heap <i>{{ x }} $$ {% raw %} 'q' ü.jpg"
+COVARIATE = "note $\\frac$ {{ x }} <b>"
+SHEET = "{{ x }} $$ <b> %"
+
+
+def _hostile_workbook(folder: Path) -> Path:
+    """A copy of the example with that text as its material, three photo ids, a photo's file
+    name, a covariate's name and values, and an unknown sheet's name."""
+    from demcal.measure.workbook import read_workbook, write_workbook
+
+    shutil.copytree(EXAMPLE, folder)
+    book = folder / "workbook.xlsx"
+    sheets = {name: sheet.frame.reset_index(drop=True) for name, sheet in read_workbook(book).sheets.items()}
+    meta = sheets["meta"]
+    meta.loc[meta["key"] == "material", "value"] = MATERIAL
+    repose = sheets["repose"]
+    repose["photo_id"] = list(PHOTO_IDS) + list(repose["photo_id"][len(PHOTO_IDS):])
+    photo = folder / repose.at[0, "file"]
+    photo.rename(photo.with_name(PHOTO_FILE))
+    repose.at[0, "file"] = f"{Path(repose.at[0, 'file']).parent}/{PHOTO_FILE}"
+    sheets["specimens"][COVARIATE] = [f"{{% raw %}} $$ <{i}>" for i in range(len(sheets["specimens"]))]
+    sheets[SHEET] = pd.DataFrame({"note": ["{{ x }}", "$\\frac$"]})
+    write_workbook(sheets, book)
+    return book
+
+
+class _Text(HTMLParser):
+    """The text of an HTML document as a reader reads it (character references resolved), and
+    its title."""
+
+    def __init__(self):
+        super().__init__(convert_charrefs=True)
+        self.parts, self.title, self._in_title = [], "", False
+
+    def handle_starttag(self, tag, attrs):
+        self._in_title = tag == "title"
+
+    def handle_endtag(self, tag):
+        self._in_title = False
+
+    def handle_data(self, data):
+        self.parts.append(data)
+        if self._in_title:
+            self.title += data
+
+    @property
+    def text(self) -> str:
+        return " ".join(" ".join(self.parts).split())
+
+
+@pytest.fixture(scope="module")
+def hostile(tmp_path_factory):
+    """That workbook through ``demcal calibrate`` (stand-in DEM), then ``demcal report`` with a
+    critique that names the covariate."""
+    root = tmp_path_factory.mktemp("hostile")
+    book = _hostile_workbook(root / "data")
+    out = root / "campaign"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr("demcal.analyse.campaign.campaign_runner", standin_runner)
+        calibrated = main(["calibrate", str(book), "--out", str(out), "--workflow", "design-expert",
+                           "--workers", "1"])
+    critique = json.loads(json.dumps(CRITIQUE))
+    critique["tests"][7]["covariate"] = COVARIATE
+    (out / "critique.json").write_text(json.dumps(critique))
+    reported = main(["report", str(out)])
+    return {"book": book, "out": out, "codes": (calibrated, reported),
+            "html": (out / "report.html").read_text(encoding="utf-8")}
+
+
+def test_workbook_text_is_printed_as_typed(hostile):
+    from pypdf import PdfReader
+
+    assert hostile["codes"] == (0, 0)
+    html = hostile["html"]
+    parsed = _Text()
+    parsed.feed(html)
+    assert parsed.title == f"Calibration of DEM parameters of {MATERIAL}"
+    assert f"Calibration of discrete element simulation parameters of {MATERIAL}" in parsed.text
+    assert f"photos/{PHOTO_FILE}" in parsed.text                     # Table A1
+    assert [unescape(cell) for _, cells in _html_rows(html, "C4") for cell in cells].count(COVARIATE) == 1
+    # none of it became markup or was run as a template
+    for raw in ("<script>", "<b>{{ x }}</b>", "<i>{{ x }}", "<b> %"):
+        assert raw not in html
+    assert parsed.text.count("{{ x }}") >= 3 and "{% raw %}" in parsed.text
+    pdf = PdfReader(str(hostile["out"] / "report.pdf"))
+    flat = re.sub(r"\s+", "", "".join(page.extract_text() for page in pdf.pages))
+    assert re.sub(r"\s+", "", MATERIAL) in flat and re.sub(r"\s+", "", COVARIATE) in flat
+
+
+def test_calibrate_refuses_text_the_report_cannot_render_before_any_run(hostile, tmp_path, monkeypatch,
+                                                                          capsys):
+    """Were photo ids drawn as mathtext, "heap $\\frac$ 1" could not be drawn: calibrate says so on
+    one line and exits 2 before its first DEM run."""
+    monkeypatch.setattr("demcal.report.figures.PLAIN_TEXT", {})
+    ran = []
+    monkeypatch.setattr("demcal.analyse.campaign.campaign_runner", ran.append)
+    out = tmp_path / "refused"
+    capsys.readouterr()
+    code = main(["calibrate", str(hostile["book"]), "--out", str(out), "--workflow", "design-expert",
+                 "--workers", "1"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.startswith(f"demcal calibrate: error: the report cannot be rendered from the workbook "
+                          f"{hostile['book']}: ValueError: ") and err.count("\n") == 1
+    assert "\\frac" in err
+    assert ran == [] and not (out / "runs").exists() and not (out / "results.json").exists()
+
+
+def test_line_breaks_in_workbook_text_leave_the_report_one_line(campaign):
+    """The workbook reader refuses control characters; the report does not rely on it: a material
+    and photo ids with line breaks render, the title on one line."""
+    from dataclasses import replace
+
+    from demcal.measure.pipeline import Measurement
+    from demcal.report.render import preflight, render_html
+    from demcal.report.tables import load_campaign
+
+    c = load_campaign(campaign["out"])
+    measurement = json.loads(json.dumps(c.measurement))
+    measurement["material"] = "Astragalus\nmembranaceus\u2028<b>\r\n{{ x }}"
+    for rec, name in zip(measurement["per_row"]["repose_angle_deg"], ("P\n1", "$\\frac$\r\n2", "\t$$")):
+        rec["id"] = name
+    preflight(Measurement.from_dict(measurement), campaign["out"])
+    parsed = _Text()
+    parsed.feed(render_html(replace(c, measurement=measurement), list(campaign["tables"].values()), []))
+    assert parsed.title == "Calibration of DEM parameters of Astragalus membranaceus <b> {{ x }}"

@@ -144,3 +144,37 @@ def test_annotated_photos_are_found_in_a_moved_campaign_folder(tmp_path):
     m = {"per_row": {"repose_angle_deg": rows}}
     assert annotated_photos(m, tmp_path) == [(rows[0], tmp_path / "annotated" / "heap_1_annotated.png")]
     assert annotated_photos(m, None) == []
+
+
+def test_runs_csv_cells_are_one_line_and_never_formulas():
+    from demcal.report.runs_csv import csv_cell
+
+    for text in ("=HYPERLINK(\"http://x\")", "+1", "-1", "@SUM(A1)"):
+        assert csv_cell(text) == "'" + text
+    assert csv_cell(" \t=1+1") == "'=1+1"                    # leading blanks hide no formula
+    assert csv_cell("line 1\nline 2\r\n\u2028end") == "line 1 line 2 end"
+    assert csv_cell("drop twins, e_pp") == "drop twins, e_pp"
+    # numbers are numbers (a negative one is not a formula), written back exactly
+    assert csv_cell(-1.5) == "-1.5" and csv_cell(0.1 + 0.2) == "0.30000000000000004" and csv_cell(7) == "7"
+    assert csv_cell(None) == "" and csv_cell(True) == "true"
+
+
+def test_photo_labels_are_one_line_drawn_as_typed(tmp_path, monkeypatch):
+    """Photo ids reach the figure as typed, on one line, never parsed as mathtext ("$\\frac$"
+    and "$$" are not formulas)."""
+    from matplotlib.image import imsave
+
+    from demcal.report import figures
+
+    image = tmp_path / "photo.png"
+    imsave(image, np.zeros((4, 6)))
+    labels = {"heap\n$\\frac$ 1": "heap $\\frac$ 1", "$$": "$$", "a$b$c$": "a$b$c$",
+              "{{ x }}\r\n{% raw %}\t<script>": "{{ x }} {% raw %} <script>", "x" * 50: "x" * 39 + "…"}
+    rows = [{"id": i, "value": 33.0, "flanks": {"left": 33.0}, "annotated": str(image)} for i in labels]
+    drawn = []
+    save = figures._save
+    monkeypatch.setattr(figures, "_save", lambda fig, *args: drawn.append(fig) or save(fig, *args))
+    assert figures.heap_photos({"per_row": {"repose_angle_deg": rows}}, tmp_path / "photos.png").is_file()
+    titles = [ax.title for ax in drawn[0].axes if ax.get_title()]
+    assert [t.get_text() for t in titles] == [f"{label}: 33.00°\nleft 33.00°" for label in labels.values()]
+    assert not any(t.get_parse_math() for t in titles)
