@@ -565,14 +565,18 @@ def _illumination(img, background):
     h, w = img.shape
     b = max(8, min(h, w) // 20)
     nr, nc = h // b, w // b
-    blocks = img[:nr * b, :nc * b].reshape(nr, b, nc, b).transpose(0, 2, 1, 3).reshape(nr, nc, b * b)
-    bg = background[:nr * b, :nc * b].reshape(nr, b, nc, b).transpose(0, 2, 1, 3).reshape(nr, nc, b * b)
-    use = bg.mean(axis=2) >= 0.6
+    # Views (block row, block column, row, column in the block): only the blocks used are copied.
+    blocks = img[:nr * b, :nc * b].reshape(nr, b, nc, b).transpose(0, 2, 1, 3)
+    bg = background[:nr * b, :nc * b].reshape(nr, b, nc, b).transpose(0, 2, 1, 3)
+    use = bg.mean(axis=(2, 3)) >= 0.6
     if use.sum() < 12:
         return None
     # Median of each block's background pixels (NaN elsewhere; NaN sorts last).
-    vals = np.sort(np.where(bg[use], blocks[use], np.nan), axis=1)
-    count = bg[use].sum(axis=1)
+    in_bg = bg[use].reshape(-1, b * b)
+    vals = blocks[use].reshape(-1, b * b)
+    vals[~in_bg] = np.nan
+    vals.sort(axis=1)
+    count = in_bg.sum(axis=1)
     med = vals[np.arange(vals.shape[0]), (count - 1) // 2]
     rows, cols = np.nonzero(use)
     ok = med > 0
@@ -589,9 +593,13 @@ def _illumination(img, background):
     # column keeps the light level of that row; and stay within the observed range.
     xg = np.arange(w, dtype=np.float32)[None, :]
     yg = np.minimum(np.arange(h, dtype=np.float32), ys.max())[:, None]
-    log_field = sum(c * t for c, t in zip(coef.astype(np.float32), design(xg, yg)))
-    log_field = np.clip(log_field, vs.min() - 0.1, vs.max() + 0.1)
-    return np.exp(log_field).astype(np.float32)
+    field = np.empty((h, w), np.float32)
+    # In bands of rows: the double-precision terms of the whole frame would take several
+    # times the memory of the photo.
+    for i in range(0, h, 256):
+        log_field = sum(c * t for c, t in zip(coef.astype(np.float32), design(xg, yg[i:i + 256])))
+        field[i:i + 256] = np.exp(np.clip(log_field, vs.min() - 0.1, vs.max() + 0.1))
+    return field
 
 
 def _fill_holes(mask):
