@@ -19,11 +19,13 @@ Quantity names are those of docs/workbook.md: ``length_mm``, ``diameter_mm``, ``
 Each value is in the unit its name carries (mm, g, kg/m^3, Pa, deg) or is dimensionless.
 
 The angle of repose comes from the heap photos through a photo estimator
-``angle_from_photo(path, side=..., annotate_to=...)`` returning an object with ``angle_deg``,
-``flanks`` (``{"left": deg or None, "right": deg or None}``) and ``base_tilt_deg``; by default
-:func:`measure.repose.angle_from_photo`. A ``target_repose_deg`` in ``meta`` overrides it (the
-override is reported, the photo estimate kept in ``extra``); the lab's ``angle_deg_manual`` is
-only compared with the photo estimate, never used as the result.
+``angle_from_photo(path, side=..., annotate_to=..., max_pixels=...)`` returning an object with
+``angle_deg``, ``flanks`` (``{"left": deg or None, "right": deg or None}``) and
+``base_tilt_deg``; by default :func:`measure.repose.angle_from_photo`. The estimator decodes
+each photo, once, and refuses one with more than ``max_pixels`` pixels before decoding it. A
+``target_repose_deg`` in ``meta`` overrides it (the override is reported, the photo estimate
+kept in ``extra``); the lab's ``angle_deg_manual`` is only compared with the photo estimate,
+never used as the result.
 """
 
 from __future__ import annotations
@@ -42,6 +44,7 @@ from demcal.measure.dimensions import specimen_statistics
 from demcal.measure.elasticity import compression_estimates
 from demcal.measure.estimate import Estimate, parse_outlier_rule, summarise
 from demcal.measure.friction import friction_estimates
+from demcal.measure.images import MAX_PHOTO_PIXELS
 from demcal.measure.restitution import restitution_estimates
 from demcal.measure.workbook import Workbook, read_workbook
 from demcal.units import GRAVITY
@@ -135,7 +138,7 @@ def _safe_name(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", str(text)).strip("_") or "photo"
 
 
-def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir) -> Estimate:
+def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir, max_photo_pixels) -> Estimate:
     """``repose_angle_deg`` from the heap photos of the ``repose`` sheet."""
     sheet = wb.sheet("repose")
     f = sheet.frame
@@ -149,7 +152,8 @@ def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir) -> Estim
         if annotate_dir is not None:
             annotate_to = Path(annotate_dir) / f"{_safe_name(f.at[r, 'photo_id'])}_annotated.png"
         try:
-            result = estimator(wb.resolve(rel), side=side, annotate_to=annotate_to)
+            result = estimator(wb.resolve(rel), side=side, annotate_to=annotate_to,
+                               max_pixels=max_photo_pixels)
         except DemcalError as exc:
             raise WorkbookError(f"photo {wb.resolve(rel)}: {exc}", file=str(sheet.file), sheet=sheet.name,
                                 row=r, column="file", value=rel) from None
@@ -187,8 +191,12 @@ def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir) -> Estim
     return replace(est, extra=dict(est.extra, **extra))
 
 
-def repose_estimate(wb: Workbook, *, photo_estimator=None, outliers="none", annotate_dir=None):
+def repose_estimate(wb: Workbook, *, photo_estimator=None, outliers="none", annotate_dir=None,
+                    max_photo_pixels=MAX_PHOTO_PIXELS):
     """``repose_angle_deg`` from the photos, overridden by ``meta`` ``target_repose_deg`` if given.
+
+    ``max_photo_pixels``, the most pixels a photo may have [px], is passed to the photo
+    estimator as ``max_pixels``.
 
     Returns
     -------
@@ -203,7 +211,8 @@ def repose_estimate(wb: Workbook, *, photo_estimator=None, outliers="none", anno
         if estimator is None:
             notes.append("repose photos not measured: no photo estimator (measure.repose) available")
         else:
-            photo = _photo_estimate(wb, estimator, outliers=outliers, annotate_dir=annotate_dir)
+            photo = _photo_estimate(wb, estimator, outliers=outliers, annotate_dir=annotate_dir,
+                                    max_photo_pixels=max_photo_pixels)
     target = wb.meta.get("target_repose_deg")
     if target is None:
         return photo, notes
@@ -221,7 +230,7 @@ def repose_estimate(wb: Workbook, *, photo_estimator=None, outliers="none", anno
 
 
 def measure_workbook(wb, *, photo_estimator=None, outliers="none", annotate_dir=None,
-                     r2_min=0.995, g=GRAVITY) -> Measurement:
+                     r2_min=0.995, g=GRAVITY, max_photo_pixels=MAX_PHOTO_PIXELS) -> Measurement:
     """Measure every quantity the workbook holds data for.
 
     Parameters
@@ -229,7 +238,7 @@ def measure_workbook(wb, *, photo_estimator=None, outliers="none", annotate_dir=
     wb : Workbook or str or Path
         A workbook from :func:`measure.workbook.read_workbook`, or its path.
     photo_estimator : callable, optional
-        ``f(path, side=..., annotate_to=...)`` for heap photos; default
+        ``f(path, side=..., annotate_to=..., max_pixels=...)`` for heap photos; default
         ``measure.repose.angle_from_photo`` (imported on use).
     outliers : str
         Outlier rule for every quantity, see :func:`measure.estimate.screen_outliers`. The
@@ -241,6 +250,9 @@ def measure_workbook(wb, *, photo_estimator=None, outliers="none", annotate_dir=
         R^2 that the initial linear window of a compression curve must reach.
     g : float
         Gravitational acceleration for camera tracks [m/s^2].
+    max_photo_pixels : int
+        Most pixels a heap photo may have [px]; a larger one is refused (a ``WorkbookError``
+        naming its row) before it is decoded. Default ``measure.images.MAX_PHOTO_PIXELS``.
 
     Returns
     -------
@@ -256,7 +268,7 @@ def measure_workbook(wb, *, photo_estimator=None, outliers="none", annotate_dir=
     quantities.update(friction_estimates(wb, outliers=outliers))
     quantities.update(compression_estimates(wb, outliers=outliers, r2_min=r2_min))
     repose, notes = repose_estimate(wb, photo_estimator=photo_estimator, outliers=outliers,
-                                    annotate_dir=annotate_dir)
+                                    annotate_dir=annotate_dir, max_photo_pixels=max_photo_pixels)
     if repose is not None:
         quantities["repose_angle_deg"] = repose
     quantities = {n: quantities[n] for n in sorted(quantities, key=_order_key)}

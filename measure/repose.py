@@ -71,6 +71,7 @@ import numpy as np
 from scipy import ndimage, stats
 
 from demcal.errors import InputError
+from demcal.measure.images import MAX_PHOTO_PIXELS, read_image
 
 SIDES = ("left", "right", "both", "auto")
 FLANKS = ("left", "right")
@@ -230,7 +231,8 @@ class DrumAngle:
 # Public functions
 
 def angle_from_photo(image, side="both", annotate_to=None, scale_mm_per_px=None, *,
-                     band=None, smooth=0.02, max_tilt_deg=10.0, min_points=20):
+                     band=None, smooth=0.02, max_tilt_deg=10.0, min_points=20,
+                     max_pixels=MAX_PHOTO_PIXELS):
     """Angle of repose from a side photo of a heap [deg], measured relative to the floor.
 
     Follows the steps in the module docstring: grayscale, illumination flattening, Otsu
@@ -260,6 +262,9 @@ def angle_from_photo(image, side="both", annotate_to=None, scale_mm_per_px=None,
         Largest floor tilt searched for [deg].
     min_points : int
         Fewest boundary points a flank fit accepts.
+    max_pixels : int
+        Most pixels a photo file may have [px]; a larger one is refused before it is decoded.
+        Default ``measure.images.MAX_PHOTO_PIXELS``.
 
     Returns
     -------
@@ -268,7 +273,8 @@ def angle_from_photo(image, side="both", annotate_to=None, scale_mm_per_px=None,
     Raises
     ------
     InputError
-        Unreadable image, no heap or no floor found, or a requested flank not measurable.
+        Unreadable or truncated image, a photo file with more than ``max_pixels`` pixels, no
+        heap or no floor found, or a requested flank not measurable.
     """
     if side not in SIDES:
         raise InputError(f"side must be one of {SIDES}, got {side!r}")
@@ -277,7 +283,7 @@ def angle_from_photo(image, side="both", annotate_to=None, scale_mm_per_px=None,
     if not 0.0 < float(max_tilt_deg) <= 45.0:
         raise InputError(f"max_tilt_deg must be in (0, 45], got {max_tilt_deg!r}")
     scale = _check_scale(scale_mm_per_px)
-    bgr, name = _read_image(image)
+    bgr, name = _read_image(image, max_pixels)
     h, w = bgr.shape[:2]
     gray = _grayscale(bgr)
     mask, flat, t, bright = _segment(gray, name)
@@ -359,7 +365,8 @@ def angle_from_profile(x, z, side="both", *, band=None, smooth=0.02, floor_z=0.0
                        fits=fits, annotated=None, unit="m", crest_height=crest)
 
 
-def angle_from_drum(image, *, chord=0.5, rim_margin=0.04, annotate_to=None):
+def angle_from_drum(image, *, chord=0.5, rim_margin=0.04, annotate_to=None,
+                    max_pixels=MAX_PHOTO_PIXELS):
     """Dynamic angle of repose in a rotating drum from a side image of its free surface [deg].
 
     The drum rim is found as the strongest circle of the Hough gradient method
@@ -379,6 +386,9 @@ def angle_from_drum(image, *, chord=0.5, rim_margin=0.04, annotate_to=None):
         Ring inside the rim left out, as a fraction of the radius [-].
     annotate_to : str or pathlib.Path, optional
         Write an annotated copy to this file.
+    max_pixels : int
+        Most pixels an image file may have [px]; a larger one is refused before it is decoded.
+        Default ``measure.images.MAX_PHOTO_PIXELS``.
 
     Returns
     -------
@@ -388,7 +398,7 @@ def angle_from_drum(image, *, chord=0.5, rim_margin=0.04, annotate_to=None):
         raise InputError(f"chord must be in (0, 1], got {chord!r}")
     if not 0.0 <= float(rim_margin) < 0.5:
         raise InputError(f"rim_margin must be in [0, 0.5), got {rim_margin!r}")
-    bgr, name = _read_image(image)
+    bgr, name = _read_image(image, max_pixels)
     gray = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
     h, w = gray.shape
     dark = gray < _otsu(gray)
@@ -476,18 +486,18 @@ def _check_scale(scale_mm_per_px):
     return s * 1e-3
 
 
-def _read_image(image):
-    """BGR uint8 image and a name for messages, from a path or an array."""
+def _read_image(image, max_pixels):
+    """BGR uint8 image and a name for messages, from a path (at most ``max_pixels`` pixels,
+    checked before decoding) or an array."""
     if isinstance(image, (str, Path)):
         path = Path(image)
         name = f"image {str(path)!r}"
         if not path.is_file():
             raise InputError(f"{name}: file not found")
-        data = np.fromfile(str(path), dtype=np.uint8)
-        img = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
-        if img is None:
-            raise InputError(f"{name}: not a readable image file")
-        return img, name
+        try:
+            return read_image(path, max_pixels), name
+        except ValueError as exc:
+            raise InputError(f"{name}: {exc}") from None
     name = "image array"
     if not isinstance(image, np.ndarray):
         raise InputError(f"image must be a file path or a numpy array, got {type(image).__name__}")

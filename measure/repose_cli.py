@@ -15,6 +15,7 @@ from pathlib import Path
 from demcal.errors import InputError
 from demcal.jsonio import write_json
 from demcal.provenance import Provenance, sha256_file
+from demcal.measure.images import MAX_PHOTO_PIXELS
 from demcal.measure.repose import SIDES, angle_from_photo
 
 
@@ -25,7 +26,7 @@ def register(subparsers) -> None:
         description="Measure the angle of repose of a heap from a side photo: threshold, top "
                     "boundary, floor line (its tilt is removed), robust line through 15-85 %% "
                     "of the height of each flank. Writes JSON and an annotated image.")
-    p.add_argument("photo", help="heap photo (any format OpenCV reads: jpg, png, bmp, tif)")
+    p.add_argument("photo", help="heap photo (jpg, png, bmp, tif or another common format)")
     p.add_argument("--json", required=True, dest="json_out", metavar="OUT",
                    help="JSON file to write")
     p.add_argument("--side", choices=SIDES, default="auto",
@@ -39,6 +40,9 @@ def register(subparsers) -> None:
     p.add_argument("--band", type=float, nargs=2, default=(0.15, 0.85), metavar=("LOW", "HIGH"),
                    help="fraction of the crest height between which each flank is fitted "
                         "(default 0.15 0.85)")
+    p.add_argument("--max-photo-pixels", type=int, default=MAX_PHOTO_PIXELS, metavar="N",
+                   help=f"refuse a photo with more pixels, before decoding it (default "
+                        f"{MAX_PHOTO_PIXELS}); raise it for a genuine larger photo")
     p.set_defaults(handler=run)
 
 
@@ -47,10 +51,14 @@ def run(args) -> int:
     photo = Path(args.photo)
     if not photo.is_file():
         raise InputError(f"photo {str(photo)!r}: file not found")
+    if args.max_photo_pixels < 1:
+        raise InputError(f"--max-photo-pixels must be a positive number of pixels, "
+                         f"got {args.max_photo_pixels}")
     out = Path(args.json_out)
     annotate = Path(args.annotate) if args.annotate else out.with_name(out.stem + "_annotated.png")
     result = angle_from_photo(photo, side=args.side, annotate_to=annotate,
-                              scale_mm_per_px=args.scale_mm_per_px, band=tuple(args.band))
+                              scale_mm_per_px=args.scale_mm_per_px, band=tuple(args.band),
+                              max_pixels=args.max_photo_pixels)
     options = {"side": args.side, "band": list(args.band), "scale_mm_per_px": args.scale_mm_per_px}
     record = {
         "angle_deg": result.angle_deg,

@@ -148,8 +148,8 @@ def stub_photo_estimator(angles: dict):
     """A photo estimator returning fixed angles by file name, recording its calls."""
     calls = []
 
-    def estimate(path, side="both", annotate_to=None):
-        calls.append({"path": path, "side": side, "annotate_to": annotate_to})
+    def estimate(path, side="both", annotate_to=None, max_pixels=None):
+        calls.append({"path": path, "side": side, "annotate_to": annotate_to, "max_pixels": max_pixels})
         a = angles[path.name]
         return StubPhoto(a, {"left": a - 1.0, "right": a + 1.0 if side == "both" else None}, 0.5)
 

@@ -11,6 +11,7 @@ import pytest
 import demcal.measure.pipeline as pipeline
 from demcal.errors import InputError, WorkbookError
 from demcal.jsonio import read_json, write_json
+from demcal.measure.images import MAX_PHOTO_PIXELS
 from demcal.measure.pipeline import Measurement, measure_workbook
 from demcal.measure.workbook import read_workbook
 from tests.measure.conftest import curve_frame, stub_photo_estimator
@@ -167,12 +168,16 @@ def test_target_repose_overrides_photos(campaign):
     assert "(override)" in m.table()
 
 
-def test_photo_estimator_gets_side_and_annotation_path(campaign, tmp_path):
+def test_photo_estimator_gets_side_annotation_path_and_pixel_limit(campaign, tmp_path):
     stub = stub_photo_estimator(PHOTOS)
     run(campaign(), photo_estimator=stub, annotate_dir=tmp_path / "ann")
     assert [c["side"] for c in stub.calls] == ["both", "left"]
     assert [c["path"].name for c in stub.calls] == ["p1.png", "p2.png"]
     assert stub.calls[0]["annotate_to"] == tmp_path / "ann" / "P1_annotated.png"
+    assert [c["max_pixels"] for c in stub.calls] == [MAX_PHOTO_PIXELS] * 2
+    stub = stub_photo_estimator(PHOTOS)
+    run(campaign(), photo_estimator=stub, max_photo_pixels=1234)
+    assert [c["max_pixels"] for c in stub.calls] == [1234] * 2
 
 
 def test_no_photo_estimator_is_a_note(campaign, monkeypatch):
@@ -183,7 +188,7 @@ def test_no_photo_estimator_is_a_note(campaign, monkeypatch):
 
 
 def test_photo_estimator_error_names_the_row(campaign, fmt):
-    def broken(path, side="both", annotate_to=None):
+    def broken(path, side="both", annotate_to=None, max_pixels=None):
         raise InputError("no heap found")
     with pytest.raises(WorkbookError) as info:
         run(campaign(), photo_estimator=broken)

@@ -31,6 +31,9 @@ from demcal.measure.repose_cli import register
 from demcal.simulate.render import Lighting, heap_photo, heap_profile, silhouette
 
 EXTERNAL_IMAGES = Path("/work/shared/external/images")
+EXAMPLE_PHOTO = Path(__file__).resolve().parents[2] / "data" / "astragalus" / "photos" / "heap_1.jpg"
+#: Angle of EXAMPLE_PHOTO's right flank when photos were decoded by cv2.imdecode without checks.
+EXAMPLE_ANGLE_DEG = 31.050311185693534
 
 # ------------------------------------------------------------------------------------------
 # The generated photo set
@@ -369,6 +372,25 @@ def test_no_heap_and_bad_arguments():
 
 
 # ------------------------------------------------------------------------------------------
+# Photo files: checked header, pixel limit, one decode
+
+def test_example_photo_measures_as_before():
+    result = angle_from_photo(EXAMPLE_PHOTO, side="right")
+    assert result.angle_deg == pytest.approx(EXAMPLE_ANGLE_DEG, abs=1e-6)
+    assert result.angle_deg == angle_from_photo(cv2.imread(str(EXAMPLE_PHOTO)), side="right").angle_deg
+
+
+def test_photo_over_a_lowered_pixel_limit_is_refused_and_a_larger_limit_accepts_it():
+    with pytest.raises(InputError, match=r"1200 x 900 px \(1,080,000 pixels\) is more than the "
+                                         r"limit of 1,079,999 pixels.*--max-photo-pixels"):
+        angle_from_photo(EXAMPLE_PHOTO, side="right", max_pixels=1_079_999)
+    result = angle_from_photo(EXAMPLE_PHOTO, side="right", max_pixels=1_080_000)
+    assert result.angle_deg == pytest.approx(EXAMPLE_ANGLE_DEG, abs=1e-6)
+    with pytest.raises(InputError, match="limit of 1,000 pixels"):
+        angle_from_drum(EXTERNAL_IMAGES / "granudrum_mcc_30rpm_averaged.bmp", max_pixels=1000)
+
+
+# ------------------------------------------------------------------------------------------
 # Real drum images (GranuDrum, MCC)
 
 RPMS = (10, 15, 30, 45)
@@ -445,3 +467,29 @@ def test_cli_bad_input_exits_2_with_one_line(tmp_path, monkeypatch, capsys):
     assert not (tmp_path / "o.json").exists()
     assert demcal.cli.main(["repose", str(tmp_path / "missing.jpg"), "--json",
                             str(tmp_path / "o.json")]) == 2
+
+
+def test_cli_pixel_limit_option(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(demcal.cli, "STAGE_CLIS", ("demcal.measure.repose_cli",))
+    out = tmp_path / "o.json"
+    argv = ["repose", str(EXAMPLE_PHOTO), "--json", str(out), "--max-photo-pixels"]
+    assert demcal.cli.main(argv + ["1079999"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1
+    assert "1200 x 900 px" in err and "1,079,999" in err and "--max-photo-pixels" in err
+    assert not out.exists()
+    assert demcal.cli.main(argv + ["0"]) == 2
+    assert "--max-photo-pixels must be a positive" in capsys.readouterr().err
+    assert demcal.cli.main(argv + ["1080000"]) == 0
+    assert 0 < json.loads(out.read_text())["angle_deg"] < 90
+
+
+def test_cli_truncated_photo_is_one_line(tmp_path, monkeypatch, capfd):
+    """Nothing from the PNG decoder on stderr either: the truncation is found before it."""
+    monkeypatch.setattr(demcal.cli, "STAGE_CLIS", ("demcal.measure.repose_cli",))
+    data = cv2.imencode(".png", cv2.imread(str(EXAMPLE_PHOTO)))[1].tobytes()
+    cut = tmp_path / "cut.png"
+    cut.write_bytes(data[:len(data) // 2])
+    assert demcal.cli.main(["repose", str(cut), "--json", str(tmp_path / "o.json")]) == 2
+    err = capfd.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "truncated PNG" in err
