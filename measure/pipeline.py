@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections import Counter
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -138,19 +139,28 @@ def _safe_name(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", str(text)).strip("_") or "photo"
 
 
+def _annotated_names(ids: dict) -> dict:
+    """Row -> file name of its annotated photo: the photo id made safe for a file name, with
+    ``@row<n>`` added where two ids would give the same name (``a/b`` and ``a_b``, or ``A`` and
+    ``a`` on a case-insensitive file system); a safe name never holds ``@``."""
+    stems = {r: _safe_name(i) for r, i in ids.items()}
+    count = Counter(s.casefold() for s in stems.values())
+    return {r: f"{s}@row{r}_annotated.png" if count[s.casefold()] > 1 else f"{s}_annotated.png"
+            for r, s in stems.items()}
+
+
 def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir, max_photo_pixels) -> Estimate:
     """``repose_angle_deg`` from the heap photos of the ``repose`` sheet."""
     sheet = wb.sheet("repose")
     f = sheet.frame
     values, rows, records, rejected = [], [], [], []
+    names = _annotated_names({r: f.at[r, "photo_id"] for r in sheet.rows})
     if annotate_dir is not None:
         Path(annotate_dir).mkdir(parents=True, exist_ok=True)
     for r in sheet.rows:
         rel = f.at[r, "file"]
         side = f.at[r, "side"] if "side" in f else "both"
-        annotate_to = None
-        if annotate_dir is not None:
-            annotate_to = Path(annotate_dir) / f"{_safe_name(f.at[r, 'photo_id'])}_annotated.png"
+        annotate_to = None if annotate_dir is None else Path(annotate_dir) / names[r]
         try:
             result = estimator(wb.resolve(rel), side=side, annotate_to=annotate_to,
                                max_pixels=max_photo_pixels)

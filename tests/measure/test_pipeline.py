@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -178,6 +179,26 @@ def test_photo_estimator_gets_side_annotation_path_and_pixel_limit(campaign, tmp
     stub = stub_photo_estimator(PHOTOS)
     run(campaign(), photo_estimator=stub, max_photo_pixels=1234)
     assert [c["max_pixels"] for c in stub.calls] == [1234] * 2
+
+
+def test_annotated_photo_names_are_unique(campaign, tmp_path):
+    """Ids that make the same file name (a/b and a_b; A and a on a case-insensitive file
+    system) get their row number; the report finds each by the name recorded."""
+    def edit(s):
+        s["repose"] = [dict(s["repose"][0], photo_id="a/b"), dict(s["repose"][1], photo_id="a_b"),
+                       dict(s["repose"][0], photo_id="P1", file="photos/p3.png"),
+                       dict(s["repose"][1], photo_id="Q", file="photos/p4.png"),
+                       dict(s["repose"][1], photo_id="q", file="photos/p5.png")]
+    root = campaign(edit)
+    photos = (root.parent if root.is_file() else root) / "photos"
+    for name in ("p3.png", "p4.png", "p5.png"):
+        (photos / name).write_bytes((photos / "p1.png").read_bytes())
+    stub = stub_photo_estimator(dict(PHOTOS, **{"p3.png": 35.0, "p4.png": 35.0, "p5.png": 35.0}))
+    m = run(root, photo_estimator=stub, annotate_dir=tmp_path / "ann")
+    names = [c["annotate_to"].name for c in stub.calls]
+    assert names == ["a_b@row1_annotated.png", "a_b@row2_annotated.png", "P1_annotated.png",
+                     "Q@row4_annotated.png", "q@row5_annotated.png"]
+    assert [Path(r["annotated"]).name for r in m.quantities["repose_angle_deg"].per_row] == names
 
 
 def test_no_photo_estimator_is_a_note(campaign, monkeypatch):
