@@ -12,6 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from demcal.errors import InputError
+from demcal.measure.cli import add_workbook_options, read_options
 
 
 def register(subparsers) -> None:
@@ -57,6 +58,7 @@ def register(subparsers) -> None:
                      help="switch a model extension on for every run (repeatable), e.g. --set "
                           "multi_contact_damping=true; only the extensions' parameters "
                           "(simulate.extensions.ENGINE_HOOKS)")
+    add_workbook_options(cal)
     cal.add_argument("--no-report", action="store_true",
                      help="skip the HTML/PDF report (and its check of the workbook text before the campaign)")
     cal.set_defaults(handler=_run_calibrate)
@@ -92,7 +94,8 @@ def _run_calibrate(args) -> int:
         raise InputError(f"--workers must be >= 1, got {config.workers}")
     # measure first: a bad workbook stops before any DEM run, and so does workbook text that
     # the report, made after the campaign, could not render
-    measurement = measure_workbook(workbook, annotate_dir=args.out / "annotated")
+    measurement = measure_workbook(workbook, annotate_dir=args.out / "annotated",
+                                   reading=read_options(args))
     if not args.no_report:
         preflight(measurement, args.out)
     results = calibrate(workbook, args.out, config, measurement=measurement)

@@ -47,7 +47,7 @@ from demcal.measure.estimate import Estimate, parse_outlier_rule, summarise
 from demcal.measure.friction import friction_estimates
 from demcal.measure.images import MAX_PHOTO_PIXELS
 from demcal.measure.restitution import restitution_estimates
-from demcal.measure.workbook import Workbook, read_workbook
+from demcal.measure.workbook import ReadOptions, Workbook, read_workbook
 from demcal.units import GRAVITY
 
 #: Order of the quantities in outputs (prefixes stand for their families).
@@ -110,6 +110,11 @@ class Measurement:
         return cls(material=d["material"], quantities=quantities, workbook=dict(d.get("workbook", {})),
                    meta=dict(d.get("meta", {})), provenance=Provenance(**d["provenance"]),
                    notes=list(d.get("notes", [])))
+
+    @property
+    def read_options(self) -> ReadOptions:
+        """How the workbook was read (recorded in provenance), to read it again the same way."""
+        return ReadOptions.from_dict(self.provenance.options.get("reading"))
 
     def table(self) -> str:
         """A short human-readable table of the quantities."""
@@ -201,6 +206,17 @@ def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir, max_phot
     return replace(est, extra=dict(est.extra, **extra))
 
 
+def _check_finite(est: Estimate) -> None:
+    """Refuse an estimate that is not a finite number (an sd and interval may be undefined only
+    for a single value, or a stated override): JSON would write it as null."""
+    numbers = [est.value] + ([est.sd, *est.ci95] if est.n >= 2 and not est.extra.get("override") else [])
+    if not all(math.isfinite(x) for x in numbers):
+        src = est.source or {}
+        raise WorkbookError(f"the estimate of {est.name} is not a finite number (value {est.value!r}, "
+                            f"sd {est.sd!r}): check the values of rows {est.rows_used[:10]}",
+                            file=src.get("file"), sheet=src.get("sheet"))
+
+
 def repose_estimate(wb: Workbook, *, photo_estimator=None, outliers="none", annotate_dir=None,
                     max_photo_pixels=MAX_PHOTO_PIXELS):
     """``repose_angle_deg`` from the photos, overridden by ``meta`` ``target_repose_deg`` if given.
@@ -240,7 +256,7 @@ def repose_estimate(wb: Workbook, *, photo_estimator=None, outliers="none", anno
 
 
 def measure_workbook(wb, *, photo_estimator=None, outliers="none", annotate_dir=None,
-                     r2_min=0.995, g=GRAVITY, max_photo_pixels=MAX_PHOTO_PIXELS) -> Measurement:
+                     r2_min=0.995, g=GRAVITY, reading: ReadOptions | None = None) -> Measurement:
     """Measure every quantity the workbook holds data for.
 
     Parameters
@@ -260,16 +276,25 @@ def measure_workbook(wb, *, photo_estimator=None, outliers="none", annotate_dir=
         R^2 that the initial linear window of a compression curve must reach.
     g : float
         Gravitational acceleration for camera tracks [m/s^2].
-    max_photo_pixels : int
-        Most pixels a heap photo may have [px]; a larger one is refused (a ``WorkbookError``
-        naming its row) before it is decoded. Default ``measure.images.MAX_PHOTO_PIXELS``.
+    reading : ReadOptions, optional
+        How to read ``wb`` when it is a path (a :class:`Workbook` carries its own). Its
+        ``max_photo_pixels`` (default ``measure.images.MAX_PHOTO_PIXELS``) also bounds the
+        photos the estimator decodes; the options are recorded in provenance, so the workbook
+        can be read again the same way (``ReadOptions.from_dict``).
 
     Returns
     -------
     Measurement
+
+    Raises
+    ------
+    WorkbookError
+        For a bad workbook, and for an estimate that came out infinite or NaN (it names the
+        quantity and its sheet: a value the plausible ranges let through).
     """
     if not isinstance(wb, Workbook):
-        wb = read_workbook(wb)
+        wb = read_workbook(wb, reading)
+    max_photo_pixels = wb.options.max_photo_pixels or MAX_PHOTO_PIXELS
     rule, limit = parse_outlier_rule(outliers)
     quantities: dict = {}
     quantities.update(specimen_statistics(wb.sheet("specimens"), outliers=outliers))
@@ -282,6 +307,9 @@ def measure_workbook(wb, *, photo_estimator=None, outliers="none", annotate_dir=
     if repose is not None:
         quantities["repose_angle_deg"] = repose
     quantities = {n: quantities[n] for n in sorted(quantities, key=_order_key)}
+    for est in quantities.values():
+        _check_finite(est)
+    notes = list(wb.notes) + notes
     sheets = {name: {"file": str(s.file), "sha256": s.sha256, "rows": len(s.rows),
                      "required": list(s.required), "optional": list(s.optional),
                      "covariates": list(s.covariates)} for name, s in wb.sheets.items()}
@@ -296,6 +324,7 @@ def measure_workbook(wb, *, photo_estimator=None, outliers="none", annotate_dir=
     if estimator is not None and photo_estimator is None:
         from demcal.measure.repose import FLANK_BAND
         options["flank_band"] = list(FLANK_BAND)  # the twins' angles must be read the same way
+    options["reading"] = wb.options.to_dict()
     return Measurement(material=str(wb.meta["material"]), quantities=quantities, workbook=info,
                        meta=dict(wb.meta), provenance=Provenance(inputs=dict(wb.files), options=options),
                        notes=notes)

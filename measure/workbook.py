@@ -14,13 +14,27 @@ Rules applied by :func:`read_workbook`:
   ``Workbook.unknown_sheets``.
 - Rows are numbered from 1 = the first row under the header, as in the spreadsheet; fully
   empty rows are skipped (the numbering of the others does not change).
+- Cells are read by :mod:`measure.rawsheets` within stated bounds (file size, what an .xlsx
+  unpacks to, characters per cell); CSV records must have the header's field count, and the
+  separator and decimal mark are given (:class:`ReadOptions`) or detected and stated in
+  ``Workbook.notes``. Hidden rows, columns and sheets, and cells merged within a column, are read
+  with a note naming them; cells merged across columns, and formulas without a stored value in
+  a known column, are refused.
 - A required cell must not be empty (exceptions: in ``drop``, the heights of a row with a
   ``track_file``; in ``incline``, a row gives either ``angle_deg`` or all of ``slope_deg``,
   ``release_height_mm``, ``runout_mm``, and roll-out rows must have mode ``roll``).
-- Numeric cells must be finite numbers; sizes, masses, volumes and drop heights must be
-  positive; a rebound height may be 0 (no rebound, e = 0) but not negative nor above its drop
-  height; ``volume_after_ml`` must exceed ``volume_before_ml``; a compressed specimen's
-  thickness must change; angles must lie strictly between 0 and 90 degrees.
+- Numeric cells must be finite numbers within the plausible range of their column
+  (:data:`RANGES`, overridable); sizes, masses, volumes and drop heights must be positive; a
+  rebound height may be 0 (no rebound, e = 0) but not negative nor above its drop height;
+  ``volume_after_ml`` must exceed ``volume_before_ml``; a compressed specimen's thickness must
+  change; angles must lie strictly between 0 and 90 degrees. Covariate numbers must lie within
+  +-:data:`COVARIATE_LIMIT`; a missing-value marker (``NaN``, ``n/a``...) among them reads as
+  empty, and text among numbers makes the column text; both with a note.
+- Ids (``specimen_id``, ``sample_id``, ``trial_id``, ``photo_id``; a compressed specimen once
+  per axis) are unique within their sheet, and no file is named twice in one column.
+- Names, ids, headers, sheet names, paths and the meta ``material`` hold no line break or other
+  control character (they reach exports and the terminal); in covariate text such characters
+  read as spaces, with a note.
 - Names: ``pair`` is ``particle-<material>`` and ``surface`` is ``particle`` or a material,
   where a material name is a letter followed by letters, digits or ``_`` (case is ignored, so
   ``Steel`` is ``steel``). Anything else (empty, ``steel`` as a pair, ``particle steel``, a
@@ -28,10 +42,12 @@ Rules applied by :func:`read_workbook`:
   ``side`` ``left``, ``right`` or ``both`` (empty means ``both``).
 - ``compression`` may carry the segment's ``length_mm`` (used for the radial contact area;
   otherwise it is taken from the ``specimens`` row with the same ``specimen_id``).
-- Referenced files (paths relative to the workbook; ``\\`` separators accepted) must exist
-  and be readable: a photo must open with OpenCV, a curve or track must be a CSV with its
-  columns (``displacement_mm``, ``force_N``; ``t_s``, ``y_mm``, optional ``angle_deg``)
-  holding numbers, at least 3 rows.
+- Referenced files (paths relative to the workbook; ``\\`` separators accepted) must resolve,
+  links followed, inside the workbook's folder (or a folder allowed in :class:`ReadOptions`),
+  checked before the file is opened; they must exist and be readable: a photo's header must
+  name an image within the pixel limit (decoded once, later, by the estimator), a curve or track
+  must be a CSV with its columns (``displacement_mm``, ``force_N``; ``t_s``, ``y_mm``, optional
+  ``angle_deg``) holding numbers, at least 3 rows.
 
 Every violation raises :class:`demcal.errors.WorkbookError` naming the file, sheet, data row,
 column and value.
@@ -50,7 +66,10 @@ import numpy as np
 import pandas as pd
 
 from demcal.errors import InputError, WorkbookError
+from demcal.measure import rawsheets
+from demcal.measure.rawsheets import RawSheet, is_missing_marker, row_ranges
 from demcal.provenance import sha256_file
+from demcal.text import control_characters, one_line
 
 #: A material name: a letter, then letters, digits or underscores (lower case after reading).
 NAME_PATTERN = re.compile(r"[a-z][a-z0-9_]*")
@@ -117,6 +136,96 @@ ATTACHMENTS = {"curve": (("displacement_mm", "force_N"), ()),
 META_POSITIVE = ("contact_density_kg_m3", "contact_shear_modulus_pa", "particle_shear_modulus_pa",
                  "box_length_mm", "box_width_mm", "box_height_mm", "plate_lift_speed_mm_s",
                  "fill_count")
+
+#: Physically plausible range of each number, inclusive, in the unit its name carries: wide
+#: enough for anything from a rapeseed to a tuber and a lab's rigs, narrow enough that a typo
+#: (1e308 mm, a diameter in m) is refused naming its cell instead of overflowing an estimate.
+#: Listed in docs/workbook.md; ``--range NAME=LO:HI`` widens or narrows one.
+RANGES = {
+    # specimens and compression [mm, g]
+    "length_mm": (0.05, 1000.0), "diameter_mm": (0.05, 1000.0), "mass_g": (1e-6, 1e4),
+    "width_before_mm": (0.05, 1000.0), "width_after_mm": (0.05, 1000.0),
+    "thickness_before_mm": (0.05, 1000.0), "thickness_after_mm": (0.05, 1000.0),
+    # density [ml]
+    "volume_before_ml": (1e-3, 1e6), "volume_after_ml": (1e-3, 1e6),
+    # drop and incline [mm]
+    "drop_height_mm": (1.0, 1e5), "rebound_height_mm": (0.0, 1e5),
+    "release_height_mm": (0.1, 1e5), "runout_mm": (0.0, 1e5),
+    # repose photos [mm/px]
+    "scale_mm_per_px": (1e-4, 100.0),
+    # meta [kg/m^3, Pa, mm, mm/s, particles]
+    "contact_density_kg_m3": (10.0, 1e5), "contact_shear_modulus_pa": (1e3, 1e13),
+    "particle_shear_modulus_pa": (1e3, 1e13), "box_length_mm": (1.0, 1e5),
+    "box_width_mm": (1.0, 1e5), "box_height_mm": (1.0, 1e5), "plate_lift_speed_mm_s": (1e-3, 1e5),
+    "fill_count": (1.0, 1e6),
+    # curve and track files [mm, N, s, deg]
+    "displacement_mm": (-1e3, 1e3), "force_N": (-1e6, 1e6), "t_s": (-1e4, 1e4),
+    "y_mm": (-1e6, 1e6), "track.angle_deg": (-1e6, 1e6),
+}
+#: Largest magnitude of a number in a covariate column: a covariate has no stated unit, but
+#: its squares must stay finite in the diagnosis' regressions.
+COVARIATE_LIMIT = 1e12
+
+
+@dataclass(frozen=True)
+class ReadOptions:
+    """How a workbook is read: the choices the user may make, recorded in provenance so that
+    a campaign's workbook is read again (by ``audit``, ``critique``) exactly as it was.
+
+    Attributes
+    ----------
+    csv_separator, csv_decimal : str or None
+        CSV separator (``,`` ``;`` or a tab) and decimal mark (``.`` or ``,``); None detects
+        them (see :func:`measure.rawsheets.read_csv`).
+    ranges : dict of str -> (float, float)
+        Plausible ranges that replace those of :data:`RANGES`, by column or meta key.
+    allowed_folders : tuple of str
+        Folders outside the workbook's own that photo, curve and track paths may point into.
+    max_photo_pixels : int
+        Largest photo read, width x height [pixels] (checked from the file's header).
+    max_file_bytes : int
+        Largest workbook file read; also the largest an .xlsx may unpack to [bytes].
+    """
+
+    csv_separator: str | None = None
+    csv_decimal: str | None = None
+    ranges: dict = field(default_factory=dict)
+    allowed_folders: tuple = ()
+    max_photo_pixels: int | None = None
+    max_file_bytes: int = rawsheets.MAX_FILE_BYTES
+
+    def __post_init__(self):
+        if self.csv_separator not in (None, *rawsheets.SEPARATORS):
+            raise InputError(f"CSV separator {self.csv_separator!r}: valid are ',', ';' and a tab")
+        if self.csv_decimal not in (None, *rawsheets.DECIMAL_MARKS):
+            raise InputError(f"CSV decimal mark {self.csv_decimal!r}: valid are '.' and ','")
+        if self.csv_decimal == "," and self.csv_separator == ",":
+            raise InputError("a CSV cannot have ',' as both its separator and its decimal mark")
+        for name, bounds in self.ranges.items():
+            lo, hi = bounds
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+                raise InputError(f"range of {name}: need finite LO < HI, got {lo!r}:{hi!r}")
+        if not self.max_file_bytes > 0:
+            raise InputError(f"the largest workbook file must be positive, got {self.max_file_bytes}")
+
+    def range_of(self, name: str):
+        """The plausible (lo, hi) of a column or meta key, or None when it has none."""
+        return self.ranges.get(name, RANGES.get(name))
+
+    def to_dict(self) -> dict:
+        return {"csv_separator": self.csv_separator, "csv_decimal": self.csv_decimal,
+                "ranges": {k: list(v) for k, v in self.ranges.items()},
+                "allowed_folders": list(self.allowed_folders),
+                "max_photo_pixels": self.max_photo_pixels, "max_file_bytes": self.max_file_bytes}
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> "ReadOptions":
+        d = dict(d or {})
+        return cls(csv_separator=d.get("csv_separator"), csv_decimal=d.get("csv_decimal"),
+                   ranges={k: tuple(v) for k, v in d.get("ranges", {}).items()},
+                   allowed_folders=tuple(d.get("allowed_folders", ())),
+                   max_photo_pixels=d.get("max_photo_pixels"),
+                   max_file_bytes=d.get("max_file_bytes", rawsheets.MAX_FILE_BYTES))
 
 
 @dataclass(frozen=True)
@@ -190,6 +299,11 @@ class Workbook:
         photo, curve and track.
     attachments : dict of str -> pandas.DataFrame
         Parsed curve and track CSVs by path (the keys of ``files``), columns in lab units.
+    notes : list of str
+        What reading did that the user should know: hidden rows and sheets, merged cells, a
+        detected decimal comma, covariate cells read as missing or as text.
+    options : ReadOptions
+        How the workbook was read.
     """
 
     source: Path
@@ -199,13 +313,15 @@ class Workbook:
     unknown_sheets: list
     files: dict
     attachments: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+    options: ReadOptions = field(default_factory=ReadOptions)
 
     def sheet(self, name: str) -> Sheet | None:
         """The sheet ``name``, or None if the workbook does not have it."""
         return self.sheets.get(name)
 
     def resolve(self, relative) -> Path:
-        """A path written in the workbook, relative to :attr:`root` (absolute paths stay)."""
+        """A path written in the workbook, resolved from :attr:`root` (links followed)."""
         return _resolve(self.root, relative)
 
     def attachment(self, relative) -> pd.DataFrame:
@@ -230,9 +346,15 @@ def _is_empty(cell) -> bool:
 
 
 def _resolve(root: Path, text) -> Path:
-    """A path cell relative to ``root``; Windows separators are accepted."""
+    """A path cell relative to ``root``, resolved (links followed); Windows separators are
+    accepted."""
     p = Path(str(text).replace("\\", "/"))
-    return p if p.is_absolute() else root / p
+    return (p if p.is_absolute() else root / p).resolve()
+
+
+def _outside(path: Path, root: Path, allowed: tuple) -> bool:
+    """True when ``path`` (resolved) lies outside ``root`` and every allowed folder."""
+    return not any(path.is_relative_to(Path(folder).resolve()) for folder in (root, *allowed))
 
 
 def _plain(value):
@@ -300,47 +422,36 @@ def _name(cell) -> str | None:
 # ----------------------------------------------------------------------------------------------
 # raw reading
 
-def _raw_xlsx(path: Path) -> dict:
-    try:
-        frames = pd.read_excel(path, sheet_name=None, header=0, dtype=object, engine="openpyxl",
-                               keep_default_na=False, na_values=[])
-    except Exception as exc:  # openpyxl raises many types for a damaged file
-        raise WorkbookError(f"cannot read the workbook as .xlsx: {exc}", file=str(path)) from None
-    return {str(name): frame for name, frame in frames.items()}
-
-
-def _read_csv(path: Path) -> pd.DataFrame:
-    """A CSV as text cells, keeping blank lines so row numbers match the file."""
-    return pd.read_csv(path, dtype=str, keep_default_na=False, skip_blank_lines=False,
-                       encoding="utf-8-sig")
-
-
-def _raw_csv(path: Path, sheet: str) -> pd.DataFrame:
-    try:
-        return _read_csv(path)
-    except Exception as exc:  # pandas raises ParserError, UnicodeDecodeError, EmptyDataError...
-        raise WorkbookError(f"cannot read the CSV sheet: {exc}", file=str(path), sheet=sheet) from None
+def _check_text(text: str, where: dict, what: str) -> None:
+    """Refuse a name, id, header or path holding a line break or another control character:
+    such text would print as a fake line or end a comment in an export."""
+    bad = control_characters(text)
+    if bad:
+        raise WorkbookError(f"{what} holds the control character(s) {' '.join(bad)} (a line break "
+                            "or a tab typed into the cell?): remove them", **where, value=text)
 
 
 def _canonical_columns(raw: pd.DataFrame, known: tuple, file: Path, sheet: str) -> pd.DataFrame:
-    """Strip headers, map known columns case-insensitively, drop empty unnamed columns."""
+    """Strip headers, map known columns case-insensitively, drop empty unnamed columns; the
+    index (data-row numbers) is kept."""
     lookup = {k.lower(): k for k in known}
     names, keep = [], []
     for i, col in enumerate(raw.columns):
-        header = "" if _is_empty(col) or str(col).startswith("Unnamed:") else str(col).strip()
+        header = "" if _is_empty(col) else str(col).strip()
         if not header:
             if raw.iloc[:, i].map(_is_empty).all():
                 continue
             raise WorkbookError(f"column {i + 1} has data but no header", file=str(file), sheet=sheet,
                                 column=f"#{i + 1}")
+        _check_text(header, {"file": str(file), "sheet": sheet, "column": f"#{i + 1}"}, "the header")
         header = lookup.get(header.lower(), header)
         if header in names:
-            raise WorkbookError("duplicate column", file=str(file), sheet=sheet, column=header)
+            raise WorkbookError(f"duplicate column: columns {names.index(header) + 1} and {i + 1} "
+                                "have this header", file=str(file), sheet=sheet, column=header)
         names.append(header)
         keep.append(i)
     frame = raw.iloc[:, keep].copy()
     frame.columns = names
-    frame.index = pd.RangeIndex(1, len(frame) + 1, name="row")
     return frame
 
 
@@ -372,14 +483,27 @@ def _check_choice(column: str, value: str | None) -> str | None:
     return f"unknown {column}; valid: {', '.join(valid)}"
 
 
-def _typed_frame(name: str, spec: SheetSpec, frame: pd.DataFrame, file: Path) -> pd.DataFrame:
+def _typed_frame(name: str, spec: SheetSpec, raw: RawSheet, frame: pd.DataFrame, file: Path,
+                 options: ReadOptions, notes: list) -> pd.DataFrame:
     """Convert and check every cell of a known sheet; covariates are typed loosely."""
     out = {}
     numbers_ = set(spec.numbers)
+    known = set(spec.ids) | set(spec.required) | set(spec.optional)
+    for (row, col), formula in raw.formulas_without_value.items():
+        if col in known:
+            raise WorkbookError("a formula without a stored value (the file was saved by a program "
+                                "that does not calculate): open and save it in a spreadsheet "
+                                "program, or type the value", file=str(file), sheet=name, row=row,
+                                column=col, value=formula)
     for col in frame.columns:
         cells = frame[col]
+
+        def err(message, row, cell):
+            return WorkbookError(message, file=str(file), sheet=name, row=row, column=col, value=cell)
+
         if col in numbers_:
             values = []
+            bounds = options.range_of(col)
             for row, cell in cells.items():
                 if _is_empty(cell):
                     values.append(math.nan)
@@ -387,17 +511,16 @@ def _typed_frame(name: str, spec: SheetSpec, frame: pd.DataFrame, file: Path) ->
                 try:
                     x = _number(cell)
                 except ValueError:
-                    raise WorkbookError("not a number", file=str(file), sheet=name, row=row,
-                                        column=col, value=cell) from None
+                    raise err("not a number", row, cell) from None
                 if col in spec.positive and not x > 0:
-                    raise WorkbookError("must be positive", file=str(file), sheet=name, row=row,
-                                        column=col, value=cell)
+                    raise err("must be positive", row, cell)
                 if col in spec.nonnegative and x < 0:
-                    raise WorkbookError("must not be negative", file=str(file), sheet=name,
-                                        row=row, column=col, value=cell)
+                    raise err("must not be negative", row, cell)
                 if col in spec.angles and not 0 < x < 90:
-                    raise WorkbookError("angle must lie strictly between 0 and 90 degrees",
-                                        file=str(file), sheet=name, row=row, column=col, value=cell)
+                    raise err("angle must lie strictly between 0 and 90 degrees", row, cell)
+                if bounds is not None and not bounds[0] <= x <= bounds[1]:
+                    raise err(f"outside the plausible range {bounds[0]:g} to {bounds[1]:g} "
+                              f"(docs/workbook.md; --range {col}=LO:HI sets another)", row, cell)
                 values.append(x)
             out[col] = pd.Series(values, index=frame.index, dtype=float)
         elif col in spec.choices:
@@ -408,28 +531,68 @@ def _typed_frame(name: str, spec: SheetSpec, frame: pd.DataFrame, file: Path) ->
                     value = "both"
                 problem = _check_choice(col, value)
                 if problem:
-                    raise WorkbookError(problem, file=str(file), sheet=name, row=row, column=col,
-                                        value=None if _is_empty(cell) else cell)
+                    raise err(problem, row, None if _is_empty(cell) else cell)
                 values.append(value)
             out[col] = pd.Series(values, index=frame.index, dtype=object)
-        elif col in spec.ids or col in spec.required or col in spec.optional:
-            out[col] = pd.Series([None if _is_empty(c) else _text(c) for c in cells],
-                                 index=frame.index, dtype=object)
+        elif col in known:
+            values = []
+            for row, cell in cells.items():
+                value = None if _is_empty(cell) else _text(cell)
+                if value is not None:
+                    _check_text(value, {"file": str(file), "sheet": name, "row": row, "column": col},
+                                "the cell")
+                values.append(value)
+            out[col] = pd.Series(values, index=frame.index, dtype=object)
         else:
-            out[col] = _covariate(cells)
+            out[col] = _covariate(name, col, cells, file, notes)
+    formulas = sorted(r for (r, c) in raw.formulas_without_value if c not in known)
+    if formulas:
+        notes.append(f"sheet '{name}': row(s) {row_ranges(formulas)} hold formulas without a "
+                     "stored value in covariate columns; they read as empty (open and save the file "
+                     "in a spreadsheet program to store their values)")
     return pd.DataFrame(out, index=frame.index)
 
 
-def _covariate(cells: pd.Series) -> pd.Series:
-    """A covariate column: numbers if every non-empty cell is one, else text."""
-    present = [c for c in cells if not _is_empty(c)]
-    try:
-        [_number(c) for c in present]
-    except ValueError:
-        return pd.Series([None if _is_empty(c) else _text(c) for c in cells], index=cells.index,
-                         dtype=object)
-    return pd.Series([math.nan if _is_empty(c) else _number(c) for c in cells], index=cells.index,
-                     dtype=float)
+def _covariate(sheet: str, column: str, cells: pd.Series, file: Path, notes: list) -> pd.Series:
+    """A covariate column: numbers if every non-empty cell is one (a missing-value marker such
+    as ``NaN`` or ``n/a`` among numbers reads as empty), else text; either way with a note
+    naming the cells that decided it."""
+    present = {row: c for row, c in cells.items() if not _is_empty(c)}
+    numeric, text = {}, {}
+    for row, c in present.items():
+        try:
+            numeric[row] = _number(c)
+        except ValueError:
+            text[row] = c
+    for row, x in numeric.items():
+        if abs(x) > COVARIATE_LIMIT:
+            raise WorkbookError(f"a covariate number must lie within +-{COVARIATE_LIMIT:g}",
+                                file=str(file), sheet=sheet, row=row, column=column, value=present[row])
+    markers = {row: c for row, c in text.items() if isinstance(c, str) and is_missing_marker(c)}
+    if not text or (numeric and len(markers) == len(text)):
+        if markers:
+            notes.append(f"sheet '{sheet}', column '{column}': row(s) {row_ranges(markers)} "
+                         f"({', '.join(sorted({repr(m) for m in markers.values()}))}) read as missing numbers")
+        return pd.Series([numeric.get(row, math.nan) for row in cells.index], index=cells.index,
+                         dtype=float)
+    if numeric and text:
+        shown = ", ".join(f"row {r}: {one_line(text[r], limit=40)!r}" for r in list(text)[:3])
+        notes.append(f"sheet '{sheet}', column '{column}' is read as text, not numbers, because of "
+                     f"{len(text)} cell(s) ({shown}{', ...' if len(text) > 3 else ''})")
+    values, cleaned = [], []
+    for row in cells.index:
+        if row not in present:
+            values.append(None)
+            continue
+        value = _text(present[row])
+        if control_characters(value):
+            cleaned.append(row)
+            value = one_line(value, limit=rawsheets.MAX_CELL_CHARS)
+        values.append(value)
+    if cleaned:
+        notes.append(f"sheet '{sheet}', column '{column}': line breaks and control characters in "
+                     f"row(s) {row_ranges(cleaned)} read as spaces")
+    return pd.Series(values, index=cells.index, dtype=object)
 
 
 def _require_cells(name: str, frame: pd.DataFrame, columns, file: Path, rows=None):
@@ -512,7 +675,11 @@ def _required_columns(name: str, columns: list, file: Path) -> list:
     return required
 
 
-def _parse_meta(frame: pd.DataFrame, file: Path) -> dict:
+#: Meta values that name things and so reach exports, reports and the terminal verbatim.
+META_NAMES = ("material", "contact_material")
+
+
+def _parse_meta(frame: pd.DataFrame, file: Path, options: ReadOptions) -> dict:
     meta, seen = {}, {}
     for row in frame.index:
         key, cell = frame.at[row, "key"], frame.at[row, "value"]
@@ -520,11 +687,15 @@ def _parse_meta(frame: pd.DataFrame, file: Path) -> dict:
             raise WorkbookError("missing key", file=str(file), sheet="meta", row=row, column="key",
                                 value=None if _is_empty(cell) else cell)
         key = _text(key).lower()
+        _check_text(key, {"file": str(file), "sheet": "meta", "row": row, "column": "key"}, "the key")
         if key in seen:
             raise WorkbookError(f"duplicate key (first in row {seen[key]})", file=str(file),
                                 sheet="meta", row=row, column="key", value=key)
         seen[key] = row
         value = _text(cell) if key == "material" and not _is_empty(cell) else _meta_value(cell)
+        if key in META_NAMES and isinstance(value, str):
+            _check_text(value, {"file": str(file), "sheet": "meta", "row": row, "column": "value"},
+                        f"meta {key}")
 
         def bad(message):
             return WorkbookError(f"meta {key}: {message}", file=str(file), sheet="meta", row=row,
@@ -542,6 +713,10 @@ def _parse_meta(frame: pd.DataFrame, file: Path) -> dict:
                     raise bad("a Poisson's ratio must lie in (-1, 0.5)")
                 if key == "target_repose_deg" and not 0 < value < 90:
                     raise bad("angle must lie strictly between 0 and 90 degrees")
+                bounds = options.range_of(key)
+                if bounds is not None and not bounds[0] <= value <= bounds[1]:
+                    raise bad(f"outside the plausible range {bounds[0]:g} to {bounds[1]:g} "
+                              f"(docs/workbook.md; --range {key}=LO:HI sets another)")
         meta[key] = value
     if not isinstance(meta.get("material"), str) or not meta["material"]:
         raise WorkbookError("meta key 'material' is missing or empty", file=str(file), sheet="meta",
@@ -550,31 +725,35 @@ def _parse_meta(frame: pd.DataFrame, file: Path) -> dict:
     return meta
 
 
-def _read_attachment(kind: str, path: Path) -> pd.DataFrame:
+def _read_attachment(kind: str, path: Path, options: ReadOptions, notes: list) -> pd.DataFrame:
     """Parse a curve or track CSV; raises ValueError with a readable reason."""
     required, optional = ATTACHMENTS[kind]
     try:
-        raw = _read_csv(path)
-    except Exception as exc:
-        raise ValueError(f"cannot parse as CSV: {exc}") from None
-    try:
-        frame = _drop_empty_rows(_canonical_columns(raw, required + optional, path, kind))
+        raw = rawsheets.read_csv(path, sheet=kind, separator=options.csv_separator,
+                                 decimal=options.csv_decimal, max_bytes=options.max_file_bytes)
+        frame = _drop_empty_rows(_canonical_columns(raw.frame, required + optional, path, kind))
     except WorkbookError as exc:
         raise ValueError(str(exc)) from None
+    notes.extend(raw.notes)
     for col in required:
         if col not in frame.columns:
             raise ValueError(f"lacks column '{col}' (needs {', '.join(required)})")
     out = {}
     for col in required + tuple(c for c in optional if c in frame.columns):
+        bounds = options.range_of(f"track.{col}" if kind == "track" and col == "angle_deg" else col)
         values = []
         for row, cell in frame[col].items():
             try:
-                values.append(_number(cell))
+                x = _number(cell)
             except ValueError:
                 if _is_empty(cell) and col in optional:
                     values.append(math.nan)
                     continue
                 raise ValueError(f"data row {row}, column '{col}': not a number ({cell!r})") from None
+            if bounds is not None and not bounds[0] <= x <= bounds[1]:
+                raise ValueError(f"data row {row}, column '{col}': {x:g} is outside the plausible "
+                                 f"range {bounds[0]:g} to {bounds[1]:g} (--range sets another)")
+            values.append(x)
         out[col] = values
     table = pd.DataFrame(out, index=frame.index, dtype=float)
     if len(table) < 3:
@@ -582,37 +761,67 @@ def _read_attachment(kind: str, path: Path) -> pd.DataFrame:
     return table
 
 
-def _check_files(wb_root: Path, name: str, spec: SheetSpec, frame: pd.DataFrame, file: Path,
-                 files: dict, attachments: dict) -> None:
-    import cv2  # imported here: only needed when a workbook points to photos
+def _check_files(wb: dict, name: str, spec: SheetSpec, frame: pd.DataFrame, file: Path) -> None:
+    """Resolve, bound and read every file a sheet points to, before any is opened: a path
+    must lead (links followed) into the workbook's folder or a folder the user allowed."""
+    from demcal.measure.images import MAX_PHOTO_PIXELS, check_image
 
+    root, options = wb["root"], wb["options"]
     for column, kind in spec.files:
         if column not in frame:
             continue
+        first: dict = {}
         for row, rel in frame[column].items():
             if rel is None:
                 if column in spec.required:
                     raise WorkbookError("missing value", file=str(file), sheet=name, row=row, column=column)
                 continue
-            path = _resolve(wb_root, rel)
-            key = str(path)
 
             def err(message):
                 return WorkbookError(f"{kind} file {message}", file=str(file), sheet=name, row=row,
                                      column=column, value=rel)
 
+            path = _resolve(root, rel)
+            if _outside(path, root, options.allowed_folders):
+                raise err(f"lies outside the workbook's folder {root} ({path}): copy it into the "
+                          "folder, or allow its folder with --allow-folder")
+            if path in first:
+                raise err(f"is the same file as row {first[path]}'s")
+            first[path] = row
             if not path.is_file():
                 raise err(f"not found: {path}")
-            if key not in files:
-                if kind == "photo":
-                    if cv2.imread(str(path), cv2.IMREAD_UNCHANGED) is None:
-                        raise err(f"cannot be read as an image: {path}")
-                else:
-                    try:
-                        attachments[key] = _read_attachment(kind, path)
-                    except ValueError as exc:
-                        raise err(f"{path}: {exc}") from None
-                files[key] = sha256_file(path)
+            key = str(path)
+            if key in wb["files"]:
+                continue
+            if kind == "photo":
+                try:
+                    check_image(path, options.max_photo_pixels or MAX_PHOTO_PIXELS)
+                except (ValueError, OSError) as exc:
+                    raise err(f"{path}: {exc}") from None
+            else:
+                try:
+                    rawsheets.check_file_size(path, options.max_file_bytes)
+                    wb["attachments"][key] = _read_attachment(kind, path, options, wb["notes"])
+                except (ValueError, WorkbookError) as exc:
+                    raise err(f"{path}: {exc}") from None
+            wb["files"][key] = sha256_file(path)
+
+
+def _check_unique(name: str, frame: pd.DataFrame, file: Path) -> None:
+    """Refuse an id given twice, naming both rows (compression: a specimen once per axis)."""
+    keys = {"specimens": ("specimen_id",), "density": ("sample_id",), "drop": ("trial_id",),
+            "incline": ("trial_id",), "compression": ("specimen_id", "axis"),
+            "repose": ("photo_id",)}[name]
+    seen: dict = {}
+    for row in frame.index:
+        key = tuple(frame.at[row, k] for k in keys)
+        if any(k is None for k in key):
+            continue
+        if key in seen:
+            what = " on the same axis" if len(keys) > 1 else ""
+            raise WorkbookError(f"duplicate {keys[0]}{what}: row {seen[key]} has it too",
+                                file=str(file), sheet=name, row=row, column=keys[0], value=key[0])
+        seen[key] = row
 
 
 # ----------------------------------------------------------------------------------------------
@@ -632,7 +841,7 @@ def resolve_workbook(path) -> Path:
     return source
 
 
-def read_workbook(path) -> Workbook:
+def read_workbook(path, options: ReadOptions | None = None) -> Workbook:
     """Read and validate a lab workbook (``.xlsx`` or a folder of ``<sheet>.csv``).
 
     Parameters
@@ -640,6 +849,9 @@ def read_workbook(path) -> Workbook:
     path : str or Path
         The ``.xlsx`` file, the folder holding one CSV per sheet, or a folder holding one
         ``.xlsx`` (see :func:`resolve_workbook`).
+    options : ReadOptions, optional
+        CSV dialect, plausible ranges, extra folders and size limits (defaults: detected,
+        :data:`RANGES`, none, :mod:`measure.rawsheets`' limits).
 
     Returns
     -------
@@ -652,17 +864,30 @@ def read_workbook(path) -> Workbook:
     InputError
         If ``path`` does not exist or is neither an ``.xlsx`` file nor a folder.
     """
+    options = options or ReadOptions()
     source = resolve_workbook(path).absolute()  # absolute: provenance and audit work from any folder
     files: dict = {}
+    notes: list = []
     if source.is_dir():
-        root = source
-        csvs = {p.stem.strip(): p for p in sorted(source.glob("*.csv")) if p.is_file()}
+        root = source.resolve()
+        csvs = {}
+        for p in sorted(source.glob("*.csv")):
+            if not p.is_file():
+                continue
+            if _outside(p.resolve(), root, ()):
+                raise WorkbookError(f"the sheet is a link to {p.resolve()}, outside the workbook's "
+                                    "folder", file=str(p), sheet=p.stem)
+            _check_text(p.stem, {"file": str(p)}, "the sheet name")
+            csvs[p.stem.strip()] = p
         raws = None
     elif source.is_file():
         if source.suffix.lower() not in (".xlsx", ".xlsm"):
             raise InputError(f"workbook {source}: expected an .xlsx file or a folder of CSV files")
-        root = source.parent
-        raws = _raw_xlsx(source)
+        root = source.parent.resolve()
+        rawsheets.check_file_size(source, options.max_file_bytes)
+        raws = rawsheets.read_xlsx(source, max_unpacked_bytes=options.max_file_bytes)
+        for n in raws:
+            _check_text(n, {"file": str(source)}, "the sheet name")
         files[str(source)] = sha256_file(source)
         csvs = None
     else:
@@ -680,29 +905,37 @@ def read_workbook(path) -> Workbook:
             where = source if raws is not None else source / f"{required}.csv"
             raise WorkbookError("missing sheet", file=str(where), sheet=required)
 
+    def raw_sheet(original: str, name: str) -> RawSheet:
+        if raws is not None:
+            raw = raws[original]
+        else:
+            raw = rawsheets.read_csv(csvs[original], sheet=name, separator=options.csv_separator,
+                                     decimal=options.csv_decimal, max_bytes=options.max_file_bytes)
+            files[str(raw.file)] = sha256_file(raw.file)
+        notes.extend(raw.notes)
+        return raw
+
+    state = {"root": root, "options": options, "files": files, "attachments": {}, "notes": notes}
     sheets: dict = {}
-    attachments: dict = {}
     meta: dict = {}
     for key in [k for k in SHEETS if k in by_key]:
-        original = by_key[key]
-        file = source if raws is not None else csvs[original]
-        raw = raws[original] if raws is not None else _raw_csv(file, key)
-        if raws is None:
-            files[str(file)] = sha256_file(file)
+        raw = raw_sheet(by_key[key], key)
+        file = raw.file
         spec = SHEETS[key]
-        frame = _drop_empty_rows(_canonical_columns(raw, spec.required + spec.optional, file, key))
+        frame = _drop_empty_rows(_canonical_columns(raw.frame, spec.required + spec.optional, file, key))
         required = _required_columns(key, list(frame.columns), file)
         if key in REQUIRED_SHEETS and frame.empty:
             raise WorkbookError("the sheet has no data rows", file=str(file), sheet=key)
         if key == "meta":
-            meta = _parse_meta(frame, file)
+            meta = _parse_meta(frame, file, options)
             typed = pd.DataFrame({"key": [_text(k).lower() for k in frame["key"]],
                                   "value": [_meta_value(v) for v in frame["value"]]},
                                  index=frame.index, dtype=object)
         else:
-            typed = _typed_frame(key, spec, frame, file)
+            typed = _typed_frame(key, spec, raw, frame, file, options, notes)
             _row_rules(key, typed, file)
-            _check_files(root, key, spec, typed, file, files, attachments)
+            _check_unique(key, typed, file)
+            _check_files(state, key, spec, typed, file)
         optional = [c for c in spec.optional if c in typed.columns and c not in required]
         covariates = [c for c in typed.columns if c not in required and c not in optional]
         sheets[key] = Sheet(name=key, file=file, sha256=files[str(file)], frame=typed,
@@ -712,19 +945,17 @@ def read_workbook(path) -> Workbook:
     for key, original in by_key.items():
         if key in SHEETS:
             continue
-        file = source if raws is not None else csvs[original]
-        if raws is None and str(file) in files:
+        if raws is None and str(csvs[original].resolve()) in files:
             continue  # a curve or track CSV that sits beside the sheets
-        raw = raws[original] if raws is not None else _raw_csv(file, original)
-        if raws is None:
-            files[str(file)] = sha256_file(file)
-        frame = _drop_empty_rows(_canonical_columns(raw, (), file, original))
-        typed = pd.DataFrame({c: _covariate(frame[c]) for c in frame.columns}, index=frame.index)
-        sheets[original] = Sheet(name=original, file=file, sha256=files[str(file)], frame=typed,
-                                 required=[], optional=[], covariates=list(typed.columns))
+        raw = raw_sheet(original, original)
+        frame = _drop_empty_rows(_canonical_columns(raw.frame, (), raw.file, original))
+        typed = pd.DataFrame({c: _covariate(original, c, frame[c], raw.file, notes)
+                              for c in frame.columns}, index=frame.index)
+        sheets[original] = Sheet(name=original, file=raw.file, sha256=files[str(raw.file)],
+                                 frame=typed, required=[], optional=[], covariates=list(typed.columns))
         unknown.append(original)
     return Workbook(source=source, root=root, meta=meta, sheets=sheets, unknown_sheets=unknown,
-                    files=files, attachments=attachments)
+                    files=files, attachments=state["attachments"], notes=notes, options=options)
 
 
 def _as_frame(name: str, content) -> pd.DataFrame:

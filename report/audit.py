@@ -589,6 +589,7 @@ def rederive(out_dir) -> tuple[Campaign | None, list[str]]:
     """
     from demcal.analyse.campaign import CampaignConfig, derive_results
     from demcal.measure.pipeline import Measurement, measure_workbook
+    from demcal.measure.workbook import ReadOptions
 
     out = Path(out_dir)
     problems = []
@@ -598,7 +599,8 @@ def rederive(out_dir) -> tuple[Campaign | None, list[str]]:
     opts = stored_m.get("provenance", {}).get("options", {})
     kwargs = {k: opts[k] for k in ("outliers", "r2_min", "g") if k in opts}
     try:
-        measurement = measure_workbook(source, **kwargs)
+        # read as the campaign read it: the same CSV dialect, ranges, folders and limits
+        measurement = measure_workbook(source, reading=ReadOptions.from_dict(opts.get("reading")), **kwargs)
     except (DemcalError, OSError) as exc:
         return None, [f"the workbook {source} cannot be measured again: {exc}"]
     derived = None

@@ -19,6 +19,7 @@ import numpy as np
 
 from demcal.errors import InputError
 from demcal.jsonio import write_json
+from demcal.measure.cli import add_workbook_options, read_options
 
 RIG_NAMES = ("repose", "drop", "incline")
 #: Frames written by --vtk over a run (besides the last).
@@ -51,6 +52,7 @@ def register(subparsers) -> None:
     g.add_argument("--workbook", metavar="PATH",
                    help="take the carton, lift speed and fill count from this workbook's meta sheet")
     g.add_argument("--annotate", metavar="PNG", help="write the annotated side view of the heap")
+    add_workbook_options(p)
     g = p.add_argument_group("drop and incline rigs")
     g.add_argument("--height", type=float, default=400.0, metavar="MM",
                    help="drop: gap between the plate and the segment's lowest point at release [mm] "
@@ -127,7 +129,7 @@ def rig_options(args) -> tuple[dict, dict]:
         if args.workbook:
             from demcal.measure.workbook import read_workbook
             from demcal.simulate.rigs.repose import ReposeGeometry
-            wb = read_workbook(args.workbook)
+            wb = read_workbook(args.workbook, read_options(args))
             opts["geometry"] = ReposeGeometry.from_meta(wb.meta, file=str(wb.source))
             inputs.update(wb.files)
         return opts, inputs

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from demcal.errors import InputError
 from demcal.jsonio import write_json
+from demcal.measure.cli import add_workbook_options, read_options
 
 
 def _list(text: str, what: str) -> tuple:
@@ -54,6 +55,7 @@ def register(subparsers) -> None:
                    help="campaign folder only: recalibrate with each accepted extension (a whole campaign "
                         "each, in DIR/heap_gain/) and report what it changes in the calibrated parameters "
                         "and in the heap observables the calibration does not fit")
+    add_workbook_options(p)
     p.set_defaults(handler=critique_command)
 
 
@@ -76,7 +78,8 @@ def critique_command(args) -> int:
     result = run_critique(source, twins=not args.no_twins, rigs=_list(args.rigs, "--rigs"),
                           extensions=extensions, alpha=args.alpha, correction=args.correction,
                           store_dir=args.store, workers=args.workers, progress=args.progress,
-                          repose_seeds=args.repose_seeds, seed=args.seed, heap_gain=args.heap_gain)
+                          repose_seeds=args.repose_seeds, seed=args.seed, heap_gain=args.heap_gain,
+                          reading=read_options(args))
     doc = result.to_dict()
     written = []
     if args.json:

@@ -184,9 +184,10 @@ class Critique:
             raise InputError(f"{where}: not a critique of this layout ({type(exc).__name__}: {exc})") from None
 
 
-def load_source(source):
+def load_source(source, reading=None):
     """(measurement, workbook or None, results or None, campaign folder or None) of a workbook
-    path or a campaign folder (one holding ``results.json``)."""
+    path (read with ``reading``, a ``measure.workbook.ReadOptions``) or a campaign folder (one
+    holding ``results.json``; its workbook is read again as the campaign read it)."""
     from demcal.measure.pipeline import Measurement, measure_workbook
     from demcal.measure.workbook import read_workbook
 
@@ -200,11 +201,12 @@ def load_source(source):
         else:
             raise InputError(f"campaign {path}: neither measure.json nor a measurement in results.json")
         wb_path = measurement.workbook.get("source")
-        workbook = read_workbook(wb_path) if wb_path and Path(wb_path).exists() else None
+        workbook = (read_workbook(wb_path, measurement.read_options)
+                    if wb_path and Path(wb_path).exists() else None)
         return measurement, workbook, results, path
     if not path.exists():
         raise InputError(f"workbook or campaign folder not found: {path}")
-    workbook = read_workbook(path)
+    workbook = read_workbook(path, reading)
     return measure_workbook(workbook), workbook, None, None
 
 
@@ -215,7 +217,7 @@ def _fmt(x, d=3):
 def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EXTENSIONS,
                  alpha: float = DEFAULT_ALPHA, correction: str = "bh", store_dir=None, workers: int = 1,
                  progress: bool = False, repose_seeds: int = 0, seed: int = 0, heap_gain: bool = False,
-                 campaign_runner=None) -> Critique:
+                 campaign_runner=None, reading=None) -> Critique:
     """Critique the model calibrated from a workbook (see the module docstring).
 
     Parameters
@@ -247,6 +249,8 @@ def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EX
         settings (its worker count too), kept and resumable in ``DIR/heap_gain/<extension>``.
     campaign_runner : callable, optional
         The recalibrations' DEM runner (default ``analyse.campaign.campaign_runner``).
+    reading : measure.workbook.ReadOptions, optional
+        How to read a workbook ``source`` (a campaign's workbook is read as it was).
 
     Returns
     -------
@@ -257,7 +261,7 @@ def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EX
     unknown = sorted(set(rigs) - set(RIGS))
     if unknown:
         raise InputError(f"unknown rig(s) {unknown}; valid: {', '.join(RIGS)}")
-    measurement, workbook, results, campaign = load_source(source)
+    measurement, workbook, results, campaign = load_source(source, reading)
     if heap_gain and campaign is None:
         raise InputError(f"{source}: the heap-side gain recalibrates a campaign; give a campaign folder "
                          "(one holding results.json), not a workbook")

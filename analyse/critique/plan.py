@@ -369,14 +369,15 @@ def truth_from_measurement(measurement, workbook):
                          f"{exc}") from None
 
 
-def design_from_workbook(path, *, photos: str = "none") -> LabDesign:
-    """The design of a lab workbook and the truth of its measured values (see the module
-    docstring); pairs and surfaces the virtual lab cannot simulate are left out with a note."""
+def design_from_workbook(path, *, photos: str = "none", reading=None) -> LabDesign:
+    """The design of a lab workbook (read with ``reading``, a ``measure.workbook.ReadOptions``)
+    and the truth of its measured values (see the module docstring); pairs and surfaces the
+    virtual lab cannot simulate are left out with a note."""
     from demcal.measure.pipeline import measure_workbook
     from demcal.measure.workbook import read_workbook
     from demcal.simulate.truth_file import PAIRS, SURFACES, design_defaults
 
-    wb = read_workbook(path)
+    wb = read_workbook(path, reading)
     measurement = measure_workbook(wb)
     truth = truth_from_measurement(measurement, wb)
     design = dict(design_defaults(), photos=photos, trials_per_specimen=None)
@@ -438,8 +439,9 @@ def design_from_workbook(path, *, photos: str = "none") -> LabDesign:
                      notes=tuple(notes), inputs=dict(measurement.provenance.inputs))
 
 
-def read_design(source, *, photos: str = "none") -> LabDesign:
-    """:class:`LabDesign` of a truth file (``.yaml``, ``.yml``) or a lab workbook."""
+def read_design(source, *, photos: str = "none", reading=None) -> LabDesign:
+    """:class:`LabDesign` of a truth file (``.yaml``, ``.yml``) or a lab workbook (read with
+    ``reading``)."""
     if photos not in ("none", "analytic"):
         raise InputError(f"photos must be none or analytic for a plan, got {photos!r}")
     path = Path(source)
@@ -447,7 +449,7 @@ def read_design(source, *, photos: str = "none") -> LabDesign:
         raise InputError(f"workbook or truth file not found: {path}")
     if path.suffix.lower() in (".yaml", ".yml"):
         return design_from_truth_file(path, photos=photos)
-    return design_from_workbook(path, photos=photos)
+    return design_from_workbook(path, photos=photos, reading=reading)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -14,6 +14,7 @@ Clopper-Pearson 95 % interval.
 from __future__ import annotations
 
 from demcal.jsonio import write_json
+from demcal.measure.cli import add_workbook_options, read_options
 from demcal.text import one_line
 
 #: Longest note printed [characters].
@@ -44,6 +45,7 @@ def register(subparsers) -> None:
     p.add_argument("--correction", choices=("bh", "holm"), default="bh",
                    help="the critique's multiple-testing correction (%(default)s)")
     p.add_argument("--json", metavar="OUT", help="write the plan to this JSON file")
+    add_workbook_options(p)
     p.set_defaults(handler=run)
 
 
@@ -91,7 +93,7 @@ def run(args) -> int:
     mechanisms = _list(args.mechanisms, "--mechanisms")
     check_options(mechanisms=mechanisms, reps=args.reps, steps=args.steps, power=args.power, alpha=args.alpha,
                   correction=args.correction)
-    lab = read_design(args.source, photos=args.photos)
+    lab = read_design(args.source, photos=args.photos, reading=read_options(args))
     print(f"plan of {lab.kind} {lab.source}: {args.reps} virtual workbooks per size, seed {args.seed}, "
           f"critique alpha {args.alpha:g} ({args.correction})")
     print(f"design: {_design_text(lab.design)}")

@@ -24,7 +24,7 @@ import pytest
 from demcal.errors import WorkbookError
 from demcal.measure.images import MAX_PHOTO_PIXELS, check_image, image_size, read_image
 from demcal.measure.pipeline import measure_workbook
-from demcal.measure.workbook import read_workbook
+from demcal.measure.workbook import ReadOptions, read_workbook
 
 ROOT = Path(__file__).resolve().parents[2]
 HEAP = ROOT / "data" / "astragalus" / "photos" / "heap_1.jpg"       # 1200 x 900 px
@@ -259,18 +259,15 @@ def heap_campaign(campaign):
 
 
 def test_workbook_photo_over_the_limit_is_refused_naming_its_row(heap_campaign):
-    wb = read_workbook(heap_campaign)
     with pytest.raises(WorkbookError) as info:
-        measure_workbook(wb, max_photo_pixels=HEAP_PIXELS - 1)
+        read_workbook(heap_campaign, ReadOptions(max_photo_pixels=HEAP_PIXELS - 1))
     assert (info.value.sheet, info.value.row, info.value.column) == ("repose", 1, "file")
     assert "1200 x 900 px" in str(info.value) and "1,079,999" in str(info.value)
-    m = measure_workbook(wb, max_photo_pixels=HEAP_PIXELS)
+    m = measure_workbook(heap_campaign, reading=ReadOptions(max_photo_pixels=HEAP_PIXELS))
     assert m.quantities["repose_angle_deg"].n == 2
+    assert m.provenance.options["reading"]["max_photo_pixels"] == HEAP_PIXELS
 
 
-@pytest.mark.xfail(strict=True, reason="measure.workbook._check_files still decodes every photo "
-                                       "(cv2.imread) to check it; reading only its header "
-                                       "(measure.images.check_image) makes this pass")
 def test_workbook_photos_are_decoded_once(heap_campaign, monkeypatch):
     from PIL import ImageFile
 

@@ -14,7 +14,7 @@ from demcal.errors import InputError, WorkbookError
 from demcal.jsonio import read_json, write_json
 from demcal.measure.images import MAX_PHOTO_PIXELS
 from demcal.measure.pipeline import Measurement, measure_workbook
-from demcal.measure.workbook import read_workbook
+from demcal.measure.workbook import ReadOptions, read_workbook
 from tests.measure.conftest import curve_frame, stub_photo_estimator
 
 T = math.tan
@@ -22,9 +22,9 @@ R = math.radians
 PHOTOS = {"p1.png": 34.0, "p2.png": 36.0}
 
 
-def run(path, **kw):
+def run(path, reading=None, **kw):
     kw.setdefault("photo_estimator", stub_photo_estimator(PHOTOS))
-    return measure_workbook(read_workbook(path), **kw)
+    return measure_workbook(read_workbook(path, reading), **kw)
 
 
 def test_hand_values(campaign):
@@ -177,8 +177,8 @@ def test_photo_estimator_gets_side_annotation_path_and_pixel_limit(campaign, tmp
     assert stub.calls[0]["annotate_to"] == tmp_path / "ann" / "P1_annotated.png"
     assert [c["max_pixels"] for c in stub.calls] == [MAX_PHOTO_PIXELS] * 2
     stub = stub_photo_estimator(PHOTOS)
-    run(campaign(), photo_estimator=stub, max_photo_pixels=1234)
-    assert [c["max_pixels"] for c in stub.calls] == [1234] * 2
+    run(campaign(), ReadOptions(max_photo_pixels=12_345), photo_estimator=stub)
+    assert [c["max_pixels"] for c in stub.calls] == [12_345] * 2
 
 
 def test_annotated_photo_names_are_unique(campaign, tmp_path):

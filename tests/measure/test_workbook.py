@@ -377,7 +377,7 @@ def test_photo_unreadable(campaign, fmt):
     root = path.parent if fmt == "xlsx" else path
     (root / "photos" / "p2.png").write_bytes(b"not a png at all")
     err = expect_error(path, fmt, "repose", 2, "file", "photos/p2.png")
-    assert "cannot be read as an image" in str(err)
+    assert "not a readable image file" in str(err)
 
 
 @pytest.mark.parametrize("content,reason", [
