@@ -141,7 +141,7 @@ class CampaignConfig:
         screening flags fewer or more, the largest effects fill up or are kept (and it is said).
     model_extensions : dict
         Engine-hook fields of ``DEMParameters`` (``simulate.extensions.ENGINE_HOOKS``) set on
-        every run of the campaign, e.g. ``{"multi_contact_damping": True}``: the model extended
+        every run of the campaign, e.g. ``{"contact_effective_mass": True}``: the model extended
         (the critique's heap-side gain recalibrates this way). Empty: the default model.
     """
 
@@ -212,12 +212,17 @@ class CampaignConfig:
     def from_dict(cls, d: dict) -> "CampaignConfig":
         """Rebuild the settings stored in ``results.json`` (``results["config"]``). Settings
         stored before the plausible workflow existed name no workflow: they were design-expert
-        campaigns; settings stored before the refinement rounds existed had none."""
+        campaigns; settings stored before the refinement rounds existed had none. Model
+        extensions stored under a former field name read as the field it became."""
+        from demcal.simulate.params import current_names
+
         names = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - names)
         if unknown:
             raise InputError(f"unknown campaign settings {unknown}; valid: {sorted(names)}")
         d = {"workflow": "design-expert", "refine_rounds": 0, **d}
+        if "model_extensions" in d:
+            d["model_extensions"] = current_names(d["model_extensions"])
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
 

@@ -56,7 +56,7 @@ def register(subparsers) -> None:
                           "1 deg and the lab's heap-to-heap sd)")
     cal.add_argument("--set", dest="sets", action="append", default=[], metavar="NAME=VALUE",
                      help="switch a model extension on for every run (repeatable), e.g. --set "
-                          "multi_contact_damping=true; only the extensions' parameters "
+                          "contact_effective_mass=true; only the extensions' parameters "
                           "(simulate.extensions.ENGINE_HOOKS)")
     add_workbook_options(cal)
     cal.add_argument("--no-report", action="store_true",
@@ -68,8 +68,9 @@ def extension_settings(items) -> dict:
     """``--set NAME=VALUE`` items as typed ``DEMParameters`` values (``CampaignConfig``
     checks that each names an extension's parameter)."""
     from demcal.simulate.cli import parameters, parse_sets
+    from demcal.simulate.params import current_names
 
-    names = parse_sets(items)
+    names = current_names(parse_sets(items))
     params = parameters(items)
     return {name: getattr(params, name) for name in names}
 

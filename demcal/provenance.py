@@ -17,7 +17,8 @@ from demcal.jsonio import to_jsonable
 #: Revision of what the DEM computes. Raise it with any change that alters the result of a run
 #: with unchanged inputs: it is part of every run-store key, so a store or cache never serves a
 #: record computed by other physics (``run_key``). Revision 2: shared normal
-#: damping (``multi_contact_damping``) damps the effective mass at each contact.
+#: damping (``contact_effective_mass``, then named ``multi_contact_damping``) damps the
+#: effective mass at each contact.
 MODEL_VERSION = 2
 
 

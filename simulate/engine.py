@@ -57,8 +57,10 @@ Engine hooks (off by default, switched by the material table, so that ``Material
 from_parameters`` carries them from ``DEMParameters``; ``simulate.extensions.ENGINE_HOOKS``):
 a pair restitution that depends on the impact speed (``set_pair(restitution_exponent=n,
 restitution_v_ref=v)``: the dashpots of a contact use e(v) at its first-touch approach speed,
-kept in its history), and the spring-dashpot rolling model (``MaterialTable(rolling_model=
-"epsd")``, its spring torque kept in the history). The history rows are as wide as the hooks
+kept in its history), the spring-dashpot rolling model (``MaterialTable(rolling_model=
+"epsd")``, its spring torque kept in the history), and normal dashpots that damp the body's
+effective mass at each contact (``MaterialTable(contact_effective_mass=True)``, from the
+contacts of each step). The history rows are as wide as the hooks
 need, and carried across list rebuilds whole; with every hook off a contact behaves as the
 plain Hertz-Mindlin law with constant restitution and constant-torque rolling. Several clump templates per factory (a size distribution) are a
 ``ParticleFactory`` option.
@@ -141,7 +143,7 @@ def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw):
 
 
 @kernel
-def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, share_mass, n_bodies, bx, bv, bw, bR,
+def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass, n_bodies, bx, bv, bw, bR,
                     bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph,
                     ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
                     e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min):
@@ -157,17 +159,17 @@ def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, share_mass, n
     opposite pair, capped over the step ``dt`` for both bodies alike; wall contacts sum theirs
     into ``brv``, ``brm`` and ``brn`` (normals weighted by magnitude) for the kick's static stop.
 
-    ``share_mass`` (the ``multi_contact_damping`` extension) gives the normal dashpot of each
-    contact the smaller of the body's mass over its number of touching contacts this step
+    ``effective_mass`` (the ``contact_effective_mass`` extension) gives the normal dashpot of
+    each contact the smaller of the body's mass over its number of touching contacts this step
     (counted into ``bcount``) and the rigid-body effective mass at the contact
     (``damping_inverse_mass``): n simultaneous contacts of one body then damp like one contact
     of n times the stiffness, and one off-centre contact damps the mass it actually moves,
-    instead of each damping with the whole mass (Kodam et al. 2010).
+    instead of each damping with the whole mass (Kodam et al. 2010; Stronge 2000, ch. 3).
     """
     pw = ph.shape[1]
     ww = wh.shape[1]
     store = hist_dt > 0.0
-    if share_mass:
+    if effective_mass:
         _count_contacts(n_bodies, bcount, sbody, sx, srad, ppi, pj, ws, wk, wkind, worig, wnorm,
                         wu, wv, whalf)
     for b in range(n_bodies):
@@ -242,7 +244,7 @@ def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, share_mass, n
         r_star = ri * rj / rsum
         m_star = 1.0 / (binvm[bi] + binvm[bj])
         m_damp = m_star
-        if share_mass:
+        if effective_mass:
             m_damp = 1.0 / (damping_inverse_mass(bR, binvi, binvm, bcount, bi, aix, aiy, aiz, nx, ny, nz)
                             + damping_inverse_mass(bR, binvi, binvm, bcount, bj, ajx, ajy, ajz, nx, ny, nz))
         cd = damp[mi, mj]
@@ -335,7 +337,7 @@ def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, share_mass, n
         mk = wmat[k]
         m_star = 1.0 / binvm[bi]
         m_damp = m_star
-        if share_mass:
+        if effective_mass:
             m_damp = 1.0 / damping_inverse_mass(bR, binvi, binvm, bcount, bi, aix, aiy, aiz, nx, ny, nz)
         cd = damp[mi, mk]
         if e_exp[mi, mk] != 0.0:
@@ -407,7 +409,7 @@ def _wall_velocities(t, wvel, wwin, wvel_now):
 
 
 @kernel
-def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r, share_mass,
+def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r, effective_mass,
              need_rebuild, need_forces,
              n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, bactive,
              n_spheres, sbody, soff, srad, sx, sx0, sxw,
@@ -464,7 +466,7 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
         need_rebuild = False
         # the first evaluation of a fresh state must not advance the contact history
         hist_dt = dt if step >= 0 else 0.0
-        _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, share_mass, n_bodies, bx, bv, bw,
+        _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass, n_bodies, bx, bv, bw,
                         bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj,
                         ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
                         e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min)
@@ -919,7 +921,7 @@ class Simulation:
         g = self._gravity
         out = _advance(
             n_steps, self.time, self.dt, g[0], g[1], g[2], self.skin, self._lever,
-            pt.rolling_model, pt.rolling_damping_ratio, pt.multi_contact_damping, self._need_rebuild,
+            pt.rolling_model, pt.rolling_damping_ratio, pt.contact_effective_mass, self._need_rebuild,
             self._need_forces,
             self.n_bodies, B["bx"], B["bv"], B["bq"], B["bL"], B["bw"], B["bR"], B["bf"], B["bt"],
             B["brm"], B["brv"], B["brn"], B["binvm"], B["binvi"], B["bmat"], B["bcount"], B["bactive"],

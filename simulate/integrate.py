@@ -22,6 +22,7 @@ References
 Allen, M. P., Tildesley, D. J. (2017). Computer Simulation of Liquids, 2nd ed., sec. 3.3.
 Omelyan, I. P. (1998). On the numerical integration of motion for rigid polyatomics: the
 modified quaternion approach. Comput. Phys. 12, 97-103.
+Stronge, W. J. (2000). Impact Mechanics. Cambridge University Press.
 """
 
 from __future__ import annotations
@@ -69,13 +70,14 @@ def apply_inverse_inertia(R, b, inv_i, ax, ay, az):
 @evaluator
 def damping_inverse_mass(R, inv_i, inv_m, count, b, ax, ay, az, nx, ny, nz):
     """Inverse of the mass a normal dashpot of body ``b`` damps with, when the body shares it
-    among its ``count[b]`` touching contacts (``multi_contact_damping``): the larger of
+    among its ``count[b]`` touching contacts (``contact_effective_mass``): the larger of
     count / m and the rigid-body inverse mass at the contact along ``n``,
-    1/m + (a x n) . I^-1 (a x n), for the lever ``a`` from the centre of mass.
+    1/m + (a x n) . I^-1 (a x n), for the lever ``a`` from the centre of mass [1/kg].
 
     One contact alone then damps its own effective mass, so an off-centre impact rebounds at
-    the contact restitution as rigid-body impact theory has it; n equal contacts of a flat
-    landing (levers cancelling) damp m / n each, i.e. as one contact of n times the stiffness.
+    the contact restitution as rigid-body impact theory has it (Stronge 2000, ch. 3); n equal
+    contacts of a flat landing (levers cancelling) damp m / n each, i.e. as one contact of n
+    times the stiffness.
     """
     cx = ay * nz - az * ny
     cy = az * nx - ax * nz

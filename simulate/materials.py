@@ -127,9 +127,9 @@ class PairArrays:
         Kernel index of the rolling model (``simulate.contact.rolling.ROLLING_MODELS``).
     rolling_damping_ratio : float
         eta_r of the spring-dashpot rolling model [-].
-    multi_contact_damping : bool
-        Share a body's mass among its simultaneous contacts in the normal dashpots
-        (``simulate.extensions``, ``multi_contact_damping``).
+    contact_effective_mass : bool
+        Normal dashpots damp the body's effective mass at each contact, shared among its
+        simultaneous contacts (``simulate.extensions``, ``contact_effective_mass``).
     """
 
     e_star: np.ndarray
@@ -143,7 +143,7 @@ class PairArrays:
     v_min: np.ndarray
     rolling_model: int = 0
     rolling_damping_ratio: float = EPSD_DAMPING_RATIO
-    multi_contact_damping: bool = False
+    contact_effective_mass: bool = False
 
     @property
     def velocity_restitution(self) -> bool:
@@ -162,20 +162,21 @@ class MaterialTable:
         ``"epsd"`` (``simulate.contact.rolling``).
     rolling_damping_ratio : float
         eta_r of the ``"epsd"`` model [-] (default 0.3, Ai et al. 2011).
-    multi_contact_damping : bool
-        Normal dashpots of a body's simultaneous contacts share its mass (default False:
-        each damps with the whole mass, as LIGGGHTS' multisphere does).
+    contact_effective_mass : bool
+        Normal dashpots damp the body's effective mass at each contact, shared among its
+        simultaneous contacts (default False: each damps with the whole mass, as LIGGGHTS'
+        multisphere does).
     """
 
     def __init__(self, rolling_model: str = "constant_torque",
-                 rolling_damping_ratio: float = EPSD_DAMPING_RATIO, multi_contact_damping: bool = False):
+                 rolling_damping_ratio: float = EPSD_DAMPING_RATIO, contact_effective_mass: bool = False):
         rolling_model_index(rolling_model)
         if not (isinstance(rolling_damping_ratio, (int, float)) and math.isfinite(rolling_damping_ratio)
                 and rolling_damping_ratio >= 0.0):
             raise InputError(f"rolling_damping_ratio must be a finite number >= 0, got {rolling_damping_ratio!r}")
         self.rolling_model = rolling_model
         self.rolling_damping_ratio = float(rolling_damping_ratio)
-        self.multi_contact_damping = bool(multi_contact_damping)
+        self.contact_effective_mass = bool(contact_effective_mass)
         self._materials: dict[str, Material] = {}
         self._pairs: dict[frozenset, PairContact] = {}
 
@@ -268,7 +269,7 @@ class MaterialTable:
                     out["v_min"][i, j] = p.restitution_v_min
         return PairArrays(**out, rolling_model=rolling_model_index(self.rolling_model),
                           rolling_damping_ratio=self.rolling_damping_ratio,
-                          multi_contact_damping=self.multi_contact_damping)
+                          contact_effective_mass=self.contact_effective_mass)
 
     def has_pair(self, a: str, b: str) -> bool:
         return frozenset((a, b)) in self._pairs
@@ -278,14 +279,14 @@ class MaterialTable:
                 "pairs": [{"a": sorted(k)[0], "b": sorted(k)[-1], **p.to_dict()}
                           for k, p in self._pairs.items()],
                 "rolling_model": self.rolling_model, "rolling_damping_ratio": self.rolling_damping_ratio,
-                "multi_contact_damping": self.multi_contact_damping}
+                "contact_effective_mass": self.contact_effective_mass}
 
     @classmethod
     def from_parameters(cls, params, particle: str = "particle", wall: str = "steel") -> "MaterialTable":
         """The two-material table (particle, wall) of a ``DEMParameters``, with its restitution
         laws and rolling model."""
         table = cls(rolling_model=params.rolling_model, rolling_damping_ratio=params.rolling_damping_ratio,
-                    multi_contact_damping=params.multi_contact_damping)
+                    contact_effective_mass=params.contact_effective_mass)
         table.add_material(particle, density=params.particle_density_kg_m3,
                            poisson_ratio=params.poisson_ratio, shear_modulus=params.shear_modulus_pa)
         table.add_material(wall, density=params.wall_density_kg_m3,

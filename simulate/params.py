@@ -8,10 +8,13 @@ Defaults (docs/design.md, "Paper defaults"): the paper's measured means for the 
 its segment geometry and densities; the particle shear modulus (1e7 Pa) is not in the paper and
 is demcal's stated default.
 
-Three engine extensions (``simulate.extensions.ENGINE_HOOKS``) are switched by fields here and
+Four engine extensions (``simulate.extensions.ENGINE_HOOKS``) are switched by fields here and
 so recorded with every run; all are off by default: a velocity-dependent restitution
 (``e_pp_exponent``, ``e_pw_exponent`` != 0), the spring-dashpot rolling model
-(``rolling_model="epsd"``) and segments drawn from a size distribution (``segment_sizes``).
+(``rolling_model="epsd"``), segments drawn from a size distribution (``segment_sizes``) and
+dashpots that damp the effective mass at each contact (``contact_effective_mass``). A field
+renamed since (``RENAMED``) is still read under its former name, so that stored results and
+truth files keep their meaning.
 """
 
 from __future__ import annotations
@@ -82,10 +85,13 @@ class DEMParameters:
         the repose scene draws each segment from them (equal weight per pair, duplicates
         counting twice; ``simulate.extensions.SizeDistribution``) instead of
         ``segment_length_m`` x ``segment_diameter_m``. Default None (one size).
-    multi_contact_damping : bool
-        Engine hook (``simulate.extensions``): the normal dashpots of a body's simultaneous
-        contacts share its mass, so that a segment landing flat on several spheres damps like
-        one contact. Default False (each contact damps with the whole mass, as LIGGGHTS).
+    contact_effective_mass : bool
+        Engine hook (``simulate.extensions``): each normal dashpot damps the body's effective
+        mass at its contact, rotation included, shared among the body's simultaneous contacts
+        (``simulate.integrate.damping_inverse_mass``), so that a segment landing flat on several
+        spheres damps like one contact and one striking with an end sphere rebounds as a rigid
+        body. Default False (each contact damps with the whole mass, as LIGGGHTS and EDEM).
+        Formerly ``multi_contact_damping``.
     """
 
     poisson_ratio: float = 0.25
@@ -115,7 +121,7 @@ class DEMParameters:
     rolling_model: str = "constant_torque"
     rolling_damping_ratio: float = EPSD_DAMPING_RATIO
     segment_sizes: tuple | None = None
-    multi_contact_damping: bool = False
+    contact_effective_mass: bool = False
 
     def __post_init__(self):
         for name in ("e_pp", "e_pw"):
@@ -167,9 +173,10 @@ class DEMParameters:
             raise InputError(f"rolling_damping_ratio must be a finite number >= 0, got {value!r}")
         if self.segment_sizes is not None:
             object.__setattr__(self, "segment_sizes", _size_pairs(self.segment_sizes))
-        if self.multi_contact_damping not in (True, False, 0, 1):
-            raise InputError(f"multi_contact_damping must be true or false (1 or 0), got {self.multi_contact_damping!r}")
-        object.__setattr__(self, "multi_contact_damping", bool(self.multi_contact_damping))
+        if self.contact_effective_mass not in (True, False, 0, 1):
+            raise InputError(f"contact_effective_mass must be true or false (1 or 0), "
+                             f"got {self.contact_effective_mass!r}")
+        object.__setattr__(self, "contact_effective_mass", bool(self.contact_effective_mass))
 
     @classmethod
     def names(cls) -> tuple[str, ...]:
@@ -177,7 +184,9 @@ class DEMParameters:
         return tuple(f.name for f in fields(cls))
 
     def with_(self, **changes) -> "DEMParameters":
-        """A copy with ``changes`` applied; unknown names raise ``InputError`` listing the valid ones."""
+        """A copy with ``changes`` applied; unknown names raise ``InputError`` listing the valid ones.
+        A former name (``RENAMED``) sets the field it became."""
+        changes = current_names(changes)
         unknown = sorted(set(changes) - set(self.names()))
         if unknown:
             raise InputError(f"unknown DEM parameter(s) {', '.join(map(repr, unknown))}; "
@@ -186,15 +195,35 @@ class DEMParameters:
 
     @classmethod
     def from_names(cls, values: dict) -> "DEMParameters":
-        """Paper defaults with ``values`` (name -> value, values may be strings) applied."""
+        """Paper defaults with ``values`` (name -> value, values may be strings, former names
+        read as the fields they became) applied."""
         return cls().with_(**dict(values))
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
-        if not self.multi_contact_damping:
+        if not self.contact_effective_mass:
             # off is the model every stored run was made with: leaving it out keeps their keys
-            del d["multi_contact_damping"]
+            del d["contact_effective_mass"]
         return d
+
+
+#: Former field names -> current ones. Results files, critique files and truth files written
+#: before a rename name the field the old way (``multi_contact_damping`` was switched on by
+#: ``--set`` and stored with the calibrated parameters and the campaign's model extensions);
+#: :func:`current_names` reads them.
+RENAMED = {"multi_contact_damping": "contact_effective_mass"}
+
+
+def current_names(values: dict) -> dict:
+    """``values`` (field name -> value) with former names (``RENAMED``) replaced by the current
+    ones; a field given under both names is refused."""
+    out = dict(values)
+    for old, new in RENAMED.items():
+        if old in out:
+            if new in out:
+                raise InputError(f"DEM parameter {new} is given twice, also under its former name {old}")
+            out[new] = out.pop(old)
+    return out
 
 
 def _size_pairs(value) -> tuple:

@@ -562,7 +562,7 @@ def _drops(truth: Truth, rng, effects, specimens, *, pairs, heights_mm, n_drop, 
         ratio = np.ones(n)
         for h in np.unique(rows["drop_height_mm"]) if hand else ():
             sel = rows["drop_height_mm"].to_numpy() == h
-            ratio[sel] = drop_twin_ratio(truth.params.with_(multi_contact_damping=True), pair, h * 1e-3,
+            ratio[sel] = drop_twin_ratio(truth.params.with_(contact_effective_mass=True), pair, h * 1e-3,
                                          rows.loc[sel, "orientation_deg"], cache_dir=cache_dir)
         apparent = contact * ratio
         # expected sizes, on the noise-free apparent restitution

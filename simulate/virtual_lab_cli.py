@@ -59,7 +59,7 @@ def _apparent_ratio(truth, effects, pair: str, heights_mm) -> float:
         return 1.0
     lowest = min(e.size for e in hand)
     angles = np.linspace(lowest, 90.0, 181)
-    params = truth.params.with_(multi_contact_damping=True)   # as the virtual lab's drops
+    params = truth.params.with_(contact_effective_mass=True)   # as the virtual lab's drops
     return float(np.mean([drop_twin_ratio(params, pair, h * 1e-3, angles).mean() for h in heights_mm]))
 
 

@@ -3,10 +3,11 @@
 The lab's sqrt(h2/h1) and the drop twin's apparent restitution at the lab's heights and
 orientations differ for three reasons, which the twin itself separates:
 
-- ``multi_contact_damping``: a segment landing on several spheres at once damps each contact
-  with the whole body mass (the glued-sphere damping of Kodam et al. 2010); the part of the
-  twin's deficit that goes away when the dashpots share the mass
-  (``simulate.extensions``, ``multi_contact_damping``): twin(on) - twin(off);
+- ``contact_effective_mass``: each contact's dashpot damps the whole body mass where the
+  contact moves only the body's effective mass there (a segment landing on several spheres at
+  once, the glued-sphere damping of Kodam et al. 2010, or striking with one end sphere); the
+  part of the twin's deficit that goes away when the dashpots damp the effective mass at each
+  contact (``simulate.extensions``, ``contact_effective_mass``): twin(on) - twin(off);
 - ``orientation_rotation``: a rigid segment turns part of its energy into rotation; the part
   left with the damping corrected: e_contact - twin(on);
 - the contact restitution itself: measured - e_contact (what a recalibration would move).
@@ -14,7 +15,7 @@ orientations differ for three reasons, which the twin itself separates:
 The three parts add up to measured - twin(off). Each part's interval is a percentile bootstrap
 over the trials (the same resample for every part); a cause is ``found`` when its part's
 interval excludes 0 and the part reaches the practical threshold of restitution (0.03),
-``ruled_out`` otherwise. ``multi_contact_damping`` also needs its signature: a flat landing
+``ruled_out`` otherwise. ``contact_effective_mass`` also needs its signature: a flat landing
 (long axis horizontal, no rotation) of the twin rebounds below the contact restitution by more
 than that threshold.
 
@@ -58,7 +59,7 @@ class ModelFinding:
     Attributes
     ----------
     mechanism : str
-        Catalogue id (``multi_contact_damping``, ``orientation_rotation``).
+        Catalogue id (``contact_effective_mass``, ``orientation_rotation``).
     verdict : str
         ``found``, ``ruled_out`` or ``not_testable``.
     observable : str
@@ -135,7 +136,7 @@ def _bootstrap_parts(measured, off, on, contact: float, rng) -> dict:
 
 
 def attribute_drop_discrepancy(runner, params, pair: str, state: dict, rng) -> tuple[list, list]:
-    """Model findings of one drop pair and the gain of ``multi_contact_damping`` on held-out
+    """Model findings of one drop pair and the gain of ``contact_effective_mass`` on held-out
     flat drops (see the module docstring).
 
     Parameters
@@ -156,9 +157,9 @@ def attribute_drop_discrepancy(runner, params, pair: str, state: dict, rng) -> t
     quantity = f"restitution.{pair}"
     observable = f"{quantity} (drop twin, apparent sqrt(h2/h1))"
     rig_pair, trials, e_c = state["rig_pair"], state["trials"], state["contact"]
-    on_params = params.with_(multi_contact_damping=True)
+    on_params = params.with_(contact_effective_mass=True)
     twins_on = {t.row: t for t in run_drop_twins(runner, on_params, trials, rig_pair, quantity=quantity,
-                                                 desc=f"drop twins, shared damping ({pair})")}
+                                                 desc=f"drop twins, contact effective mass ({pair})")}
     state["twins_on"] = twins_on
     rows = [r for r in state["twins"] if math.isfinite(state["twins"][r].simulated)
             and math.isfinite(twins_on[r].simulated)]
@@ -166,7 +167,7 @@ def attribute_drop_discrepancy(runner, params, pair: str, state: dict, rng) -> t
     if len(rows) < 2:
         why = "fewer than 2 drops the twin could measure"
         return [ModelFinding(m, "not_testable", observable, evidence=why)
-                for m in ("multi_contact_damping", "orientation_rotation")], []
+                for m in ("contact_effective_mass", "orientation_rotation")], []
     measured = [state["twins"][r].measured for r in rows]
     off = [state["twins"][r].simulated for r in rows]
     on = [twins_on[r].simulated for r in rows]
@@ -193,17 +194,17 @@ def attribute_drop_discrepancy(runner, params, pair: str, state: dict, rng) -> t
     signature = e_c - flat_off > bar
     damping_found = signature and judged("damping")
     findings = [
-        ModelFinding("multi_contact_damping", "found" if damping_found else "ruled_out",
+        ModelFinding("contact_effective_mass", "found" if damping_found else "ruled_out",
                      share=share(p["damping"]), part=p["damping"], part_ci95=ci["damping"],
                      evidence=(f"landing flat the twin rebounds at {_fmt(flat_off)} with contact {state['parameter']} "
-                               f"= {_fmt(e_c)} ({_fmt(flat_on)} with the dashpots sharing the mass); at the lab's "
-                               f"drops the shared damping raises the twin from {_fmt(np.mean(off))} to "
+                               f"= {_fmt(e_c)} ({_fmt(flat_on)} with the contact effective mass); at the lab's "
+                               f"drops the effective mass raises the twin from {_fmt(np.mean(off))} to "
                                f"{_fmt(np.mean(on))}: {_fmt(p['damping'])} [{_fmt(ci['damping'][0])}, "
                                f"{_fmt(ci['damping'][1])}] of the discrepancy {_fmt(total)}"
                                + ("" if signature else "; the flat landing shows no overdamping")), **common),
         ModelFinding("orientation_rotation", "found" if judged("rotation") else "ruled_out",
                      share=share(p["rotation"]), part=p["rotation"], part_ci95=ci["rotation"],
-                     evidence=(f"with the damping shared, the twin's apparent restitution {_fmt(np.mean(on))} lies "
+                     evidence=(f"with the effective mass damped, the twin's apparent restitution {_fmt(np.mean(on))} lies "
                                f"{_fmt(p['rotation'])} [{_fmt(ci['rotation'][0])}, {_fmt(ci['rotation'][1])}] "
                                f"below its contact restitution {_fmt(e_c)}: energy into rotation; the rest, "
                                f"measured minus contact restitution, is {_fmt(p['contact'])} "
@@ -219,7 +220,7 @@ def attribute_drop_discrepancy(runner, params, pair: str, state: dict, rng) -> t
 
 def _damping_gain(runner, params, on_params, pair: str, state: dict, rng):
     """|mean residual| of the held-out drops logged near flat (all drops when too few are),
-    before (the model under critique) and after (shared damping, the contact restitution taken
+    before (the model under critique) and after (contact effective mass, the contact restitution taken
     as the mean sqrt(h2/h1) of the other half: two-fold cross-fit)."""
     quantity = f"restitution.{pair}"
     trials = state["trials"]
@@ -234,7 +235,7 @@ def _damping_gain(runner, params, on_params, pair: str, state: dict, rng):
         e_train = float(np.mean([t[1] for t in train]))
         fitted.append(e_train)
         twins = run_drop_twins(runner, on_params.with_(**{param: min(max(e_train, 1e-3), 1.0)}), test,
-                               state["rig_pair"], quantity=quantity, desc=f"held-out drops, shared damping ({pair})")
+                               state["rig_pair"], quantity=quantity, desc=f"held-out drops, contact effective mass ({pair})")
         for t in twins:
             if math.isfinite(t.simulated) and math.isfinite(state["twins"][t.row].simulated):
                 before.append(t.measured - state["twins"][t.row].simulated)
@@ -245,10 +246,10 @@ def _damping_gain(runner, params, on_params, pair: str, state: dict, rng):
     u = float(stats.t.ppf(0.975, len(after) - 1)) * float(np.std(after, ddof=1)) / math.sqrt(len(after))
     note = (f"held-out discrepancy with the extension {_fmt(d)} +- {_fmt(u)} (95 %): "
             + ("inside its uncertainty" if abs(d) <= u else "beyond its uncertainty"))
-    return _gain("multi_contact_damping", "multi_contact_damping", "abs_mean_residual", quantity,
+    return _gain("contact_effective_mass", "contact_effective_mass", "abs_mean_residual", quantity,
                  f"{len(before)} {where}, each judged with the contact restitution of the other half "
                  "(two-fold cross-fit)", before, after, rng,
                  fitted=(f"{param} = mean sqrt(h2/h1) of the other half: "
                          + ", ".join(_fmt(e) for e in fitted)), note=note,
-                 extension=next(h for h in engine_hooks(on_params) if h["extension"] == "multi_contact_damping"),
-                 heap_settings={"multi_contact_damping": True})
+                 extension=next(h for h in engine_hooks(on_params) if h["extension"] == "contact_effective_mass"),
+                 heap_settings={"contact_effective_mass": True})

@@ -435,8 +435,8 @@ def _extensions(runner, params, findings, model_findings, state, chosen, seed, s
         # corrected where it was found) puts into a rebound
         for pair in _pairs_named(model_findings, "orientation_rotation", state):
             s = state[pair]
-            damped = pair in _pairs_named(model_findings, "multi_contact_damping", state)
-            model = params.with_(multi_contact_damping=True) if damped else params
+            damped = pair in _pairs_named(model_findings, "contact_effective_mass", state)
+            model = params.with_(contact_effective_mass=True) if damped else params
             twins_now = s["twins_on"] if damped else s["twins"]
             try:
                 g, inv = inverted_restitution_gain(runner, model, pair, s["rig_pair"], s["trials"], twins_now,
@@ -465,7 +465,7 @@ def _extensions(runner, params, findings, model_findings, state, chosen, seed, s
             except InputError as exc:
                 summary.append(f"size_distribution ({pair}) not evaluated: {exc}")
     for g in gains:
-        if g.name == "multi_contact_damping":
+        if g.name == "contact_effective_mass":
             continue  # stated with the attribution
         verdict = ("helps" if g.ci95[0] > 0 else "makes it worse" if g.ci95[1] < 0 else "has no clear gain")
         summary.append(f"Extension {g.name} ({g.quantity}): {g.measure} on {g.held_out} {_fmt(g.before)} "
@@ -552,9 +552,10 @@ def _drop_statements(state: dict, params) -> list:
             text += ("sqrt(h2/h1) may not feed the DEM directly: the twin's apparent restitution differs from "
                      f"its contact restitution by {offset:.3g}")
             on = [t.simulated for t in s.get("twins_on", {}).values() if math.isfinite(t.simulated)]
-            text += (f"; with the dashpots sharing the mass it rebounds at {np.mean(on):.3g}, so "
-                     f"{np.mean(on) - d['mean']:.3g} of it is the glued-sphere damping of landings on several "
-                     f"spheres and {e - np.mean(on):.3g} rotation (model findings)." if on else ".")
+            text += (f"; with the dashpots damping the effective mass at each contact it rebounds at "
+                     f"{np.mean(on):.3g}, so {np.mean(on) - d['mean']:.3g} of it is the overdamping of "
+                     f"off-centre and simultaneous contacts and {e - np.mean(on):.3g} rotation (model "
+                     f"findings)." if on else ".")
             inv = s.get("inverted")
             if inv is not None:
                 halves = ", ".join(f"{v:.3g}" for v in inv["halves"])

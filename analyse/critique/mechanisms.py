@@ -24,9 +24,9 @@ orientation_rotation               data: a drop series varies with ``orientation
                                    contact restitution (an elongated body turns part of its
                                    energy into rotation: sqrt(h2/h1) is not the contact
                                    restitution) (``attribution``)
-multi_contact_damping              model only: the twin's flat landing rebounds well below the
-                                   contact restitution and sharing the mass among simultaneous
-                                   contacts closes the gap (``attribution``)
+contact_effective_mass             model only: the twin's flat landing rebounds well below the
+                                   contact restitution and damping the effective mass at each
+                                   contact closes the gap (``attribution``)
 size_dependence                    a series of a test sheet varies with the specimen's
                                    ``length_mm``, ``diameter_mm`` or ``mass_g``
 block_effect                       a series differs between the levels of a categorical
@@ -99,10 +99,11 @@ CATALOGUE = (
               "data: drop restitution against orientation_deg; model: the twin's apparent restitution "
               "below its contact e with the damping corrected",
               "extension inverted_restitution (contact e from the drop twin); more_spheres"),
-    Mechanism("multi_contact_damping", "glued spheres: each simultaneous contact damps with the whole mass",
-              "model: the twin's flat landing (no rotation) rebounds well below its contact e, and sharing "
-              "the mass among the contacts closes the gap to the drops",
-              "extension multi_contact_damping (dashpots share the body's mass)", model_only=True),
+    Mechanism("contact_effective_mass", "dashpots damp the whole mass where a contact moves less of it",
+              "model: the twin's flat landing (no rotation) rebounds well below its contact e, and damping "
+              "the effective mass at each contact closes the gap to the drops",
+              "extension contact_effective_mass (dashpots damp the effective mass at each contact)",
+              model_only=True),
     Mechanism("size_dependence", "response depends on segment size",
               "series against the specimen's length_mm, diameter_mm, mass_g",
               "extension size_distribution (segments drawn from the callipers)"),

@@ -77,7 +77,7 @@ def twin_parameters(measurement, results=None):
     from demcal.simulate.params import DEMParameters
 
     if results and results.calibrated_parameters:
-        return DEMParameters(**results.calibrated_parameters), "calibrated (campaign results.json)"
+        return DEMParameters.from_names(results.calibrated_parameters), "calibrated (campaign results.json)"
     params = base_parameters(measurement)
     wall = wall_of(measurement.meta)
     changes = {}

@@ -80,7 +80,7 @@ OUTFLOW_BASE, OUTFLOW_SLOPE, OUTFLOW_NOISE = 0.10, 0.2, 0.01
 
 
 def extension_standin_runner(inputs: dict) -> dict:
-    """The noisy heap stand-in with flat drops whose rebound depends on ``multi_contact_damping``
+    """The noisy heap stand-in with flat drops whose rebound depends on ``contact_effective_mass``
     (``FLAT_DROP_RATIO`` times the contact restitution without it, the contact restitution with
     it), and heaps that record an outflow fraction depending on e_pw, an outside pile angle and a
     crest height: what a recalibration with the extension changes is known in closed form."""
@@ -92,7 +92,7 @@ def extension_standin_runner(inputs: dict) -> dict:
                                                .digest()[:8], "little"))
     if inputs.get("rig") == "drop":
         e = p["e_pp"] if inputs["pair"] == "particle-particle" else p["e_pw"]
-        ratio = 1.0 if p.get("multi_contact_damping") else FLAT_DROP_RATIO
+        ratio = 1.0 if p.get("contact_effective_mass") else FLAT_DROP_RATIO
         return {"rig": "drop", "observable": {"apparent_restitution": ratio * e + rng.normal(0.0, 0.005)}}
     if inputs.get("rig") == "incline":
         return heap_standin_runner(inputs)

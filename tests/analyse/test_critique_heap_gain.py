@@ -56,16 +56,16 @@ def test_heap_side_gain_of_shared_damping(flat_lab, tmp_path):
     vw, out = flat_lab
     c = run_critique(out, rigs=("drop",), store_dir=tmp_path / "store", heap_gain=True,
                      campaign_runner=extension_standin_runner)
-    damping = [m for m in c.model_findings if m.mechanism == "multi_contact_damping"]
+    damping = [m for m in c.model_findings if m.mechanism == "contact_effective_mass"]
     assert damping and all(m.verdict == "found" for m in damping)
     # one recalibration, though both pairs accept the same switch
     (h,) = c.heap_gains
-    assert h.extension == "multi_contact_damping" and h.settings == {"multi_contact_damping": True}
+    assert h.extension == "contact_effective_mass" and h.settings == {"contact_effective_mass": True}
     folder = out / h.campaign
     after = CampaignResult.from_dict(read_json(folder / "results.json"))
     before = CampaignResult.from_dict(read_json(out / "results.json"))
-    assert after.config["model_extensions"] == {"multi_contact_damping": True}
-    assert all(read_json(p)["inputs"]["params"].get("multi_contact_damping") for p in (folder / "runs").glob("*.json"))
+    assert after.config["model_extensions"] == {"contact_effective_mass": True}
+    assert all(read_json(p)["inputs"]["params"].get("contact_effective_mass") for p in (folder / "runs").glob("*.json"))
     # the twin without shared damping cannot reach the flat rebounds: e_pw runs to the grid's top;
     # with it, the measured sqrt(h2/h1) is the contact restitution
     e = {p.name: p for p in h.parameters}["e_pw"]
@@ -81,7 +81,7 @@ def test_heap_side_gain_of_shared_damping(flat_lab, tmp_path):
     assert not outflow.fitted and next(o for o in h.observables if o.name.startswith("angle of repose")).fitted
     crest = next(o for o in h.observables if o.name == "crest height")
     assert crest.unit == "mm" and crest.before == pytest.approx(80.0, abs=1.0)     # 0.08 m in the records
-    assert any(s.startswith("Heap-side gain of multi_contact_damping") for s in c.conclusions)
+    assert any(s.startswith("Heap-side gain of contact_effective_mass") for s in c.conclusions)
     # critique.json reads back, and the report's tables C5 and C6 show it
     doc = json.loads(json.dumps(to_jsonable(c.to_dict())))
     assert Critique.from_dict(doc).heap_gains == c.heap_gains
@@ -90,6 +90,6 @@ def test_heap_side_gain_of_shared_damping(flat_lab, tmp_path):
 
     tables = {t.id: t for t in critique_tables(load_campaign(out))}
     rows = {r[1]: r for r in tables["C5"].rows}
-    assert rows["e_pw"][0] == "multi_contact_damping" and rows["e_pw"][-1] == "beyond its uncertainty"
+    assert rows["e_pw"][0] == "contact_effective_mass" and rows["e_pw"][-1] == "beyond its uncertainty"
     assert len(tables["C6"].rows) == len(h.observables)
     assert any(h.conclusion in note for note in tables["C5"].notes)

@@ -137,7 +137,7 @@ def test_twin_only_orientation_dependence_is_a_model_discrepancy_not_a_data_effe
     assert abs(slope.simulated) > 3 * abs(slope.measured)
     assert "the twin predicts" in slope.note and "the lab shows" in slope.note
     causes = {m.mechanism: m for m in c.model_findings}
-    assert set(causes) == {"multi_contact_damping", "orientation_rotation"}
+    assert set(causes) == {"contact_effective_mass", "orientation_rotation"}
     assert causes["orientation_rotation"].verdict == "found"
     total = causes["orientation_rotation"].measured - causes["orientation_rotation"].simulated
     parts = sum(m.part for m in causes.values())
@@ -148,17 +148,17 @@ def test_twin_only_orientation_dependence_is_a_model_discrepancy_not_a_data_effe
     assert Critique.from_dict(doc).model_findings == c.model_findings
 
 
-def test_flat_drops_name_multi_contact_damping_and_the_extension_closes_the_gap(tmp_path):
+def test_flat_drops_name_contact_effective_mass_and_the_extension_closes_the_gap(tmp_path):
     """Segments landing flat that rebound at the contact restitution: the twin's glued-sphere
     damping is found, rotation is ruled out, and with the mass shared the held-out drops agree
     within their uncertainty."""
     c = _drop_lab(tmp_path, (0.0, 0.0))
     assert c.found() == []
     causes = {m.mechanism: m for m in c.model_findings}
-    assert causes["multi_contact_damping"].verdict == "found" and causes["multi_contact_damping"].share > 0.9
+    assert causes["contact_effective_mass"].verdict == "found" and causes["contact_effective_mass"].share > 0.9
     assert causes["orientation_rotation"].verdict == "ruled_out"
-    gain = next(g for g in c.extensions if g.name == "multi_contact_damping")
-    assert gain.ci95[0] > 0 and gain.extension["extension"] == "multi_contact_damping"
+    gain = next(g for g in c.extensions if g.name == "contact_effective_mass")
+    assert gain.ci95[0] > 0 and gain.extension["extension"] == "contact_effective_mass"
     assert "inside its uncertainty" in gain.note
     assert not any(g.name == "inverted_restitution" for g in c.extensions)   # no parameter absorbs it
 
@@ -172,10 +172,10 @@ def test_drops_within_five_degrees_of_flat_split_the_gap_between_damping_and_rot
     c = _drop_lab(tmp_path, (0.0, 5.0))
     assert c.found() == []
     causes = {m.mechanism: m for m in c.model_findings}
-    assert causes["multi_contact_damping"].verdict == "found"
+    assert causes["contact_effective_mass"].verdict == "found"
     assert causes["orientation_rotation"].verdict == "found"
-    assert causes["multi_contact_damping"].share > causes["orientation_rotation"].share > 0
-    gain = next(g for g in c.extensions if g.name == "multi_contact_damping")
+    assert causes["contact_effective_mass"].share > causes["orientation_rotation"].share > 0
+    gain = next(g for g in c.extensions if g.name == "contact_effective_mass")
     assert gain.ci95[0] > 0 and gain.after < gain.before / 3
 
 

@@ -596,8 +596,8 @@ CRITIQUE = {
                    "[0.436, 0.469] from 10 drops (calibrated 0.352)", "note": "",
          "extension": {"extension": "inverted_restitution", "pair": "particle-steel"}, "heap_settings": {}}],
     "heap_gains": [
-        {"extension": "multi_contact_damping", "mechanism": "multi_contact_damping",
-         "settings": {"multi_contact_damping": True}, "campaign": "heap_gain/multi_contact_damping",
+        {"extension": "contact_effective_mass", "mechanism": "contact_effective_mass",
+         "settings": {"contact_effective_mass": True}, "campaign": "heap_gain/contact_effective_mass",
          "verdict_before": "equivalent", "verdict_after": "equivalent",
          "parameters": [{"name": "e_pw", "before": 0.71, "after": 0.36, "before_ci95": [0.62, 0.8],
                          "after_ci95": [0.3, 0.42], "shift": -0.35, "within_uncertainty": False},
@@ -606,7 +606,7 @@ CRITIQUE = {
          "observables": [{"name": "outflow fraction", "unit": "-", "fitted": False, "before": 0.094,
                           "before_sd": 0.02, "n_before": 20, "after": 0.121, "after_sd": 0.025, "n_after": 20,
                           "difference": 0.027, "ci95": [0.0125, 0.0415], "beyond_noise": True}],
-         "conclusion": "Recalibrated with multi_contact_damping: e_pw moved beyond its uncertainty."}],
+         "conclusion": "Recalibrated with contact_effective_mass: e_pw moved beyond its uncertainty."}],
     "summary": [
         "restitution.particle-steel: the lab's sqrt(h2/h1) is 0.352; the drop twin with contact e_pw = 0.352, "
         "at the lab's 20 drop heights and orientations, rebounds with an apparent 0.281 [0.268, 0.294] "

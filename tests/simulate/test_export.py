@@ -87,9 +87,9 @@ def test_rolling_friction_is_converted_exactly_for_a_sphere_and_said_to_be_an_av
 
 
 def test_engine_hooks_the_target_lacks_are_listed_as_not_carried_over():
-    params = DEMParameters(multi_contact_damping=True, rolling_model="epsd")
+    params = DEMParameters(contact_effective_mass=True, rolling_model="epsd")
     model = export_model(params)
-    assert "NOT carried over: demcal engine hook multi_contact_damping" in render(model, "liggghts")
+    assert "NOT carried over: demcal engine hook contact_effective_mass" in render(model, "liggghts")
     assert "rolling_spring_dashpot" not in render(model, "liggghts")      # LIGGGHTS has epsd
     assert "rolling_friction epsd" in render(model, "liggghts")
     assert "NOT carried over: demcal engine hook rolling_spring_dashpot" in render(model, "edem")
