@@ -56,6 +56,7 @@ column and value.
 from __future__ import annotations
 
 import datetime as _dt
+import functools
 import math
 import numbers
 import re
@@ -270,7 +271,13 @@ class Sheet:
 
     def covariates_of(self, row: int) -> dict:
         """Covariate values of one row (empty cells as None)."""
-        return {c: _plain(self.frame.at[row, c]) for c in self.covariates}
+        return dict(self._covariate_rows[row])
+
+    @functools.cached_property
+    def _covariate_rows(self) -> dict:
+        # built once: a frame lookup per cell costs more than the estimators that ask
+        columns = {c: [_plain(v) for v in self.frame[c].tolist()] for c in self.covariates}
+        return {int(r): {c: columns[c][i] for c in self.covariates} for i, r in enumerate(self.frame.index)}
 
     def error(self, message, *, row=None, column=None, value=None) -> WorkbookError:
         """A :class:`WorkbookError` located in this sheet."""
@@ -458,8 +465,8 @@ def _canonical_columns(raw: pd.DataFrame, known: tuple, file: Path, sheet: str) 
 def _drop_empty_rows(frame: pd.DataFrame) -> pd.DataFrame:
     if frame.shape[1] == 0:
         return frame.iloc[0:0]
-    empty = frame.apply(lambda r: all(_is_empty(c) for c in r), axis=1)
-    return frame.loc[~empty.astype(bool)]
+    empty = frame.map(_is_empty).all(axis=1)
+    return frame.loc[~empty.to_numpy(bool)]
 
 
 # ----------------------------------------------------------------------------------------------

@@ -932,7 +932,7 @@ def table_validation(c: Campaign) -> Table:
 DISCREPANCY_COLUMNS = ("observable", "sheet", "measured", "measured_ci95", "simulated", "simulated_ci95",
                        "difference", "combined_u95", "exceeds", "n_measured", "n_simulated")
 FINDING_COLUMNS = ("mechanism", "verdict", "sheet", "covariate", "effect", "ci95", "p_adjusted", "quantity",
-                   "source", "effect_unit")
+                   "source", "effect_unit", "rows_to_decide")
 MODEL_FINDING_COLUMNS = ("mechanism", "verdict", "observable", "measured", "simulated", "part", "part_ci95",
                          "share")
 EXTENSION_COLUMNS = ("name", "mechanism", "before", "after", "gain", "ci95", "measure", "quantity",
@@ -1078,7 +1078,7 @@ def critique_tables(c: Campaign) -> list[Table]:
     return [_record_table("C1", "Model discrepancies: where the twins disagree with the lab", cr.discrepancies,
                           DISCREPANCY_COLUMNS, ("note",), src, "discrepancies"),
             _record_table("C2", "Data effects: covariate effects in the lab's measurements", cr.findings,
-                          FINDING_COLUMNS, ("evidence",), src, "findings"),
+                          FINDING_COLUMNS, ("reason", "evidence"), src, "findings"),
             _record_table("C2b", "Causes of the model discrepancies, each tested, with its share",
                           cr.model_findings, MODEL_FINDING_COLUMNS, ("evidence",), src, "model_findings"),
             _record_table("C3", "Model extensions and their gain on held-out trials", cr.extensions,

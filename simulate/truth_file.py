@@ -54,7 +54,7 @@ SURFACES = ("particle", "steel")
 #: Keys of the ``design`` section: the options of ``write_virtual_workbook`` that shape the workbook.
 DESIGN_KEYS = ("photos", "n_specimens", "n_density", "pairs", "drop_heights_mm", "n_drop",
                "orientation_range_deg", "n_tracks", "surfaces", "n_incline", "n_compression",
-               "n_photos", "trials_per_specimen")
+               "n_photos", "trials_per_specimen", "interleaved")
 
 #: Smallest count of each integer design option (those of ``write_virtual_workbook``).
 DESIGN_MIN_COUNTS = {"n_specimens": 3, "n_density": 2, "n_drop": 1, "n_incline": 2, "n_compression": 0,
@@ -177,6 +177,9 @@ def parse_design(values, where: str = "design") -> dict:
                 raise InputError(f"{at}: must be one of {', '.join(PHOTO_MODES)}, got {value!r}")
         elif key == "trials_per_specimen" and value is None:
             pass
+        elif key == "interleaved":
+            if not isinstance(value, bool):
+                raise InputError(f"{at}: must be true or false, got {value!r}")
         elif key in DESIGN_MIN_COUNTS:
             value = _count(value, at, DESIGN_MIN_COUNTS[key])
         elif key == "pairs":

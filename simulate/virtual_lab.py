@@ -495,10 +495,11 @@ def _join_specimens(frame: pd.DataFrame, specimens: pd.DataFrame) -> pd.DataFram
 
 
 def _contributions(effects, sheet: str, quantity: str, rows: pd.DataFrame, truth: Truth,
-                   specimens_mean: dict, height_ref_mm: float = 0.0) -> dict:
+                   specimens_mean: dict, height_ref_mm: float = 0.0, order_centre=None) -> dict:
     """Per-row additive contribution of each effect (index in ``effects``) to a quantity, in its
     own unit (e for drops, mu for inclines; block offsets of inclines are in degrees and are
-    returned separately by the caller)."""
+    returned separately by the caller). A drift is centred on ``order_centre`` (default the
+    middle of these rows' trials)."""
     out = {}
     n = len(rows)
     for k, eff in enumerate(effects):
@@ -511,7 +512,7 @@ def _contributions(effects, sheet: str, quantity: str, rows: pd.DataFrame, truth
             out[k] = eff.size * (rows["length_mm"].to_numpy(float) - specimens_mean["length_mm"])
         elif eff.kind == "trial_order_drift":
             t = rows["trial_order"].to_numpy(float)
-            out[k] = eff.size * (t - 0.5 * (n + 1))
+            out[k] = eff.size * (t - (0.5 * (n + 1) if order_centre is None else order_centre))
         elif eff.kind == "moisture_dependence":
             out[k] = eff.size * (rows["moisture_pct"].to_numpy(float) - truth.moisture_pct)
         elif eff.kind == "block_effect":
@@ -534,9 +535,11 @@ def _expected(effects, k: int, sheet: str, quantity: str, rows: pd.DataFrame, de
 
 
 def _drops(truth: Truth, rng, effects, specimens, *, pairs, heights_mm, n_drop, orientation_range,
-           n_tracks, root: Path, cache_dir, trials_per_specimen=None):
+           n_tracks, root: Path, cache_dir, trials_per_specimen=None, interleaved=False):
     """The drop sheet, its tracks, and the expected sizes of the effects planted in it."""
     frames, expected = [], []
+    n_pair = n_drop * len(heights_mm)
+    orders = rng.permutation(np.arange(1, n_pair * len(pairs) + 1)) if interleaved else None
     orient = [e for e in effects if e.kind == "orientation_rotation"]
     spec_mean = {"length_mm": float(specimens["length_mm"].mean())}
     trial = 0
@@ -547,6 +550,9 @@ def _drops(truth: Truth, rng, effects, specimens, *, pairs, heights_mm, n_drop, 
                                      spread_days=_by_day(effects, "drop"),
                                      trials_per_specimen=trials_per_specimen))
         rows["pair"] = pair
+        if interleaved:
+            k = len(frames)
+            rows["trial_order"] = orders[k * n:(k + 1) * n]
         rows["drop_height_mm"] = rng.permutation(np.repeat(np.asarray(heights_mm, float), n_drop))
         hand = [e for e in orient if e.acts_on(f"restitution.{pair}")]
         lo = min([e.size for e in hand]) if hand else orientation_range[0]
@@ -554,7 +560,8 @@ def _drops(truth: Truth, rng, effects, specimens, *, pairs, heights_mm, n_drop, 
         rows["orientation_deg"] = rng.uniform(lo, hi, n).round(1)
         rows = _join_specimens(rows, specimens)
         contrib = _contributions(effects, "drop", f"restitution.{pair}", rows, truth, spec_mean,
-                                 height_ref_mm=float(np.mean(heights_mm)))
+                                 height_ref_mm=float(np.mean(heights_mm)),
+                                 order_centre=0.5 * (n_pair * len(pairs) + 1) if interleaved else None)
         contact = e_pair + sum(contrib.values(), np.zeros(n))
         # without a planted orientation effect the rebound is the contact restitution at every
         # orientation; with one, segments turn part of their energy into rotation as a rigid
@@ -799,7 +806,8 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
                            orientation_range_deg=(80.0, 90.0), n_tracks: int = 2,
                            surfaces=("particle", "steel"), n_incline: int = 30,
                            n_compression: int = 10, n_photos: int = 4,
-                           cache_dir=None, geometry=None, trials_per_specimen: int | None = None) -> VirtualWorkbook:
+                           cache_dir=None, geometry=None, trials_per_specimen: int | None = None,
+                           interleaved: bool = False) -> VirtualWorkbook:
     """Write a complete lab workbook from ``truth``, with ``effects`` planted.
 
     Parameters
@@ -839,6 +847,9 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
         Drop and incline trials per specimen: each sheet's trials go to that many trials on
         each of a random subset of the specimens (with ``Truth.icc`` a clustered design);
         default a random specimen per trial.
+    interleaved : bool
+        Drops of every pair in one random order (``trial_order`` runs over the whole sheet, and
+        a planted drift with it); default each pair's drops in a session of its own.
 
     Returns
     -------
@@ -871,7 +882,8 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
         sheets["drop"], exp = _drops(truth, rng, effects, specimens, pairs=tuple(pairs),
                                      heights_mm=tuple(float(h) for h in drop_heights_mm), n_drop=n_drop,
                                      orientation_range=(lo, hi), n_tracks=n_tracks, root=root,
-                                     cache_dir=cache_dir, trials_per_specimen=trials_per_specimen)
+                                     cache_dir=cache_dir, trials_per_specimen=trials_per_specimen,
+                                     interleaved=interleaved)
         expected += exp
     if surfaces:
         sheets["incline"], exp = _inclines(truth, rng, effects, specimens, surfaces=tuple(surfaces),

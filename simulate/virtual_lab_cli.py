@@ -26,23 +26,27 @@ ATTACHMENTS = {"photos": "heap_*.jpg", "tracks": "T*.csv", "curves": "C*.csv"}
 
 
 def parse_plant(items) -> tuple:
-    """``["KIND=SIZE", "KIND", ...]`` -> PlantedEffect tuple (no size: the kind's default)."""
+    """``["KIND=SIZE", "KIND=SIZE:SHEET", "KIND=SIZE:SHEET:QUANTITY", "KIND", ...]`` ->
+    PlantedEffect tuple (no size: the kind's default; no sheet or quantity: the kind's)."""
     from demcal.simulate.virtual_lab import EFFECT_KINDS, PlantedEffect
 
     effects = []
     for item in items:
-        kind, sep, size = str(item).partition("=")
+        kind, sep, rest = str(item).partition("=")
         kind = kind.strip()
         if kind not in EFFECT_KINDS:
             raise InputError(f"--plant {item!r}: unknown effect {kind!r}; valid: {', '.join(EFFECT_KINDS)}")
+        size, _, where = rest.partition(":")
+        sheet, _, quantity = where.partition(":")
         value = None
-        if sep:
+        if sep and size.strip():
             try:
                 value = float(size)
             except ValueError:
                 raise InputError(f"--plant {item!r}: SIZE must be a number, got {size.strip()!r}") from None
         try:
-            effects.append(PlantedEffect(kind, size=value))
+            effects.append(PlantedEffect(kind, size=value, sheet=sheet.strip() or None,
+                                         quantity=quantity.strip() or None))
         except InputError as exc:
             raise InputError(f"--plant {item!r}: {exc}") from None
     return tuple(effects)
@@ -148,8 +152,9 @@ def register(subparsers) -> None:
     p.add_argument("truth", metavar="TRUTH.yaml", help="the truth file (see data/virtual_lab/truth.yaml)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="folder for the workbook (one CSV per sheet), or a path ending in .xlsx")
-    p.add_argument("--plant", action="append", default=[], metavar="KIND=SIZE",
-                   help=f"plant an effect (repeatable; SIZE in the kind's unit, omitted: its default); "
+    p.add_argument("--plant", action="append", default=[], metavar="KIND=SIZE[:SHEET[:QUANTITY]]",
+                   help=f"plant an effect (repeatable; SIZE in the kind's unit, omitted: its default; "
+                        f"SHEET and QUANTITY where, e.g. trial_order_drift=-0.001:drop:restitution); "
                         f"KIND one of {', '.join(EFFECT_KINDS)}")
     p.add_argument("--seed", type=int, default=0, help="seed of the virtual campaign (default %(default)s)")
     p.add_argument("--force", action="store_true", help="replace a virtual workbook already in DIR")

@@ -29,7 +29,10 @@ below ``alpha`` and *relevant* when its effect over the data (trend: the range o
 line-and-quadratic over the covariate's observed values, so that a U-shape counts; line:
 |slope| x range; block: the range of level means; mean: |mean|) reaches the practical
 threshold of its quantity (``PRACTICAL_THRESHOLDS``), so that a tiny but significant effect is
-not reported as a cause.
+not reported as a cause. A test *excludes* a relevant effect when its 95 % interval lies within
+the threshold (``CovariateTest.excludes_relevant``): only then may a mechanism be ruled out;
+a relevant interval that misses the corrected level leaves it ``inconclusive``, with the rows
+that would decide it (``CovariateTest.rows_to_decide``, ``mechanisms.judge``).
 
 Pooled series. An effect several pairs share (a velocity dependence or a drift on every drop
 pair) is also tested on all their rows at once (``pooled_series``): each value relative to its
@@ -65,6 +68,7 @@ Benjamini, Y., Hochberg, Y. (1995). Controlling the false discovery rate: a prac
 powerful approach to multiple testing. J. R. Stat. Soc. B 57(1), 289-300.
 Benjamini, Y., Yekutieli, D. (2005). False discovery rate-adjusted multiple confidence
 intervals for selected parameters. J. Am. Stat. Assoc. 100(469), 71-81.
+Cohen, J. (1988). Statistical Power Analysis for the Behavioral Sciences, 2nd ed. Erlbaum.
 Holm, S. (1979). A simple sequentially rejective multiple test procedure. Scand. J. Stat. 6,
 65-70.
 Fisher, R. A. (1925). Statistical Methods for Research Workers. Oliver & Boyd (analysis of
@@ -82,7 +86,7 @@ import numbers
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
-from scipy import stats
+from scipy import optimize, stats
 
 from demcal.errors import InputError
 from demcal.jsonio import restore_nan
@@ -227,6 +231,9 @@ class CovariateTest:
         ``trial`` (independent rows), ``specimen`` (a covariate of the specimen, rows with a
         random specimen intercept and the specimens' degrees of freedom) or ``trial within
         specimens`` (a trial covariate, random specimen intercept, within degrees of freedom).
+    alpha_test : float
+        The unadjusted level at which this test alone in its family would be significant
+        (alpha / m): the level :meth:`rows_to_decide` plans for.
     """
 
     series: str
@@ -252,11 +259,44 @@ class CovariateTest:
     explained_by: str | None = None
     levels: dict = field(default_factory=dict)
     level: str = "trial"
+    alpha_test: float = math.nan
 
     @property
     def quantity(self) -> str:
         """The quantity behind the series (``residual:`` and similar prefixes removed)."""
         return self.series.split(":", 1)[-1]
+
+    def largest_admitted(self, sign: int = 0) -> float:
+        """The largest size over the data that the 95 % interval admits [unit]: the interval's
+        larger end in magnitude (with ``sign`` +1 or -1, in that direction only), times the
+        covariate's range for a slope."""
+        lo, hi = self.ci95
+        bound = max(abs(lo), abs(hi)) if sign == 0 else max(sign * lo, sign * hi, 0.0)
+        return bound * self.span if self.span is not None else bound
+
+    def excludes_relevant(self, sign: int = 0) -> bool:
+        """Whether the data exclude a relevant effect (of ``sign``, if given): the 95 % interval
+        lies within the practical threshold (for a trend, with its curvature not significant at
+        5 %, since the interval is the straight line's)."""
+        curved = self.p_curvature is not None and self.p_curvature < 0.05
+        size = self.largest_admitted(sign)
+        return bool(math.isfinite(size) and size < self.threshold and not curved)
+
+    def rows_to_decide(self, power: float = 0.8) -> int | None:
+        """Rows of this design that would find an effect of the practical threshold's size with
+        probability ``power`` at :attr:`alpha_test`: n lambda (se / delta)^2, where delta is the
+        threshold in the effect's unit (over the covariate's range for a slope), the standard
+        error falls as 1 / sqrt(rows), and lambda is the noncentrality at which the test's
+        chi-square (2 degrees of freedom for a trend's line and curvature, levels - 1 for a
+        block, else 1) reaches ``power`` (Cohen 1988, ch. 8-9). None without a standard error."""
+        delta = self.threshold / self.span if self.span else self.threshold
+        alpha = self.alpha_test if math.isfinite(self.alpha_test) else DEFAULT_ALPHA
+        if not (math.isfinite(self.se) and self.se > 0 and delta > 0):
+            return None
+        df = 2 if self.method == "trend" else max(len(self.levels) - 1, 1) if self.method == "anova" else 1
+        crit = float(stats.chi2.isf(alpha, df))
+        lam = optimize.brentq(lambda nc: float(stats.ncx2.sf(crit, df, nc)) - power, 1e-9, 1e6)
+        return int(math.ceil(self.n * lam * (self.se / delta) ** 2))
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -331,10 +371,11 @@ def adjust(tests, *, method: str = "bh", alpha: float = DEFAULT_ALPHA) -> list:
         raise InputError(f"alpha must be in (0, 1), got {alpha!r}")
     tests = list(tests)
     adj = adjust_pvalues([t.p_value for t in tests], method)
-    out = [replace(t, p_adjusted=float(a), significant=bool(np.isfinite(a) and a < alpha),
-                   relevant=bool(np.isfinite(t.practical) and t.practical >= t.threshold))
-           for t, a in zip(tests, adj)]
     m = int(np.isfinite(adj).sum())
+    out = [replace(t, p_adjusted=float(a), significant=bool(np.isfinite(a) and a < alpha),
+                   relevant=bool(np.isfinite(t.practical) and t.practical >= t.threshold),
+                   alpha_test=alpha / max(m, 1))
+           for t, a in zip(tests, adj)]
     selected = sum(t.significant and t.relevant for t in out)
     if selected:
         tail = selected * FCR_LEVEL / m / 2.0

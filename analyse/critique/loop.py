@@ -6,7 +6,8 @@
     {"discrepancies": [{"observable", "measured", "measured_ci95", "simulated", "simulated_ci95",
                         "difference", "combined_u95", "exceeds", ...}],
      "findings": [{"mechanism", "verdict", "sheet", "covariate", "effect", "ci95",
-                   "p_adjusted", "quantity", "source", "effect_unit", "evidence"}],
+                   "p_adjusted", "quantity", "source", "effect_unit", "evidence", "reason",
+                   "rows_to_decide"}],
      "model_findings": [{"mechanism", "verdict", "observable", "measured", "simulated",
                          "share", "part", "part_ci95", "evidence"}],
      "extensions": [{"name", "mechanism", "before", "after", "gain", "ci95", "measure",
@@ -129,6 +130,11 @@ class Critique:
         found = self.found()
         lines.append(f"  data effects found: {len(found)} ("
                      + (", ".join(sorted({f.mechanism for f in found})) or "none") + ")")
+        open_ = [f for f in self.findings if f.verdict == "inconclusive"]
+        if open_:
+            lines.append("  inconclusive: " + ", ".join(
+                f"{f.mechanism}" + (f" ({f.rows_to_decide} rows would decide it)" if f.rows_to_decide else "")
+                for f in open_))
         for m in self.model_findings:
             if m.verdict == "found":
                 lines.append(f"  model: {m.mechanism} explains {_fmt(m.part)} [{_fmt(m.part_ci95[0])}, "
@@ -570,9 +576,19 @@ def _drop_statements(state: dict, params) -> list:
 
 def _finding_statements(findings) -> list:
     found = [f for f in findings if f.verdict == "found"]
-    if not found:
-        return ["No mechanism of the catalogue is found in this data (every testable signature was "
-                "ruled out after the multiple-testing correction)."]
-    names = sorted({f.mechanism for f in found})
-    return [f"Found: {', '.join(names)}. " + " ".join(
-        f"{f.mechanism}: {f.evidence}." for f in found[:6])]
+    open_ = [f for f in findings if f.verdict == "inconclusive"]
+    ruled = sorted({f.mechanism for f in findings if f.verdict == "ruled_out"})
+    out = []
+    if found:
+        names = sorted({f.mechanism for f in found})
+        out.append(f"Found: {', '.join(names)}. " + " ".join(f"{f.mechanism}: {f.evidence}." for f in found[:6]))
+    else:
+        out.append("No mechanism of the catalogue is found in this data.")
+    if open_:
+        out.append("Inconclusive (neither found nor excluded by the data): " + "; ".join(
+            f"{f.mechanism} ({f.quantity} vs {f.covariate}"
+            + (f", about {f.rows_to_decide} rows would decide it" if f.rows_to_decide else "") + ")"
+            for f in open_) + ".")
+    if ruled:
+        out.append(f"Ruled out (every interval within the practical threshold): {', '.join(ruled)}.")
+    return out

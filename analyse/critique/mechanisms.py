@@ -7,10 +7,18 @@ Every mechanism is judged from tests (``analyse.critique.diagnosis``), never ass
   correction *and* reaches the practical threshold (and has the expected sign, where the
   mechanism has one), and no other selected covariate of the same series explains it
   (``diagnosis.explain_away``); one finding per such test, the strongest first;
-- ``ruled_out``: its signature was tested and no test passed both bars; the finding shows the
-  closest test (effect and interval), so the reader sees how large an effect is excluded;
+- ``ruled_out``: the data exclude a relevant effect: every test of its signature has its 95 %
+  interval within the practical threshold (``CovariateTest.excludes_relevant``), or is
+  explained by another covariate; the finding shows the test that comes closest to the
+  threshold, so the reader sees how large an effect is excluded;
+- ``inconclusive``: neither: some test's interval reaches the threshold without the test
+  being significant after the correction. The finding shows the test closest to significance
+  and the rows of that design that would find an effect of the threshold's size with 80 %
+  power (``CovariateTest.rows_to_decide``);
 - ``not_testable``: the data lack the covariate or its variation (one drop height, no
   orientation logged, no two-flank photo, no campaign), with the reason.
+
+Every finding carries its ``reason``: the bar it passed or missed, in words.
 
 Catalogue (``CATALOGUE``):
 
@@ -24,9 +32,10 @@ orientation_rotation               data: a drop series varies with ``orientation
                                    contact restitution (an elongated body turns part of its
                                    energy into rotation: sqrt(h2/h1) is not the contact
                                    restitution) (``attribution``)
-contact_effective_mass             model only: the twin's flat landing rebounds well below the
-                                   contact restitution and damping the effective mass at each
-                                   contact closes the gap (``attribution``)
+contact_effective_mass             model only: at the logged orientations the twin rebounds
+                                   below the rigid-body reference (``rigid_impact``; landing
+                                   flat, the contact restitution), and the twin with the hook
+                                   on against off closes the gap to the drops (``attribution``)
 size_dependence                    a series of a test sheet varies with the specimen's
                                    ``length_mm``, ``diameter_mm`` or ``mass_g``
 block_effect                       a series differs between the levels of a categorical
@@ -100,8 +109,8 @@ CATALOGUE = (
               "below its contact e with the damping corrected",
               "extension inverted_restitution (contact e from the drop twin); more_spheres"),
     Mechanism("contact_effective_mass", "dashpots damp the whole mass where a contact moves less of it",
-              "model: the twin's flat landing (no rotation) rebounds well below its contact e, and damping "
-              "the effective mass at each contact closes the gap to the drops",
+              "model: the twin's rebound at the logged orientations below the rigid-body reference (a flat "
+              "landing's: its contact e), and the twin with the hook on against off closes the gap to the drops",
               "extension contact_effective_mass (dashpots damp the effective mass at each contact)",
               model_only=True),
     Mechanism("size_dependence", "response depends on segment size",
@@ -151,6 +160,10 @@ def mechanism_of(test) -> str:
     return classify(test.series, test.sheet, test.covariate, test.method == "anova")
 
 
+#: Verdicts on a mechanism (see the module docstring).
+VERDICTS = ("found", "ruled_out", "inconclusive", "not_testable")
+
+
 @dataclass(frozen=True)
 class Finding:
     """The verdict on a mechanism, with the evidence of one test.
@@ -159,7 +172,7 @@ class Finding:
     ----------
     mechanism : str
     verdict : str
-        ``found``, ``ruled_out`` or ``not_testable``.
+        ``found``, ``ruled_out``, ``inconclusive`` or ``not_testable`` (``VERDICTS``).
     sheet, covariate, quantity : str or None
         Where the evidence is (``quantity``: the series, e.g. ``restitution.particle-steel``,
         ``residual:restitution.particle-steel``).
@@ -175,6 +188,11 @@ class Finding:
     p_adjusted : float or None
     evidence : str
         One sentence with the numbers.
+    reason : str
+        Why the verdict: the bars the test passed or missed.
+    rows_to_decide : int or None
+        For ``inconclusive``: rows of that design that would find an effect of the practical
+        threshold's size with 80 % power.
     """
 
     mechanism: str
@@ -188,6 +206,8 @@ class Finding:
     effect_unit: str | None = None
     p_adjusted: float | None = None
     evidence: str = ""
+    reason: str = ""
+    rows_to_decide: int | None = None
 
     def to_dict(self) -> dict:
         """Flat, JSON-ready (the keys the report's critique table shows)."""
@@ -195,7 +215,8 @@ class Finding:
                 "covariate": self.covariate, "effect": self.effect,
                 "ci95": None if self.ci95 is None else [float(c) for c in self.ci95],
                 "p_adjusted": self.p_adjusted, "quantity": self.quantity, "source": self.source,
-                "effect_unit": self.effect_unit, "evidence": self.evidence}
+                "effect_unit": self.effect_unit, "evidence": self.evidence, "reason": self.reason,
+                "rows_to_decide": self.rows_to_decide}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Finding":
@@ -215,12 +236,32 @@ def _evidence(t, verdict: str) -> str:
             f"p {_fmt(t.p_value)}, adjusted {_fmt(t.p_adjusted)}; {bar}")
 
 
-def _finding(mech: str, verdict: str, t, note: str = "") -> Finding:
+def _finding(mech: str, verdict: str, t, note: str = "", reason: str = "", rows=None) -> Finding:
     ci = t.ci_selected if verdict == "found" and t.ci_selected is not None else t.ci95
     return Finding(mechanism=mech, verdict=verdict, sheet=t.sheet, covariate=t.covariate,
                    quantity=t.series, source=t.source, effect=float(t.effect),
                    ci95=[float(ci[0]), float(ci[1])], effect_unit=t.effect_unit,
-                   p_adjusted=float(t.p_adjusted), evidence=(note + _evidence(t, verdict)))
+                   p_adjusted=float(t.p_adjusted), evidence=(note + _evidence(t, verdict)),
+                   reason=reason, rows_to_decide=rows)
+
+
+FOUND_REASON = "significant after the multiple-testing correction and above the practical threshold"
+
+
+def _excluded_reason(t, sign: int = 0) -> str:
+    if t.explained_by:
+        return f"explained by {t.explained_by} (its effect vanishes with {t.explained_by} in the model)"
+    return (f"95 % interval within the practical threshold: at most {_fmt(t.largest_admitted(sign))} "
+            f"over the data against {_fmt(t.threshold)}")
+
+
+def _open_reason(t, rows, sign: int = 0) -> str:
+    why = f"adjusted p {_fmt(t.p_adjusted)}" + (", below the level but under the threshold"
+                                                if t.significant else "")
+    need = (f"; about {rows} rows of this design (it has {t.n}) would find an effect of the "
+            f"threshold's size with 80 % power" if rows is not None else "")
+    return (f"not excluded: its 95 % interval admits {_fmt(t.largest_admitted(sign))} over the data, "
+            f"beyond the practical threshold {_fmt(t.threshold)}; not found: {why}{need}")
 
 
 def judge(tests, untestable=(), *, notes: dict | None = None) -> list:
@@ -239,7 +280,7 @@ def judge(tests, untestable=(), *, notes: dict | None = None) -> list:
     Returns
     -------
     list of Finding
-        Found ones first (by adjusted p), then ruled out, then not testable.
+        Found ones first (by adjusted p), then inconclusive, ruled out, not testable.
     """
     notes = dict(notes or {})
     by_mech: dict = {}
@@ -249,7 +290,7 @@ def judge(tests, untestable=(), *, notes: dict | None = None) -> list:
     for u in untestable:
         skipped.setdefault(classify(u.series, u.sheet, u.covariate, u.kind == "categorical"), []).append(u)
 
-    found, ruled, untest = [], [], []
+    found, open_, ruled, untest = [], [], [], []
     for mech in [m.id for m in CATALOGUE if m.id != "ill_conditioned_parameter" and not m.model_only] + ["other_covariate"]:
         ts = by_mech.get(mech, [])
         sign = MECHANISMS[mech].sign if mech in MECHANISMS else 0
@@ -261,25 +302,36 @@ def judge(tests, untestable=(), *, notes: dict | None = None) -> list:
                 if t.significant and t.relevant and t.explained_by is None and np.sign(t.effect) > 0:
                     found.append(_finding("other_covariate", "found", t,
                                           "restitution rises with drop height, against the catalogue's "
-                                          "signature: "))
+                                          "signature: ", reason=FOUND_REASON))
         for t in sorted(hits, key=lambda t: t.p_adjusted):
-            found.append(_finding(mech, "found", t))
+            found.append(_finding(mech, "found", t, reason=FOUND_REASON))
         if hits or mech == "other_covariate":
             continue
         if ts:
-            best = min(ts, key=lambda t: (t.p_adjusted, -t.practical))
-            why = (f"explained by {best.explained_by} (its effect vanishes with {best.explained_by} in the "
-                   f"model): " if best.explained_by else "")
-            ruled.append(_finding(mech, "ruled_out", best,
-                                  f"{len(ts)} test(s), none significant and above the threshold "
-                                  f"unless explained by another covariate; closest: {why}"))
+            # ruled out only where the data exclude a relevant effect; a relevant interval that
+            # misses the corrected level is open, with the rows that would decide it
+            unsettled = [t for t in ts if t.explained_by is None and not t.excludes_relevant(sign)]
+            if unsettled:
+                best = min(unsettled, key=lambda t: (t.p_value, -t.practical))
+                rows = best.rows_to_decide()
+                open_.append(_finding(mech, "inconclusive", best,
+                                      f"{len(ts)} test(s), none found, {len(unsettled)} not excluding a "
+                                      "relevant effect; closest to significance: ",
+                                      reason=_open_reason(best, rows, sign), rows=rows))
+            else:
+                best = max(ts, key=lambda t: t.largest_admitted(sign) / t.threshold)
+                ruled.append(_finding(mech, "ruled_out", best,
+                                      f"{len(ts)} test(s), each excluding a relevant effect or explained "
+                                      "by another covariate; closest to the threshold: ",
+                                      reason=_excluded_reason(best, sign)))
             continue
         reason = notes.get(mech)
         if reason is None:
             reasons = [f"{u.series} vs {u.covariate}: {u.reason}" for u in skipped.get(mech, [])]
             reason = "; ".join(reasons[:3]) if reasons else _missing_reason(mech)
-        untest.append(Finding(mechanism=mech, verdict="not_testable", evidence=reason))
-    return found + ruled + untest
+        untest.append(Finding(mechanism=mech, verdict="not_testable", evidence=reason,
+                              reason="no test of its signature: " + reason))
+    return found + open_ + ruled + untest
 
 
 def _missing_reason(mech: str) -> str:
