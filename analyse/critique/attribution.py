@@ -15,9 +15,15 @@ orientations differ for three reasons, which the twin itself separates:
 The three parts add up to measured - twin(off). Each part's interval is a percentile bootstrap
 over the trials (the same resample for every part); a cause is ``found`` when its part's
 interval excludes 0 and the part reaches the practical threshold of restitution (0.03),
-``ruled_out`` otherwise. ``contact_effective_mass`` also needs its signature: a flat landing
-(long axis horizontal, no rotation) of the twin rebounds below the contact restitution by more
-than that threshold.
+``ruled_out`` otherwise. ``contact_effective_mass`` also needs its signature: at the logged
+orientations the twin rebounds below the rigid-body reference by more than that threshold on
+average. The reference is the same segment as a rigid body with the contact restitution at
+each instantaneous impact, on a frictionless plate (``simulate.rigid_impact``: one end impact,
+or the two of a segment a few degrees off flat), each drop at its own height and orientation;
+drops with no logged orientation are judged by a flat landing, whose reference is the contact
+restitution itself. Friction, the twin's finite contact durations and its rebound ending where
+the centre of mass falls back below its contact height also keep a twin below the reference,
+so the signature is necessary, not sufficient: the hook's own part decides.
 
 The twin's dependence on orientation is compared with the lab's as a discrepancy of its own
 (slope of the rebound against ``orientation_deg``, twin against lab): a dependence the twin
@@ -29,6 +35,7 @@ Kodam, M., Bharadwaj, R., Curtis, J., Hancock, B., Wassgren, C. (2010). Cylindri
 contact detection for use in discrete element method simulations, Part II: Experimental
 validation. Chem. Eng. Sci. 65, 5863-5871.
 Efron, B., Tibshirani, R. J. (1993). An Introduction to the Bootstrap. Chapman & Hall, ch. 13.
+Stronge, W. J. (2000). Impact Mechanics. Cambridge University Press, ch. 2-3.
 """
 
 from __future__ import annotations
@@ -42,7 +49,9 @@ from scipy import stats
 from demcal.analyse.critique.diagnosis import MIN_ROWS, PRACTICAL_THRESHOLDS, trend_test
 from demcal.analyse.critique.gain import N_BOOTSTRAP, _gain, split_trials
 from demcal.analyse.critique.twins import Discrepancy, drop_task, drop_twin_runner, run_drop_twins
+from demcal.simulate.clump import segment_from_parameters
 from demcal.simulate.extensions import engine_hooks
+from demcal.simulate.rigid_impact import rigid_drop
 
 #: Orientation of a flat landing [deg]: the long axis horizontal.
 FLAT_DEG = 0.0
@@ -174,11 +183,8 @@ def attribute_drop_discrepancy(runner, params, pair: str, state: dict, rng) -> t
     parts = _bootstrap_parts(measured, off, on, e_c, rng)
     p, ci = parts["point"], parts["ci95"]
     total = p["total"]
-    # the signature: a flat landing of the twin, where no energy goes into rotation
-    height = float(np.median([t[2] for t in trials]))
-    flat = runner(drop_twin_runner, [drop_task(params, rig_pair, height, FLAT_DEG, 0),
-                                     drop_task(on_params, rig_pair, height, FLAT_DEG, 0)], "flat landing")
-    flat_off, flat_on = (float(r["observable"]["apparent_restitution"]) for r in flat)
+    where, reference, sig_off, sig_on = _rigid_body_signature(runner, params, on_params, rig_pair, trials,
+                                                              {r: (off[i], on[i]) for i, r in enumerate(rows)}, e_c)
 
     # a share of a discrepancy that is not there (its interval holds 0) means nothing
     real = ci["total"][0] > 0 or ci["total"][1] < 0
@@ -191,17 +197,19 @@ def attribute_drop_discrepancy(runner, params, pair: str, state: dict, rng) -> t
         return (lo > 0 or hi < 0) and abs(p[part]) >= bar
 
     common = dict(observable=observable, measured=float(np.mean(measured)), simulated=float(np.mean(off)))
-    signature = e_c - flat_off > bar
+    signature = reference - sig_off > bar
     damping_found = signature and judged("damping")
     findings = [
         ModelFinding("contact_effective_mass", "found" if damping_found else "ruled_out",
                      share=share(p["damping"]), part=p["damping"], part_ci95=ci["damping"],
-                     evidence=(f"landing flat the twin rebounds at {_fmt(flat_off)} with contact {state['parameter']} "
-                               f"= {_fmt(e_c)} ({_fmt(flat_on)} with the contact effective mass); at the lab's "
-                               f"drops the effective mass raises the twin from {_fmt(np.mean(off))} to "
+                     evidence=(f"{where} the twin rebounds at {_fmt(sig_off)} where a rigid body with contact "
+                               f"{state['parameter']} = {_fmt(e_c)} rebounds at {_fmt(reference)} "
+                               f"({_fmt(sig_on)} with the contact effective mass); at the lab's drops the "
+                               f"effective mass raises the twin from {_fmt(np.mean(off))} to "
                                f"{_fmt(np.mean(on))}: {_fmt(p['damping'])} [{_fmt(ci['damping'][0])}, "
                                f"{_fmt(ci['damping'][1])}] of the discrepancy {_fmt(total)}"
-                               + ("" if signature else "; the flat landing shows no overdamping")), **common),
+                               + ("" if signature else "; the twin does not rebound below the rigid body")),
+                     **common),
         ModelFinding("orientation_rotation", "found" if judged("rotation") else "ruled_out",
                      share=share(p["rotation"]), part=p["rotation"], part_ci95=ci["rotation"],
                      evidence=(f"with the effective mass damped, the twin's apparent restitution {_fmt(np.mean(on))} lies "
@@ -216,6 +224,28 @@ def attribute_drop_discrepancy(runner, params, pair: str, state: dict, rng) -> t
         if gain is not None:
             gains.append(gain)
     return findings, gains
+
+
+def _rigid_body_signature(runner, params, on_params, rig_pair: str, trials, twins: dict, e_c: float):
+    """Where the signature of ``contact_effective_mass`` is read, the rigid-body reference there
+    and the twin's rebound without and with the hook (means over the drops).
+
+    ``twins`` maps a data row to the twin's (off, on) apparent restitution. The drops with a
+    logged orientation: each against ``simulate.rigid_impact.rigid_drop`` of the segment at its
+    orientation and height, contact restitution ``e_c``. Without one: a flat landing of the
+    twin at the median height (run here), against the flat rigid body (``e_c``)."""
+    body = segment_from_parameters(params)
+    logged = [(row, h, o) for row, _, h, o, _, _ in trials if o is not None and row in twins]
+    if logged:
+        reference = float(np.mean([rigid_drop(body, float(o), e_c, float(h)).apparent_restitution
+                                   for _, h, o in logged]))
+        off, on = (float(np.mean([twins[row][k] for row, _, _ in logged])) for k in (0, 1))
+        return f"at the {len(logged)} drops' logged orientations", reference, off, on
+    height = float(np.median([t[2] for t in trials]))
+    flat = runner(drop_twin_runner, [drop_task(params, rig_pair, height, FLAT_DEG, 0),
+                                     drop_task(on_params, rig_pair, height, FLAT_DEG, 0)], "flat landing")
+    off, on = (float(r["observable"]["apparent_restitution"]) for r in flat)
+    return "landing flat", rigid_drop(body, FLAT_DEG, e_c, height).apparent_restitution, off, on
 
 
 def _damping_gain(runner, params, on_params, pair: str, state: dict, rng):

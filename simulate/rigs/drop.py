@@ -34,7 +34,10 @@ body in m* (docs/design.md, as EDEM). A segment landing flat touches with all n 
 the body then sees n springs and n dashpots whose damping is set for one, so its damping
 ratio is sqrt(n) times the contact's and the rebound far lower than ``e`` (0.04 instead of
 0.35 for 5 spheres; Kodam et al. 2010). A segment landing end on (one contact through the
-centre of mass) rebounds with the contact's ``e``.
+centre of mass) rebounds with the contact's ``e``. One striking with an end sphere is
+overdamped too, its contact moving only the body's effective mass there. The
+``contact_effective_mass`` hook (``simulate.extensions``) damps that mass at each contact
+instead; ``simulate.rigid_impact`` gives the rigid body's rebound to compare with.
 
 Time step. Contacts must be resolved: by default dt = t_c / 100, t_c the elastic Hertz contact
 duration (Johnson 1985, sec. 11.4) of one member sphere carrying 1/n of the body's mass at the

@@ -179,6 +179,39 @@ def test_drops_within_five_degrees_of_flat_split_the_gap_between_damping_and_rot
     assert gain.ci95[0] > 0 and gain.after < gain.before / 3
 
 
+def test_the_effective_mass_signature_reads_the_logged_orientations_or_a_flat_landing():
+    """The signature of contact_effective_mass compares the twin with the rigid body at each
+    drop's logged orientation and height; drops with no orientation logged are judged by a
+    flat landing of the twin, whose rigid-body reference is the contact restitution."""
+    from demcal.analyse.critique.attribution import _rigid_body_signature
+    from demcal.simulate.clump import segment_from_parameters
+    from demcal.simulate.params import DEMParameters
+    from demcal.simulate.rigid_impact import rigid_drop
+
+    params = DEMParameters(e_pw=0.36)
+    on = params.with_(contact_effective_mass=True)
+    ran = []
+
+    def runner(function, tasks, desc):
+        ran.extend(tasks)
+        return [function(t) for t in tasks]
+
+    trials = [(1, 0.3, 0.4, 60.0, {}, None), (2, 0.3, 0.2, 2.0, {}, None)]
+    where, reference, off, on_mean = _rigid_body_signature(runner, params, on, "particle-steel", trials,
+                                                           {1: (0.1, 0.2), 2: (0.05, 0.35)}, 0.36)
+    body = segment_from_parameters(params)
+    assert reference == pytest.approx(np.mean([rigid_drop(body, 60.0, 0.36, 0.4).apparent_restitution,
+                                               rigid_drop(body, 2.0, 0.36, 0.2).apparent_restitution]))
+    assert (off, on_mean) == pytest.approx((0.075, 0.275)) and "2 drops" in where and not ran
+    unlogged = [(1, 0.3, 0.4, None, {}, None), (2, 0.3, 0.2, None, {}, None)]
+    where, reference, off, on_mean = _rigid_body_signature(runner, params, on, "particle-steel", unlogged,
+                                                           {1: (0.1, 0.2), 2: (0.05, 0.35)}, 0.36)
+    assert where == "landing flat" and reference == pytest.approx(0.36, abs=1e-12)
+    assert [t["orientation_deg"] for t in ran] == [0.0, 0.0] and ran[0]["height"] == pytest.approx(0.3)
+    assert off < 0.5 * 0.36 and on_mean == pytest.approx(0.36, rel=0.05)
+    assert ran[1]["params"]["contact_effective_mass"] and "contact_effective_mass" not in ran[0]["params"]
+
+
 def test_cli_errors_name_the_option(tmp_path):
     parser = argparse.ArgumentParser()
     register(parser.add_subparsers())
