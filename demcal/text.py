@@ -13,6 +13,10 @@ import unicodedata
 #: Longest text kept by :func:`one_line` by default [characters].
 MAX_LINE = 200
 
+#: First characters that make a spreadsheet run a cell as a formula (tab and carriage return,
+#: the others of that kind, never survive :func:`one_line`).
+FORMULA_START = ("=", "+", "-", "@")
+
 #: Unicode categories that may end a line or move the cursor: controls (Cc, which holds
 #: \\n, \\r, \\t, ESC, NEL), format characters (Cf: bidi overrides), line and paragraph
 #: separators (Zl, Zp), and unassigned or private code points.
@@ -47,3 +51,9 @@ def one_line(text, *, limit: int = MAX_LINE, replacement: str = " ") -> str:
     if len(cleaned) > limit:
         cleaned = cleaned[: max(limit - 1, 0)] + "\u2026"
     return cleaned
+
+
+def no_formula(cell: str) -> str:
+    """A CSV cell of text that a spreadsheet shows as text: a leading ``'`` where it would
+    otherwise run the cell as a formula (CSV injection)."""
+    return "'" + cell if cell.startswith(FORMULA_START) else cell

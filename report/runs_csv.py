@@ -16,7 +16,7 @@ import csv
 from pathlib import Path
 
 from demcal.report.tables import Campaign, run_stages
-from demcal.text import one_line
+from demcal.text import no_formula, one_line
 
 #: The run list's file name, in the campaign folder beside the report.
 RUNS_CSV = "runs.csv"
@@ -24,10 +24,6 @@ RUNS_CSV = "runs.csv"
 #: Columns before the observables (then one column per observable name, in order of first
 #: appearance over the runs).
 COLUMNS = ("key", "stage", "rig", "seed", "status", "attempts", "wall_s", "error")
-
-#: First characters that make a spreadsheet read a cell as a formula.
-FORMULA_START = ("=", "+", "-", "@")
-
 
 def csv_cell(value) -> str:
     """One cell as written: empty for None, numbers exactly (``repr``), text on one line and
@@ -38,8 +34,7 @@ def csv_cell(value) -> str:
         return "true" if value else "false"
     if isinstance(value, (int, float)):
         return repr(value)
-    text = one_line(value)
-    return "'" + text if text.startswith(FORMULA_START) else text
+    return no_formula(one_line(value))
 
 
 def run_list(c: Campaign) -> tuple[list[str], list[list[str]]]:

@@ -54,7 +54,7 @@ from demcal.simulate.contact.rolling import ROLLING_LEVERS
 from demcal.simulate.extensions import engine_hooks
 from demcal.simulate.materials import youngs_modulus
 from demcal.simulate.params import DEMParameters
-from demcal.text import one_line
+from demcal.text import no_formula, one_line
 
 #: Formats ``demcal export --to`` writes, and the file each writes by default.
 EXPORT_FILES = {"liggghts": "liggghts_materials.in", "yade": "yade_materials.py",
@@ -74,10 +74,6 @@ LEVER_SAMPLE = 4000
 #: Characters LIGGGHTS' input parser acts on: ``&`` at the end of a line joins the next line to
 #: it (even to a comment), ``$`` substitutes a variable.
 _LIGGGHTS_SPECIAL = str.maketrans({"&": " ", "$": " "})
-
-#: First characters that make a spreadsheet run a cell as a formula (tab and carriage return,
-#: the others of that kind, never survive ``one_line``).
-_FORMULA_START = ("=", "+", "-", "@")
 
 
 def liggghts_seeds(seed: int) -> tuple:
@@ -264,12 +260,6 @@ def _text(text, target: str) -> str:
     return one_line(text)
 
 
-def _no_formula(cell: str) -> str:
-    """A CSV cell of text a spreadsheet shows as text: a leading ``'`` where it would otherwise
-    run the cell as a formula."""
-    return "'" + cell if cell.startswith(_FORMULA_START) else cell
-
-
 def _header(model: ExportModel, target: str, title: str, comment: str) -> list:
     """Lines every export opens with: what it is, where it came from, the rolling convention
     and what does not carry over."""
@@ -423,13 +413,13 @@ def edem_table(model: ExportModel) -> str:
         w.writerow([line])       # one cell: a comma or quote in the text cannot add a field
     name = one_line(model.material)
     w.writerow(["section", "name", "Poisson's ratio", "Shear Modulus (Pa)", "Density (kg/m3)"])
-    w.writerow(["material", _no_formula(name), _g(p.poisson_ratio), _g(p.shear_modulus_pa),
+    w.writerow(["material", no_formula(name), _g(p.poisson_ratio), _g(p.shear_modulus_pa),
                 _g(p.particle_density_kg_m3)])
     w.writerow(["material", "steel", _g(p.wall_poisson_ratio), _g(p.wall_shear_modulus_pa),
                 _g(p.wall_density_kg_m3)])
     w.writerow(["section", "interaction", "Coefficient of Restitution", "Coefficient of Static Friction",
                 "Coefficient of Rolling Friction"])
-    names = {"particle-particle": _no_formula(f"{name}-{name}"), "particle-wall": _no_formula(f"{name}-steel")}
+    names = {"particle-particle": no_formula(f"{name}-{name}"), "particle-wall": no_formula(f"{name}-steel")}
     for key, (e, mu_s, mu_r) in inter.items():
         w.writerow(["interaction", names[key], _g(e), _g(mu_s), _g(mu_r)])
     w.writerow(["section", "sphere", "X (m)", "Y (m)", "Z (m)", "Radius (m)"])
