@@ -18,8 +18,10 @@ from demcal.jsonio import to_jsonable
 #: with unchanged inputs: it is part of every run-store key, so a store or cache never serves a
 #: record computed by other physics (``run_key``). Revision 2: shared normal
 #: damping (``contact_effective_mass``, then named ``multi_contact_damping``) damps the
-#: effective mass at each contact.
-MODEL_VERSION = 2
+#: effective mass at each contact. Revision 3: the drop rig reads the rebound to the first apex
+#: in free flight after the whole impact sequence (a tilted body's centre of mass descending
+#: between its end impacts no longer ends it).
+MODEL_VERSION = 3
 
 
 def run_key(inputs: dict) -> str:
