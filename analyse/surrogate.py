@@ -103,9 +103,12 @@ class Prior:
             raise InputError(f"the prior of {', '.join(bad)} is empty inside the admissible range")
         return cls(tuple(names), mean, sd, lo, hi, tuple(sources))
 
+    def _args(self) -> tuple:
+        """Shape and location arguments of ``scipy.stats.truncnorm``."""
+        return (self.low - self.mean) / self.sd, (self.high - self.mean) / self.sd, self.mean, self.sd
+
     def _dist(self):
-        return stats.truncnorm((self.low - self.mean) / self.sd, (self.high - self.mean) / self.sd,
-                               loc=self.mean, scale=self.sd)
+        return stats.truncnorm(*self._args())
 
     @property
     def dim(self) -> int:
@@ -119,7 +122,10 @@ class Prior:
         return self.ppf(rng.random((n, self.dim)))
 
     def logpdf(self, x) -> np.ndarray:
-        return np.sum(self._dist().logpdf(np.atleast_2d(x)), axis=1)
+        # the distribution's own method, not a frozen one: freezing rebuilds scipy's distribution
+        # object (docstrings included) on every call, and the posterior mode calls this thousands
+        # of times
+        return np.sum(stats.truncnorm.logpdf(np.atleast_2d(x), *self._args()), axis=1)
 
     def truncated_mean_sd(self) -> tuple[np.ndarray, np.ndarray]:
         d = self._dist()
