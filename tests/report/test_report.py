@@ -41,6 +41,50 @@ def _campaign(tmp_root: Path, name: str) -> tuple[Path, Path]:
     return data, out
 
 
+def _folder_digest(folder: Path) -> str:
+    """SHA-256 over the names and contents of every file under ``folder``."""
+    h = hashlib.sha256()
+    for p in sorted(q for q in folder.rglob("*") if q.is_file()):
+        h.update(str(p.relative_to(folder)).encode() + b"\0" + hashlib.sha256(p.read_bytes()).digest())
+    return h.hexdigest()
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _memoised_audit_inputs():
+    """Every audit here measures the example workbook again and reads the stored PDF's words;
+    both are pure functions of file contents, so they are computed once per content: the
+    measurement keyed by the workbook's path, options and every file beside it (photos
+    included), the PDF's words by its SHA-256. A changed workbook, photo or PDF is computed
+    afresh. Measurements that write annotated photos (``calibrate``) are never cached."""
+    import copy
+
+    import demcal.measure.pipeline as pipeline
+    import demcal.report.audit as audit_module
+
+    measure, words = pipeline.measure_workbook, audit_module.pdf_words
+    measured, read = {}, {}
+
+    def measure_workbook(wb, **kwargs):
+        if not isinstance(wb, (str, Path)) or kwargs.get("annotate_dir") or kwargs.get("photo_estimator"):
+            return measure(wb, **kwargs)
+        path = Path(wb).resolve()
+        key = (str(path), repr(sorted(kwargs.items())), _folder_digest(path.parent))
+        if key not in measured:
+            measured[key] = measure(wb, **kwargs)
+        return copy.deepcopy(measured[key])
+
+    def pdf_words(path):
+        key = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+        if key not in read:
+            read[key] = words(path)
+        return list(read[key])
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(pipeline, "measure_workbook", measure_workbook)
+        mp.setattr(audit_module, "pdf_words", pdf_words)
+        yield
+
+
 @pytest.fixture(scope="module")
 def campaign(tmp_path_factory):
     data, out = _campaign(tmp_path_factory.mktemp("report"), "campaign")
