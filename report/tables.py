@@ -993,16 +993,18 @@ def table_covariate_tests(c: Campaign) -> Table:
     rows, notes = [], []
     for i in order:
         t = items[i]
-        rows.append((i + 1, t.series, t.sheet, t.source, t.covariate, t.method, t.level, t.n, t.effect,
+        rows.append((i + 1, t.series, t.sheet, t.source, t.covariate, f"{t.method} ({t.tier})", t.level, t.n, t.effect,
                      list(t.ci95), t.effect_unit, t.practical, t.threshold, t.p_value, t.p_adjusted,
                      covariate_verdict(t)))
     opts = c.critique.provenance.options if c.critique is not None else {}
     how = {"bh": "Benjamini-Hochberg", "holm": "Holm"}.get(opts.get("correction"), opts.get("correction"))
-    notes.append("Sorted by adjusted p-value" + (f" ({how}, all tests together)" if how else "")
+    notes.append("Sorted by adjusted p-value" + (f" ({how} within each tier: primary tests spend 0.8 of the "
+                                                  "level, follow-ups 0.2)" if how else "")
                  + "; significant rows in bold" + (f" (adjusted p < {opts['alpha']:g})"
                                                    if isinstance(opts.get("alpha"), (int, float)) else "")
-                 + ". Test: position in critique.json's tests. Effect: slope per covariate unit (trend, "
-                 "line), range of level means (anova) or mean (mean), with its marginal 95 % interval; "
+                 + ". Test: position in critique.json's tests. Method: line (slope), trend (line and "
+                 "curvature), anova or mean, with its tier. Effect: slope per "
+                 "covariate unit (trend, line), range of level means (anova) or mean (mean), with its marginal 95 % interval; "
                  "over range: the effect across the covariate's observed range, in the unit of the series, "
                  "against the practical threshold. A cause is significant, above the threshold and not "
                  "explained by another covariate.")

@@ -41,8 +41,8 @@ kind (default size)                       what changes
 (-2e-4 per mm)                            per mm of drop height (0.38 at 200 mm to 0.30 at
                                           600 mm around 0.34)
 ``orientation_rotation`` (0 deg)          segments dropped by hand at random orientations
-                                          from ``size`` to 90 deg, so part of the energy goes
-                                          into rotation as in the drop twin
+                                          from ``size`` to 90 deg on every pair, so part of the
+                                          energy goes into rotation as in the drop twin
 ``size_dependence`` (0.02 per mm)         contact e tracks the specimen's length
 ``block_effect`` (2 deg)                  one operator reads incline angles ``size`` higher
                                           (levels of the covariate offset evenly over ``size``;
@@ -84,7 +84,7 @@ EFFECT_KINDS = ("velocity_dependent_restitution", "orientation_rotation", "size_
 EFFECT_DEFAULTS = {
     "velocity_dependent_restitution": dict(size=-2.0e-4, sheet="drop", quantity="restitution",
                                            covariate="drop_height_mm", unit="1/mm"),
-    "orientation_rotation": dict(size=0.0, sheet="drop", quantity="restitution.particle-steel",
+    "orientation_rotation": dict(size=0.0, sheet="drop", quantity="restitution",
                                  covariate="orientation_deg", unit="deg (lowest release angle)"),
     "size_dependence": dict(size=0.02, sheet="drop", quantity="restitution", covariate="length_mm",
                             unit="1/mm"),

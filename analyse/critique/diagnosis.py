@@ -9,11 +9,13 @@ that name a ``specimen_id``, the specimen's calliper size and covariates from th
 
 Tests (one p-value per series and covariate):
 
-numeric covariate (``trend``)
-    Least squares y = b0 + b1 x + b2 x^2 (x centred and scaled); the p-value is the F-test of
-    b1 = b2 = 0 (a trend or a curvature); with only two distinct values, the t-test of the
-    straight line's slope. The effect is the slope of the straight line y = a + b x [unit of y
-    per unit of x] with its Student-t 95 % interval; the curvature's own p-value is reported.
+numeric covariate (``line`` and ``trend``)
+    ``line``: least squares y = a + b x, the t-test of the slope b; the effect is b [unit of y
+    per unit of x] with its Student-t 95 % interval. ``trend`` (three or more distinct
+    values): y = b0 + b1 z + b2 z^2 (z the centred and scaled x; degree ``CURVED_DEGREE`` for
+    the covariates of ``CURVED_COVARIATES``), the F-test of all its terms (a trend or a
+    curvature); its effect and interval are the straight line's, and the curvature's own
+    p-value is reported.
 categorical covariate (``anova``)
     One-way analysis of variance over the levels with at least two rows (Fisher 1925). The
     effect is the range of the level means (largest minus smallest); its interval is the
@@ -22,12 +24,28 @@ categorical covariate (``anova``)
 paired difference or offset (``mean``)
     One-sample t-test of the mean (flank difference, floor tilt, twin-minus-contact).
 
-Multiple testing. The p-values of all tests of a workbook are adjusted together, by
-Benjamini & Hochberg (1995) (``"bh"``, default; false discovery rate) or Holm (1979)
-(``"holm"``; family-wise error rate). A test is *significant* when its adjusted p-value is
-below ``alpha`` and *relevant* when its effect over the data (trend: the range of the fitted
-line-and-quadratic over the covariate's observed values, so that a U-shape counts; line:
-|slope| x range; block: the range of level means; mean: |mean|) reaches the practical
+Multiple testing. The tests come in two tiers, each adjusted on its own by Benjamini &
+Hochberg (1995) (``"bh"``, default; false discovery rate) or Holm (1979) (``"holm"``;
+family-wise error rate) and each spending its share of ``alpha`` (``TIER_SHARES``: 0.8 and
+0.2; Bonferroni over the tiers, so with nothing there the chance of any significant test stays
+below alpha):
+
+- ``primary``: what the catalogue's mechanisms predict, with the fewest tests: the straight
+  lines, anovas and means of the pooled series (an effect the drop pairs or incline surfaces
+  share) and of the series measured once (sizes, density, repose, flanks), and, for a
+  covariate expected to act in a V (``CURVED_COVARIATES``: orientation), its trend on every
+  series;
+- ``follow-up``: the per-pair and per-surface series that a pooled series holds (an effect
+  on one pair only), and the trends (curvature) of the other covariates.
+
+At a lab's sample size (21 drops per pair over three heights, 20 slide and 20 roll trials per
+surface) the tiers find each planted effect of the virtual lab in about 9 of 10 workbooks,
+where one adjustment of every test together finds a drift in about 5 of 10
+(benchmarks/critique_power.md); the price is a U-shaped dependence on a covariate expected to
+act in a line, a follow-up, found less often than a line of its size. A test is *significant* when its adjusted p-value (the
+tier's, over its share) is below ``alpha`` and *relevant* when its effect over the data (trend:
+the range of the fitted curve over the covariate's observed values, so that a U-shape counts;
+line: |slope| x range; block: the range of level means; mean: |mean|) reaches the practical
 threshold of its quantity (``PRACTICAL_THRESHOLDS``), so that a tiny but significant effect is
 not reported as a cause. A test *excludes* a relevant effect when its 95 % interval lies within
 the threshold (``CovariateTest.excludes_relevant``): only then may a mechanism be ruled out;
@@ -39,24 +57,24 @@ pair) is also tested on all their rows at once (``pooled_series``): each value r
 own pair's mean, so the pairs' different levels do not hide it, with the family's threshold
 over the mean level.
 
-Level. ``DEFAULT_ALPHA`` is 0.01. When nothing is there, BH (like Holm) lets a workbook name a
-cause with probability about alpha whatever the number of tests; with the 50-odd tests of a
-full workbook and 20-30 trials per group, significant noise is mostly also above the practical
-thresholds, so alpha is the false-alarm rate: at 0.05, 4 of 100 clean virtual-lab workbooks
-named a cause (``simulate.virtual_lab``, photos omitted); at 0.01, 2 of the same 100.
+Level. ``DEFAULT_ALPHA`` is 0.01: over 200 clean virtual-lab workbooks of a lab's size, with
+independent trials and with three or five trials per specimen (intraclass correlation 0.5),
+1 to 3 named a cause; at 0.02, 5 to 6 of the clustered ones did, beyond a bound of 5 %
+(benchmarks/critique_power.md).
 
 Intervals after selection. A cause is named because its test came out significant, so its
 ordinary 95 % interval covers the true size less often than 95 % (the selected estimates are
 the large ones). A named effect therefore carries the false-coverage-rate interval of
 Benjamini & Yekutieli (2005): the marginal interval at level 1 - R q / m for R effects selected
-among m tests, q = ``FCR_LEVEL``, so that on average at most 5 % of the named intervals miss.
+among the m tests of its tier, q = ``FCR_LEVEL`` times the tier's share, so that on average at
+most 5 % of the named intervals miss.
 
 Repeated trials. Trials on one specimen share its properties, so they are not independent
 (with an intraclass correlation of 0.5, ten specimens of three trials gave a false alarm on a
 specimen-level covariate in about one clean workbook in four when tested trial by trial).
 With repeats, every test carries a random intercept per specimen (feasible GLS with moment
-estimates of the variance components) and the between-within degrees of freedom
-(``series_tests``).
+estimates of the variance components, the specimen variance taken as nil unless the specimens
+differ at ``PRELIMINARY_LEVEL``) and the between-within degrees of freedom (``series_tests``).
 
 Identifiers (``*_id``), file columns, and labels that are unique to almost every row are not
 covariates; a covariate with no variation, or too few rows (``MIN_ROWS``), is listed as
@@ -64,11 +82,15 @@ untestable with the reason.
 
 References
 ----------
+Bancroft, T. A. (1964). Analysis and inference for incompletely specified models involving the
+use of preliminary test(s) of significance. Biometrics 20(3), 427-442.
 Benjamini, Y., Hochberg, Y. (1995). Controlling the false discovery rate: a practical and
 powerful approach to multiple testing. J. R. Stat. Soc. B 57(1), 289-300.
 Benjamini, Y., Yekutieli, D. (2005). False discovery rate-adjusted multiple confidence
 intervals for selected parameters. J. Am. Stat. Assoc. 100(469), 71-81.
 Cohen, J. (1988). Statistical Power Analysis for the Behavioral Sciences, 2nd ed. Erlbaum.
+Paull, A. E. (1950). On a preliminary test for pooling mean squares in the analysis of
+variance. Ann. Math. Stat. 21(4), 539-556.
 Holm, S. (1979). A simple sequentially rejective multiple test procedure. Scand. J. Stat. 6,
 65-70.
 Fisher, R. A. (1925). Statistical Methods for Research Workers. Oliver & Boyd (analysis of
@@ -117,6 +139,23 @@ FCR_LEVEL = 0.05
 
 CORRECTIONS = ("bh", "holm")
 
+#: Share of ``alpha`` spent on each tier of tests (see the module docstring, Multiple testing).
+TIER_SHARES = {"primary": 0.8, "follow-up": 0.2}
+
+#: Level of the preliminary test of the specimen variance (``_random_effects_fit``): 0.25, the
+#: level at which pooling after a preliminary test keeps the final test close to its nominal
+#: size (Bancroft 1964; Paull 1950).
+PRELIMINARY_LEVEL = 0.25
+
+#: Covariates whose expected effect is not a line: a segment rebounds at its contact
+#: restitution landing flat and end on, and far lower in between, down to no rebound at all
+#: where it pivots on its end (``simulate.rigid_impact``, the drop twin), and that V lies at a
+#: different angle on each plate. A parabola fits it poorly: their trend is a polynomial of
+#: degree ``CURVED_DEGREE`` and is their primary test on every series, pooled or not (their
+#: straight line is a follow-up).
+CURVED_COVARIATES = ("orientation_deg",)
+CURVED_DEGREE = 4
+
 #: Covariates that are never tested (files and identifiers are recognised by name too).
 NOT_COVARIATES = {"id", "file", "track_file", "curve_file", "side", "annotated"}
 
@@ -152,6 +191,8 @@ class Series:
     practical_threshold : float or None
         The practical threshold in the series' unit when its family's does not apply (a pooled
         series of values relative to their pair's mean).
+    members : tuple of str
+        For a pooled series, the names of the series it pools (tested as follow-ups).
     """
 
     name: str
@@ -164,6 +205,7 @@ class Series:
     covariates: dict = field(default_factory=dict)
     test: str = "covariates"
     practical_threshold: float | None = None
+    members: tuple = ()
 
     @property
     def threshold(self) -> float:
@@ -187,7 +229,8 @@ class CovariateTest:
         Covariate tested (``side`` for a flank difference, ``floor`` for a floor tilt,
         ``orientation_deg`` for the twin-minus-contact offset).
     method : str
-        ``trend``, ``line``, ``anova`` or ``mean``.
+        ``line`` (straight line, 1 degree of freedom), ``trend`` (line and curvature, 2),
+        ``anova`` or ``mean``.
     n : int
         Rows used.
     effect : float
@@ -232,8 +275,13 @@ class CovariateTest:
         random specimen intercept and the specimens' degrees of freedom) or ``trial within
         specimens`` (a trial covariate, random specimen intercept, within degrees of freedom).
     alpha_test : float
-        The unadjusted level at which this test alone in its family would be significant
-        (alpha / m): the level :meth:`rows_to_decide` plans for.
+        The unadjusted level at which this test alone in its tier would be significant
+        (alpha x the tier's share / m): the level :meth:`rows_to_decide` plans for.
+    tier : str
+        ``primary`` or ``follow-up`` (``TIER_SHARES``; the module docstring says which tests
+        are which).
+    df_test : int
+        Numerator degrees of freedom of the test (a trend's terms; 1 for a line or a mean).
     """
 
     series: str
@@ -260,6 +308,8 @@ class CovariateTest:
     levels: dict = field(default_factory=dict)
     level: str = "trial"
     alpha_test: float = math.nan
+    tier: str = "primary"
+    df_test: int = 1
 
     @property
     def quantity(self) -> str:
@@ -288,12 +338,13 @@ class CovariateTest:
         threshold in the effect's unit (over the covariate's range for a slope), the standard
         error falls as 1 / sqrt(rows), and lambda is the noncentrality at which the test's
         chi-square (2 degrees of freedom for a trend's line and curvature, levels - 1 for a
-        block, else 1) reaches ``power`` (Cohen 1988, ch. 8-9). None without a standard error."""
+        block, the terms of a trend (``df_test``), else 1) reaches ``power`` (Cohen 1988, ch.
+        8-9). None without a standard error."""
         delta = self.threshold / self.span if self.span else self.threshold
         alpha = self.alpha_test if math.isfinite(self.alpha_test) else DEFAULT_ALPHA
         if not (math.isfinite(self.se) and self.se > 0 and delta > 0):
             return None
-        df = 2 if self.method == "trend" else max(len(self.levels) - 1, 1) if self.method == "anova" else 1
+        df = max(len(self.levels) - 1, 1) if self.method == "anova" else self.df_test
         crit = float(stats.chi2.isf(alpha, df))
         lam = optimize.brentq(lambda nc: float(stats.ncx2.sf(crit, df, nc)) - power, 1e-9, 1e6)
         return int(math.ceil(self.n * lam * (self.se / delta) ** 2))
@@ -366,20 +417,34 @@ def adjust_pvalues(p, method: str = "bh") -> np.ndarray:
 
 
 def adjust(tests, *, method: str = "bh", alpha: float = DEFAULT_ALPHA) -> list:
-    """The tests with ``p_adjusted``, ``significant`` and ``relevant`` set, all adjusted together."""
+    """The tests with ``p_adjusted``, ``significant`` and ``relevant`` set.
+
+    Each tier (``CovariateTest.tier``) is adjusted on its own and spends its share of
+    ``alpha`` (``TIER_SHARES``): ``p_adjusted`` is the tier's adjusted p-value over its share
+    (capped at 1), so that ``p_adjusted < alpha`` is significance in every tier. With nothing
+    there the chance of any significant test is at most the sum of the tiers' levels, alpha
+    (Bonferroni over the tiers). Intervals after selection are those of each tier.
+    """
     if not 0 < alpha < 1:
         raise InputError(f"alpha must be in (0, 1), got {alpha!r}")
-    tests = list(tests)
-    adj = adjust_pvalues([t.p_value for t in tests], method)
-    m = int(np.isfinite(adj).sum())
-    out = [replace(t, p_adjusted=float(a), significant=bool(np.isfinite(a) and a < alpha),
-                   relevant=bool(np.isfinite(t.practical) and t.practical >= t.threshold),
-                   alpha_test=alpha / max(m, 1))
-           for t, a in zip(tests, adj)]
-    selected = sum(t.significant and t.relevant for t in out)
-    if selected:
-        tail = selected * FCR_LEVEL / m / 2.0
-        out = [replace(t, ci_selected=_interval(t, tail)) if t.significant and t.relevant else t for t in out]
+    out = list(tests)
+    unknown = {t.tier for t in out} - set(TIER_SHARES)
+    if unknown:
+        raise InputError(f"unknown test tier(s) {sorted(unknown)}; valid: {', '.join(TIER_SHARES)}")
+    for tier, share in TIER_SHARES.items():
+        idx = [i for i, t in enumerate(out) if t.tier == tier]
+        adj = np.minimum(adjust_pvalues([out[i].p_value for i in idx], method) / share, 1.0)
+        m = int(np.isfinite(adj).sum())
+        for i, a in zip(idx, adj):
+            t = out[i]
+            out[i] = replace(t, p_adjusted=float(a), significant=bool(np.isfinite(a) and a < alpha),
+                             relevant=bool(np.isfinite(t.practical) and t.practical >= t.threshold),
+                             alpha_test=alpha * share / max(m, 1))
+        selected = [i for i in idx if out[i].significant and out[i].relevant]
+        if selected:
+            tail = len(selected) * FCR_LEVEL * share / m / 2.0
+            for i in selected:
+                out[i] = replace(out[i], ci_selected=_interval(out[i], tail))
     return out
 
 
@@ -396,10 +461,18 @@ def _t95(dof: int) -> float:
     return float(stats.t.ppf(0.975, dof)) if dof > 0 else math.nan
 
 
-def trend_test(x, y) -> dict:
-    """Straight line and quadratic of y on a numeric x (see the module docstring).
+def trend_test(x, y, degree: int = 2) -> dict:
+    """Straight line and polynomial of y on a numeric x (see the module docstring).
 
-    Returns ``{"method", "n", "effect", "ci95", "p_value", "p_curvature", "span"}``.
+    The trend is y = b0 + b1 z + ... + b_d z^d (z the centred and scaled x, d = ``degree``,
+    lowered to the distinct values of x less one); its p-value is the F-test of all its terms,
+    ``p_curvature`` the F-test of the terms beyond the straight line (for d = 2 the quadratic
+    term's t-test). With two distinct values, only the line.
+
+    Returns ``{"method", "n", "effect", "ci95", "se", "dof", "p_value", "p_line", "p_curvature",
+    "span", "df_test"}`` (and ``curve_range`` for a trend): ``effect`` and ``ci95`` are the
+    straight line's slope and its Student-t interval, ``p_line`` its t-test, ``df_test`` the
+    numerator degrees of freedom of ``p_value``.
     """
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
@@ -414,31 +487,28 @@ def trend_test(x, y) -> dict:
     se_b = math.sqrt(rss1 / dof1 / sxx) if dof1 > 0 else math.nan
     t = _t95(dof1)
     ci = (b - t * se_b, b + t * se_b)
-    if np.unique(x).size >= 3 and n >= 4:
-        z = xc / math.sqrt(sxx / n)
-        X = np.column_stack([np.ones(n), z, z * z])
-        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
-        resid2 = y - X @ coef
-        rss2 = float(resid2 @ resid2)
-        rss0 = float(((y - y.mean()) ** 2).sum())
-        dof2 = n - 3
-        if rss2 > 0:
-            F = ((rss0 - rss2) / 2.0) / (rss2 / dof2)
-            p = float(stats.f.sf(F, 2, dof2))
-            cov = rss2 / dof2 * np.linalg.pinv(X.T @ X)
-            tc = coef[2] / math.sqrt(cov[2, 2]) if cov[2, 2] > 0 else math.inf
-            p_curv = float(2.0 * stats.t.sf(abs(tc), dof2))
-        else:
-            p, p_curv = (0.0, 0.0) if rss0 > 0 else (1.0, 1.0)
-        fitted = X @ coef
-        return {"method": "trend", "n": n, "effect": b, "ci95": ci, "se": se_b, "dof": dof1, "p_value": p,
-                "p_curvature": p_curv, "span": span, "curve_range": float(fitted.max() - fitted.min())}
     if se_b > 0:
-        p = float(2.0 * stats.t.sf(abs(b / se_b), dof1))
+        p_line = float(2.0 * stats.t.sf(abs(b / se_b), dof1))
     else:
-        p = 0.0 if b != 0 else 1.0
-    return {"method": "line", "n": n, "effect": b, "ci95": ci, "se": se_b, "dof": dof1, "p_value": p,
-            "p_curvature": None, "span": span}
+        p_line = 0.0 if b != 0 else 1.0
+    line = {"n": n, "effect": b, "ci95": ci, "se": se_b, "dof": dof1, "p_line": p_line, "span": span}
+    d = min(degree, np.unique(x).size - 1, n - 2)
+    if d < 2:
+        return {**line, "method": "line", "p_value": p_line, "p_curvature": None, "df_test": 1}
+    z = xc / math.sqrt(sxx / n)
+    X = np.column_stack([z ** k for k in range(d + 1)])
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    rss = float(np.sum((y - X @ coef) ** 2))
+    rss0 = float(((y - y.mean()) ** 2).sum())
+    dof = n - d - 1
+    if rss > 0:
+        p = float(stats.f.sf((rss0 - rss) / d / (rss / dof), d, dof))
+        p_curv = float(stats.f.sf(max(rss1 - rss, 0.0) / (d - 1) / (rss / dof), d - 1, dof))
+    else:
+        p, p_curv = (0.0, 0.0) if rss0 > 0 else (1.0, 1.0)
+    fitted = X @ coef
+    return {**line, "method": "trend", "p_value": p, "p_curvature": p_curv, "df_test": d,
+            "curve_range": float(fitted.max() - fitted.min())}
 
 
 def block_test(levels, y) -> dict:
@@ -493,7 +563,11 @@ def _random_effects_fit(y, X, groups):
     msw = float(np.sum((e - means[index]) ** 2)) / max(n - G, 1)
     msb = float(np.sum(sizes * (means - e.mean()) ** 2)) / max(G - 1, 1)
     n0 = (n - float(np.sum(sizes ** 2)) / n) / max(G - 1, 1)
-    s_b2 = max(0.0, (msb - msw) / n0) if n0 > 0 else 0.0
+    # "sometimes pool": the specimen variance is taken as nil unless the specimens differ at the
+    # preliminary level (Bancroft 1964), so that a chance excess of msb over msw does not cost a
+    # trial covariate the degrees of freedom of the specimens
+    differ = G > 1 and n > G and msw > 0 and float(stats.f.sf(msb / msw, G - 1, n - G)) < PRELIMINARY_LEVEL
+    s_b2 = max(0.0, (msb - msw) / n0) if n0 > 0 and differ else 0.0
     theta = 1.0 - np.sqrt(msw / (msw + sizes * s_b2)) if s_b2 > 0 and msw > 0 else np.zeros(G)
     t = theta[index]
 
@@ -544,7 +618,7 @@ def _clustered(y, X, groups, between: bool, controls: int = 0):
     return coef[lead:], cov[lead:, lead:], p, dof
 
 
-def clustered_trend_test(x, y, groups, between: bool) -> dict:
+def clustered_trend_test(x, y, groups, between: bool, degree: int = 2) -> dict:
     """``trend_test`` with a random specimen intercept (``_clustered``): repeated trials on one
     specimen count as much as their correlation allows, once for a covariate of the specimen."""
     x, y = np.asarray(x, float), np.asarray(y, float)
@@ -554,14 +628,16 @@ def clustered_trend_test(x, y, groups, between: bool) -> dict:
     slope, se = float(b[0]) / scale, math.sqrt(max(cov[0, 0], 0.0)) / scale
     t = _t95(dof)
     out = {"n": x.size, "effect": slope, "ci95": (slope - t * se, slope + t * se), "se": se, "dof": dof,
-           "span": float(x.max() - x.min())}
-    if np.unique(x).size >= 3 and dof > 1:
-        b2, cov2, p, dof2 = _clustered(y, np.column_stack([z, z * z]), groups, between)
-        p_curv = float(2.0 * stats.t.sf(abs(b2[1]) / math.sqrt(cov2[1, 1]), dof2)) if cov2[1, 1] > 0 else 0.0
-        curve = b2[0] * z + b2[1] * z * z
-        return {**out, "method": "trend", "p_value": p, "p_curvature": p_curv,
+           "span": float(x.max() - x.min()), "p_line": p_line}
+    d = min(degree, np.unique(x).size - 1, dof)
+    if d >= 2:
+        Z = np.column_stack([z ** k for k in range(1, d + 1)])
+        bd, _, p, _ = _clustered(y, Z, groups, between)
+        *_, p_curv, _ = _clustered(y, Z, groups, between, controls=1)
+        curve = Z @ bd
+        return {**out, "method": "trend", "p_value": p, "p_curvature": p_curv, "df_test": d,
                 "curve_range": float(curve.max() - curve.min())}
-    return {**out, "method": "line", "p_value": p_line, "p_curvature": None}
+    return {**out, "method": "line", "p_value": p_line, "p_curvature": None, "df_test": 1}
 
 
 def clustered_block_test(levels, y, groups, between: bool) -> dict:
@@ -663,17 +739,21 @@ def series_tests(series: Series) -> tuple[list, list]:
 
     def make(cov, res, unit, level="trial"):
         span = res.get("span")
-        # relevance on the fitted curve's range over the data, so that a U-shape counts
-        practical = (res["curve_range"] if "curve_range" in res else
-                     abs(res["effect"]) * span if span is not None else abs(res["effect"]))
-        tests.append(CovariateTest(
-            series=series.name, sheet=series.sheet, source=series.source, covariate=cov,
-            method=res["method"], n=int(res["n"]), effect=float(res["effect"]),
-            ci95=tuple(float(c) for c in res["ci95"]), se=float(res["se"]), dof=int(res["dof"]),
-            effect_unit=unit, span=span,
-            practical=float(practical), threshold=float(series.threshold),
-            p_value=float(res["p_value"]), p_curvature=res.get("p_curvature"),
-            levels=res.get("levels", {}), level=level))
+        common = dict(series=series.name, sheet=series.sheet, source=series.source, covariate=cov,
+                      n=int(res["n"]), effect=float(res["effect"]), ci95=tuple(float(c) for c in res["ci95"]),
+                      se=float(res["se"]), dof=int(res["dof"]), effect_unit=unit, span=span,
+                      threshold=float(series.threshold), p_curvature=res.get("p_curvature"),
+                      levels=res.get("levels", {}), level=level)
+        if res["method"] in ("line", "trend"):
+            # the straight line, and with three values or more its curvature too (a U-shape)
+            tests.append(CovariateTest(method="line", practical=abs(res["effect"]) * span,
+                                       p_value=float(res["p_line"]), **common))
+        if res["method"] != "line":
+            # relevance of a trend on the fitted curve's range over the data, so that a U-shape counts
+            practical = res["curve_range"] if "curve_range" in res else abs(res["effect"])
+            tests.append(CovariateTest(method=res["method"], practical=float(practical),
+                                       p_value=float(res["p_value"]), df_test=int(res.get("df_test", 1)),
+                                       **common))
 
     if series.test == "mean":
         cov = next(iter(series.covariates), "mean")
@@ -707,7 +787,9 @@ def series_tests(series: Series) -> tuple[list, list]:
             if np.unique(x).size < 2:
                 skip(cov, f"no variation (every row {x[0]:g})")
                 continue
-            res = trend_test(x, y) if level == "trial" else clustered_trend_test(x, y, g, level == "specimen")
+            degree = CURVED_DEGREE if cov in CURVED_COVARIATES else 2
+            res = (trend_test(x, y, degree) if level == "trial"
+                   else clustered_trend_test(x, y, g, level == "specimen", degree))
             unit = f"{series.unit}/{_unit_of(cov)}"
         else:
             labels = [str(v) for v in vals]
@@ -738,16 +820,27 @@ def series_tests(series: Series) -> tuple[list, list]:
 
 
 def run_tests(series_list, *, method: str = "bh", alpha: float = DEFAULT_ALPHA) -> tuple[list, list]:
-    """Test every series and adjust all p-values together.
+    """Test every series, put each test in its tier and adjust the tiers (``adjust``).
+
+    Follow-ups are the tests of a series that a pooled series holds (one drop pair of the
+    pooled restitution) and the trends (line and curvature) of every series; the rest are
+    primary: lines, anovas and means of the pooled series and of the series measured once.
 
     Returns
     -------
     (list of CovariateTest, list of Untestable)
     """
+    pooled = {name for s in series_list for name in s.members}
+
+    def tier(series, test):
+        if test.covariate in CURVED_COVARIATES and test.method in ("line", "trend"):
+            return "primary" if test.method == "trend" else "follow-up"
+        return "follow-up" if series.name in pooled or test.method == "trend" else "primary"
+
     tests, skipped = [], []
     for s in series_list:
         t, u = series_tests(s)
-        tests += t
+        tests += [replace(x, tier=tier(s, x)) for x in t]
         skipped += u
     tests = adjust(tests, method=method, alpha=alpha)
     return explain_away(tests, series_list), skipped
@@ -810,23 +903,37 @@ def explain_away(tests, series_list) -> list:
     effect; a day carries a drift). For every pair of selected (significant and relevant) tests
     on the same series, the covariate's p-value is recomputed with the other covariate in the
     model (``partial_pvalue``); if it is no longer below the cut-off that selected it (the
-    largest unadjusted p-value among the significant tests), the test is marked
-    ``explained_by`` the other covariate and names no cause.
+    largest unadjusted p-value among the significant tests of its tier), the test is marked
+    ``explained_by`` the other covariate and names no cause. Where each of two covariates
+    vanishes with the other, the one with the smaller p-value stands and explains the other.
     """
     selected = [t for t in tests if t.significant and t.relevant and t.method != "mean"]
     if len(selected) < 2:
         return tests
-    cut = max(t.p_value for t in tests if t.significant)
+    # the cut-off of each tier: its largest selected unadjusted p-value
+    cut = {tier: max((t.p_value for t in tests if t.significant and t.tier == tier), default=0.0)
+           for tier in TIER_SHARES}
     by_name = {s.name: s for s in series_list}
+    vanishes: dict = {}         # (series, covariate, other) -> whether it vanishes with other
+
+    def vanishes_with(t, other):
+        key = (t.series, t.covariate, other.covariate)
+        if key not in vanishes:
+            s = by_name.get(t.series)
+            vanishes[key] = (s is not None and t.covariate in s.covariates and other.covariate in s.covariates
+                             and partial_pvalue(s, t.covariate, other.covariate) > cut[t.tier])
+        return vanishes[key]
+
     explained = {}
     for t in selected:
         for other in selected:
             if other is t or other.series != t.series or other.covariate == t.covariate:
                 continue
-            s = by_name.get(t.series)
-            if s is None or t.covariate not in s.covariates or other.covariate not in s.covariates:
-                continue
-            if partial_pvalue(s, t.covariate, other.covariate) > cut:
+            # two covariates that each vanish with the other (length and mass of a segment):
+            # the data cannot tell them apart, and the stronger one stands for both
+            mutual_and_weaker = other.p_value < t.p_value or (other.p_value == t.p_value
+                                                              and other.covariate < t.covariate)
+            if vanishes_with(t, other) and (mutual_and_weaker or not vanishes_with(other, t)):
                 explained[id(t)] = other.covariate
                 break
     return [replace(t, explained_by=explained[id(t)], ci_selected=None) if id(t) in explained else t
@@ -937,7 +1044,8 @@ def pooled_series(series_list) -> list:
                 covs[c] += list(s.covariates[c])
         out.append(Series(name=f"{POOLED}{family}", sheet=sheet, source="measured", family=family, unit="1",
                           rows=tuple(rows), values=tuple(values), covariates={c: tuple(v) for c, v in covs.items()},
-                          practical_threshold=PRACTICAL_THRESHOLDS[family] / abs(float(np.mean(means)))))
+                          practical_threshold=PRACTICAL_THRESHOLDS[family] / abs(float(np.mean(means))),
+                          members=tuple(s.name for s in members)))
     return out
 
 

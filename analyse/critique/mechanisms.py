@@ -296,6 +296,9 @@ def judge(tests, untestable=(), *, notes: dict | None = None) -> list:
         sign = MECHANISMS[mech].sign if mech in MECHANISMS else 0
         hits = [t for t in ts if t.significant and t.relevant and t.explained_by is None
                 and (sign == 0 or np.sign(t.effect) == sign)]
+        # a trend found where its straight line is found too says nothing more
+        lines = {(t.series, t.covariate) for t in hits if t.method == "line"}
+        hits = [t for t in hits if t.method != "trend" or (t.series, t.covariate) not in lines]
         if mech == "velocity_dependent_restitution":
             # a significant rise with height is not this mechanism: report it as unexplained
             for t in ts:

@@ -41,6 +41,15 @@ def check_named(vw, critique):
     assert found, f"{kind}: nothing found"
     assert {f.mechanism for f in found} == {kind}, [(f.mechanism, f.quantity, f.covariate) for f in found]
     expected = {(x["sheet"], x["quantity"], x["covariate"]): x["true_effect"] for x in vw.expected}
+    # an effect planted on every pair is named on their pooled series, relative to each pair's
+    # level: its size the mean of the pairs' relative sizes
+    truth = Truth()
+    relative: dict = {}
+    for (sheet, quantity, covariate), true in expected.items():
+        if quantity.startswith("restitution."):
+            level = truth.restitution(quantity.split(".", 1)[1])
+            relative.setdefault((sheet, "pooled:restitution", covariate), []).append(true / level)
+    expected.update({k: sum(v) / len(v) for k, v in relative.items() if len(v) > 1})
     named = [f for f in found if (f.sheet, f.quantity, f.covariate) in expected]
     assert named, f"{kind}: found {[(f.sheet, f.quantity, f.covariate) for f in found]}, expected {list(expected)}"
     for f in named:

@@ -71,12 +71,11 @@ def test_a_mechanism_is_ruled_out_only_when_every_interval_lies_within_the_thres
     rng = np.random.default_rng(3)
     f, tests = _verdict([_drift(rng, 400, 0.0, sd=0.01)])
     v = f["trial_order_drift"]
-    (t,) = tests
-    assert t.method == "trend" and t.largest_admitted() < t.threshold
+    assert sorted(t.method for t in tests) == ["line", "trend"]
+    assert all(t.largest_admitted() < t.threshold for t in tests)
     assert v.verdict == "ruled_out" and "within the practical threshold" in v.reason
     f, tests = _verdict([_drift(rng, 8, 0.0, sd=0.03)])
-    (t,) = tests
-    assert t.largest_admitted() > t.threshold
+    assert all(t.largest_admitted() > t.threshold for t in tests)
     assert f["trial_order_drift"].verdict == "inconclusive"
 
 
@@ -90,8 +89,8 @@ def test_a_directed_mechanism_is_excluded_in_its_own_direction():
     s = Series("restitution.particle-steel", "drop", "measured", "restitution", "1", tuple(range(1, 61)),
                tuple(y), {"drop_height_mm": tuple(h)})
     f, tests = _verdict([s])
-    (t,) = tests
-    assert t.largest_admitted(-1) == 0.0 and t.largest_admitted() > t.threshold
+    assert len(tests) == 2
+    assert all(t.largest_admitted(-1) == 0.0 and t.largest_admitted() > t.threshold for t in tests)
     assert f["velocity_dependent_restitution"].verdict == "ruled_out"
 
 
@@ -99,13 +98,14 @@ def test_a_directed_mechanism_is_excluded_in_its_own_direction():
 def test_rows_to_decide_give_the_planned_power(n, noise):
     """Rows from ``rows_to_decide`` find an effect of the threshold's size at the test's level
     with 80 % power: over 400 simulated designs of that many rows, tested as the critique tests
-    them (the F-test of line and curvature), the rate's two-sided 99 % Clopper-Pearson interval
-    holds 0.8.
+    them (the straight line's t-test, the primary test of a trend covariate), the rate's
+    two-sided 99 % Clopper-Pearson interval holds 0.8.
     The plan is checked at the true standard error (a plan from data carries the error of its
     estimate too)."""
     rng = np.random.default_rng(21 + n)
     tests, _ = diagnosis.run_tests([_drift(rng, n, 0.0, sd=0.03)] + _noise(rng, n, noise))
-    (t,) = [t for t in tests if t.covariate == "trial_order"]
+    (t,) = [t for t in tests if t.covariate == "trial_order" and t.method == "line"]
+    assert t.tier == "primary"
     order = np.arange(1, n + 1, dtype=float)
     t = replace(t, se=0.03 / math.sqrt(float(((order - order.mean()) ** 2).sum())))
     rows = t.rows_to_decide()
@@ -116,5 +116,5 @@ def test_rows_to_decide_give_the_planned_power(n, noise):
         # more rows of this design (its trial orders repeated): se falls as 1/sqrt(rows)
         order = np.resize(np.arange(1.0, n + 1), rows)
         y = 0.35 + slope * (order - order.mean()) + rng.normal(0.0, 0.03, rows)
-        hits += diagnosis.trend_test(order, y)["p_value"] < t.alpha_test
+        hits += diagnosis.trend_test(order, y)["p_line"] < t.alpha_test
     assert _lower(hits, reps, 0.995) <= 0.8 <= _upper(hits, reps, 0.995), (rows, hits)

@@ -742,7 +742,8 @@ def test_table_c4_lists_every_covariate_test_sorted_and_marked(critique_report):
     for row in c4["rows"]:
         r, t = dict(zip(c4["columns"], row)), tests[row[0] - 1]
         assert (r["Series"], r["Covariate"], r["Method"], r["n"], r["Effect"], r["95 % CI"], r["p"],
-                r["Adjusted p"]) == (t["series"], t["covariate"], t["method"], t["n"], t["effect"], t["ci95"],
+                r["Adjusted p"]) == (t["series"], t["covariate"], f"{t['method']} ({t.get('tier', 'primary')})",
+                                     t["n"], t["effect"], t["ci95"],
                                      t["p_value"], t["p_adjusted"])
     verdicts = dict(zip(_column(c4, "Test"), _column(c4, "Verdict")))
     assert verdicts == {3: "significant: cause", 4: "significant, explained by orientation_deg",
