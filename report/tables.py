@@ -24,6 +24,7 @@ import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from demcal.analyse.critique.diagnosis import TIER_SHARES
 from demcal.analyse.critique.loop import Critique
 from demcal.analyse.results import CampaignResult, Validation, read_campaign_results
 from demcal.errors import InputError
@@ -998,8 +999,9 @@ def table_covariate_tests(c: Campaign) -> Table:
                      covariate_verdict(t)))
     opts = c.critique.provenance.options if c.critique is not None else {}
     how = {"bh": "Benjamini-Hochberg", "holm": "Holm"}.get(opts.get("correction"), opts.get("correction"))
-    notes.append("Sorted by adjusted p-value" + (f" ({how} within each tier: primary tests spend 0.8 of the "
-                                                  "level, follow-ups 0.2)" if how else "")
+    shares = ", ".join(f"{tier} {share:g}" for tier, share in TIER_SHARES.items())
+    notes.append("Sorted by adjusted p-value" + (f" ({how} within each tier; share of the level: {shares})"
+                                                  if how else "")
                  + "; significant rows in bold" + (f" (adjusted p < {opts['alpha']:g})"
                                                    if isinstance(opts.get("alpha"), (int, float)) else "")
                  + ". Test: position in critique.json's tests. Method: line (slope), trend (line and "

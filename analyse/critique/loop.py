@@ -27,8 +27,8 @@ Steps (docs/design.md, "The critique loop"):
    model under critique (the campaign's calibrated parameters, else the measured means);
 2. the twin of every drop and incline trial, the campaign's repose validation runs, and the
    discrepancy table;
-3. data effects: every measured per-row value tested against every covariate, all p-values
-   adjusted together (``diagnosis``), and the catalogue's verdicts on them (``mechanisms``),
+3. data effects: every measured per-row value tested against every covariate, each tier of
+   tests adjusted on its own (``diagnosis``), and the catalogue's verdicts on them (``mechanisms``),
    ``ill_conditioned_parameter`` from the campaign;
 4. model findings: each drop discrepancy split into its causes, each tested, and the twin's
    orientation dependence against the lab's (``attribution``);

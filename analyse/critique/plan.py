@@ -4,8 +4,8 @@ find with a given probability (80 % by default), from virtual workbooks.
 For a data-effect mechanism M of the catalogue (``simulate.virtual_lab.EFFECT_KINDS``) and an
 effect size S, the *detection rate* is the share of N virtual workbooks of the planned design,
 with M planted at size S, in which the critique names M: each workbook is read and measured
-(``measure``), its per-row series tested against every covariate with all p-values adjusted
-together (``diagnosis.run_tests``) and the catalogue judged (``mechanisms.judge``), the same
+(``measure``), its per-row series tested against every covariate, each tier of tests adjusted
+on its own (``diagnosis.run_tests``) and the catalogue judged (``mechanisms.judge``), the same
 steps and defaults as ``demcal critique --no-twins``; M is detected when its verdict is
 ``found``. The rate at S is given with its Clopper-Pearson 95 % interval (Clopper & Pearson
 1934).
@@ -751,3 +751,70 @@ def _plan_one(lab, target: Target, seeds, workdir, *, power, steps, alpha, corre
         at_floor=found.at_floor,
         points=[{"size": target.size(x), "hits": k, "n": n, "refused": rates[x].refused} for x, k, n in found.points],
         note="; ".join(notes))
+
+
+# ----------------------------------------------------------------------------------------------
+# where to drop: the drop twin's sensitivity to the contact restitution by orientation
+
+#: Release orientations of the orientation design [deg].
+ORIENTATION_GRID = tuple(range(0, 91, 10))
+#: Half step of the central difference in the contact restitution [-].
+RESTITUTION_STEP = 0.05
+
+
+@dataclass(frozen=True)
+class OrientationSensitivity:
+    """How well drops released at one orientation identify a pair's contact restitution.
+
+    Attributes
+    ----------
+    pair : str
+    orientation_deg : float
+        Angle of the long axis to the horizontal at release [deg].
+    apparent : float
+        The drop twin's apparent restitution sqrt(h2/h1) there [-].
+    sensitivity : float
+        d apparent / d e of the twin [-]: 1 where sqrt(h2/h1) reads e itself (one contact
+        through the centre of mass), near 0 where the drop says nothing of e.
+    """
+
+    pair: str
+    orientation_deg: float
+    apparent: float
+    sensitivity: float
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def orientation_design(params, pairs, height_m: float, *, grid=ORIENTATION_GRID,
+                       step: float = RESTITUTION_STEP) -> list:
+    """The drop twin's sensitivity of the apparent restitution to each pair's contact
+    restitution, release orientation by orientation: the central difference of the drop rig
+    (``simulate.rigs.drop``) at e - step and e + step (clipped to (0, 1)), from ``height_m``,
+    with ``params`` otherwise (its extensions included). A lab that releases its drops where
+    the sensitivity is near 1 measures e directly; where it is small, the rebound hardly
+    depends on e (the body turns the energy into rotation, or lands on several spheres).
+
+    Returns
+    -------
+    list of OrientationSensitivity
+        One per pair and orientation, in the order given.
+    """
+    from demcal.simulate.extensions import restitution_parameter
+    from demcal.simulate.rigs import run_rig
+
+    out = []
+    for pair in pairs:
+        name = restitution_parameter(pair)
+        e = float(getattr(params, name))
+        lo, hi = max(e - step, 0.01), min(e + step, 1.0)
+
+        def apparent(value, angle):
+            return float(run_rig("drop", params.with_(**{name: value}), 0, height=height_m, pair=pair,
+                                 orientation_deg=float(angle)).observable["apparent_restitution"])
+
+        for angle in grid:
+            out.append(OrientationSensitivity(pair, float(angle), apparent(e, angle),
+                                              (apparent(hi, angle) - apparent(lo, angle)) / (hi - lo)))
+    return out

@@ -8,7 +8,8 @@ WORKBOOK_OR_TRUTH is a truth file (``.yaml``, as for ``demcal virtual-lab``) or 
 whose sheets give the design and whose measured values give the truth
 (``analyse.critique.plan``). Prints one row per mechanism: where it is planted, the smallest
 effect detected in at least 80 % of the virtual workbooks, the detection rate there and its
-Clopper-Pearson 95 % interval.
+Clopper-Pearson 95 % interval; then, for a design with drops, the drop twin's sensitivity of
+the apparent restitution to the contact restitution by release orientation (where to drop).
 """
 
 from __future__ import annotations
@@ -73,6 +74,19 @@ def table(plan) -> str:
     return "\n".join(lines)
 
 
+def orientation_table(rows) -> str:
+    """The drop twin's sensitivity by release orientation (``plan.orientation_design``), one
+    line per pair: where to drop to measure the contact restitution."""
+    lines = []
+    for pair in dict.fromkeys(r.pair for r in rows):
+        mine = [r for r in rows if r.pair == pair]
+        best = max(mine, key=lambda r: r.sensitivity)
+        cells = "  ".join(f"{r.orientation_deg:g}: {r.sensitivity:.2f}" for r in mine)
+        lines.append(f"  {pair}: d apparent / d e by release orientation [deg]: {cells}; best at "
+                     f"{best.orientation_deg:g} deg (apparent {best.apparent:.3f})")
+    return "\n".join(lines)
+
+
 def _design_text(d: dict) -> str:
     parts = []
     if d["pairs"]:
@@ -105,6 +119,18 @@ def run(args) -> int:
     for m in plan.mechanisms:
         if m.sheet is not None and m.note:
             print(f"{m.mechanism}: {one_line(m.note, limit=NOTE_LIMIT)}")
+    out = plan.to_dict()
+    pairs = lab.design.get("pairs") or ()
+    if pairs:
+        from demcal.analyse.critique.plan import orientation_design
+
+        heights = sorted(lab.design["drop_heights_mm"])
+        height = heights[len(heights) // 2]
+        rows = orientation_design(lab.truth.params, pairs, height * 1e-3)
+        print(f"where to drop (drop twin from {height:g} mm at the planned truth): a sensitivity near 1 "
+              "reads the contact restitution itself, near 0 says little of it")
+        print(orientation_table(rows))
+        out["drop_orientations"] = [r.to_dict() for r in rows]
     if args.json:
-        print(f"written: {write_json(args.json, plan.to_dict())}")
+        print(f"written: {write_json(args.json, out)}")
     return 0

@@ -11,8 +11,8 @@ import yaml
 from scipy import stats
 
 from demcal.analyse.critique import run_critique
-from demcal.analyse.critique.plan import (choose_target, clopper_pearson, design_from_workbook, read_design,
-                                          smallest_reaching)
+from demcal.analyse.critique.plan import (ORIENTATION_GRID, choose_target, clopper_pearson, design_from_workbook,
+                                          orientation_design, read_design, smallest_reaching)
 from demcal.cli import main
 from demcal.errors import DemcalError, InputError
 from demcal.simulate.virtual_lab import PlantedEffect, Truth, write_virtual_workbook
@@ -89,6 +89,10 @@ def test_printed_power_is_the_direct_detection_rate(tmp_path, capsys):
     assert ci == pytest.approx(clopper_pearson(hits, n), abs=0.006)
     # a smaller size tried fell short of 80 %
     assert any(p["hits"] < 0.8 * p["n"] and abs(p["size"]) < abs(row["size"]) for p in row["points"])
+    # where to drop: every pair of the design at every orientation of the grid, printed and kept
+    assert "where to drop" in out
+    assert {(r["pair"], r["orientation_deg"]) for r in plan["drop_orientations"]} == \
+        {(pair, float(a)) for pair in SMALL["design"]["pairs"] for a in ORIENTATION_GRID}
 
     spec = read_design(truth)
     direct, reps = 0, 200
@@ -148,3 +152,21 @@ def test_plan_errors_are_one_line(tmp_path, capsys):
     assert main(["plan", str(truth), "--mechanisms", "wet_segments"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "valid: velocity_dependent_restitution" in err
+
+
+def test_orientation_design_reads_the_twins_sensitivity_to_the_contact_restitution():
+    """End on, one contact through the centre of mass: the rebound is the contact restitution,
+    d apparent / d e = 1. Tilted, on a stiff frictionless plate, the twin's sensitivity is the
+    rigid body's (``simulate.rigid_impact``, differenced the same way) within 0.1."""
+    from demcal.simulate.clump import segment_from_parameters
+    from demcal.simulate.extensions import with_contact_effective_mass
+    from demcal.simulate.params import DEMParameters
+    from demcal.simulate.rigid_impact import rigid_drop
+
+    (end_on,) = orientation_design(DEMParameters(), ["particle-steel"], 0.4, grid=(90,))
+    assert end_on.sensitivity == pytest.approx(1.0, abs=0.03)
+    stiff = with_contact_effective_mass(DEMParameters(e_pw=0.36, mu_s_pw=0.0, mu_r_pw=0.0, shear_modulus_pa=1e10))
+    body = segment_from_parameters(stiff)
+    for row in orientation_design(stiff, ["particle-steel"], 0.1, grid=(10, 30, 60)):
+        rigid = [rigid_drop(body, row.orientation_deg, e, 0.1).apparent_restitution for e in (0.31, 0.41)]
+        assert row.sensitivity == pytest.approx((rigid[1] - rigid[0]) / 0.1, abs=0.1), row

@@ -751,8 +751,9 @@ def test_table_c4_lists_every_covariate_test_sorted_and_marked(critique_report):
                         1: "not significant", 2: "not significant", 7: "not significant"}
     assert "Test 3: interval after selection (false-coverage rate, Benjamini & Yekutieli 2005) " \
            "[0.00025, 0.00079] 1/deg." in c4["notes"]
-    assert c4["notes"][0].startswith("Sorted by adjusted p-value (Benjamini-Hochberg, all tests together); "
-                                     "significant rows in bold (adjusted p < 0.01).")
+    assert c4["notes"][0].startswith("Sorted by adjusted p-value (Benjamini-Hochberg within each tier; share of "
+                                     "the level: primary 0.8, follow-up 0.2); significant rows in bold "
+                                     "(adjusted p < 0.01).")
     # every row in the HTML, cell by cell as stored, the significant ones in bold
     rows = _html_rows(critique_report["html"], "C4")
     assert [cells for _, cells in rows] == [[format_cell(v, f) for v, f in zip(row, c4["formats"])]
@@ -760,7 +761,7 @@ def test_table_c4_lists_every_covariate_test_sorted_and_marked(critique_report):
     assert [int(cells[0]) for attrs, cells in rows if 'class="marked"' in attrs] == [3, 4, 5]
     cause = next(cells for _, cells in rows if cells[0] == "3")
     assert cause[1:7] == ["residual:restitution.particle-steel", "drop", "twin residual", "orientation_deg",
-                          "trend", "trial"]                   # files without a level: independent trials
+                          "trend (primary)", "trial"]         # files without a level or tier: primary, independent trials
     assert cause[8:] == ["0.00052", "[0.00031, 0.00073]", "1/deg", "0.0468", "0.03", "&lt; 0.0001", "0.0004",
                          "significant: cause"]
 

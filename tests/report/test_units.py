@@ -91,7 +91,8 @@ def test_covariate_tests_table_sorts_by_adjusted_p_and_keeps_every_test():
     assert "Test 3: interval after selection (false-coverage rate, Benjamini & Yekutieli 2005) " \
            "[0.01, 0.3] 1/mm." in table.notes
     assert [r[6] for r in table.rows] == ["trial", "specimen", "trial", "trial"]   # the unit of each test
-    assert table.notes[0].startswith("Sorted by adjusted p-value (Benjamini-Hochberg, all tests together)")
+    assert table.notes[0].startswith("Sorted by adjusted p-value (Benjamini-Hochberg within each tier; share of "
+                                     "the level: primary 0.8, follow-up 0.2)")
     assert table.sources == ({"kind": "critique", "file": "critique.json", "sha256": "00", "path": "tests"},)
     empty = table_covariate_tests(Campaign(measurement={}, results=None, critique=None))
     assert empty.rows == () and "None: critique.json holds no covariate tests." in empty.notes
