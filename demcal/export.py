@@ -1,5 +1,9 @@
 """``demcal export DIR --to liggghts|yade|edem|json|all [--out PATH]``: the calibrated parameters
-of a finished campaign in the input terms of another DEM code (``simulate.export``)."""
+of a finished campaign in the input terms of another DEM code (``simulate.export``).
+
+When the campaign folder holds a ``critique.json`` whose critique recalibrated with an accepted
+extension (its ``heap_gains``), each export also says whether the target can run that
+extension and gives the set calibrated with it beside its own (``simulate.export.CalibratedWith``)."""
 
 from __future__ import annotations
 
@@ -8,13 +12,26 @@ from pathlib import Path
 
 from demcal.errors import InputError
 from demcal.provenance import code_version, sha256_file
-from demcal.simulate.export import EXPORT_FILES, export_model, render
+from demcal.simulate.export import EXPORT_FILES, CalibratedWith, export_model, render
 from demcal.simulate.params import DEMParameters
+
+
+def accepted_extensions(critique) -> tuple:
+    """The ``CalibratedWith`` of each extension a critique (``analyse.critique.loop.Critique``
+    or None) accepted and recalibrated with."""
+    if critique is None:
+        return ()
+    return tuple(CalibratedWith(h.extension, h.mechanism, dict(h.settings), h.campaign,
+                                {p.name: (p.after, None if p.after_ci95 is None else tuple(p.after_ci95))
+                                 for p in h.parameters})
+                 for h in critique.heap_gains)
 
 
 def campaign_model(campaign_dir):
     """The ``ExportModel`` of a finished calibration: its calibrated parameters, the 95 %
-    plausible intervals (plausible workflow) and the results file's hash."""
+    plausible intervals (plausible workflow), the results file's hash and, from its
+    ``critique.json``, the extensions the critique accepted."""
+    from demcal.analyse.critique.loop import load_critique
     from demcal.analyse.results import read_campaign_results
 
     path = Path(campaign_dir) / "results.json"
@@ -27,7 +44,15 @@ def campaign_model(campaign_dir):
                  if results.calibration is not None else {})
     source = {"file": str(path), "sha256": sha256_file(path), "code": code_version(),
               "calibrated_by": results.provenance.code}
-    return export_model(params, material=results.material or "segment", source=source, intervals=intervals)
+    critique, critique_source = load_critique(campaign_dir)
+    if critique_source:
+        source["critique"] = critique_source
+    try:
+        accepted = accepted_extensions(critique)
+    except InputError as exc:
+        raise InputError(f"{Path(campaign_dir) / 'critique.json'}: heap_gains: {exc}") from None
+    return export_model(params, material=results.material or "segment", source=source, intervals=intervals,
+                        accepted=accepted)
 
 
 def write_exports(campaign_dir, targets, out=None) -> list:

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from demcal.analyse.critique.diagnosis import TIER_SHARES
-from demcal.analyse.critique.loop import Critique
+from demcal.analyse.critique.loop import Critique, load_critique
 from demcal.analyse.results import CampaignResult, Validation, read_campaign_results
 from demcal.errors import InputError
 from demcal.jsonio import read_json, to_jsonable
@@ -221,19 +221,6 @@ def load_campaign(out_dir) -> Campaign:
     critique, critique_source = load_critique(out)
     return Campaign(measurement=measurement, results=results, runs=runs, paper=paper,
                     paper_source=paper_source, critique=critique, critique_source=critique_source, folder=out)
-
-
-def load_critique(out_dir) -> tuple[Critique | None, dict]:
-    """The critique of a campaign folder (``critique.json``, typed) and ``{"file", "sha256"}``."""
-    p = Path(out_dir) / "critique.json"
-    if not p.exists():
-        return None, {}
-    try:
-        doc = read_json(p)
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{p} is not valid JSON ({exc})") from None
-    # named relative to the campaign folder, so that a moved or copied folder still audits
-    return Critique.from_dict(doc, str(p)), {"file": "critique.json", "sha256": sha256_file(p)}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -1073,9 +1060,38 @@ def table_heap_observables(c: Campaign) -> Table:
                  formats=("", "", "", "", ".4g", ".3g", "d", ".4g", ".3g", "d", ".3g", ".3g", ""))
 
 
+def table_target_codes(c: Campaign) -> Table:
+    """Table C7: whether LIGGGHTS, Yade and EDEM can run each extension the critique accepted
+    and recalibrated with, and which of the two calibrated sets ``demcal export`` writes."""
+    from demcal.simulate.export import TARGET_NAMES, expresses
+
+    gains = c.critique.heap_gains
+    rows = []
+    for h in gains:
+        for target, name in TARGET_NAMES.items():
+            ok = expresses(target, h.extension)
+            rows.append((h.extension, h.mechanism, name, "yes" if ok else "no",
+                         "calibrated without it (Table C5, Before)" + ("" if ok else ": it compensates for "
+                                                                      "the extension in its values")))
+    notes = []
+    for h in gains:
+        lacking = [name for t, name in TARGET_NAMES.items() if not expresses(t, h.extension)]
+        if lacking:
+            notes.append(f"{', '.join(lacking)} cannot express {h.extension}: the export "
+                         f"gives them the parameters calibrated without it, and the set calibrated with it "
+                         f"(Table C5, After; {h.campaign}) beside them, for demcal.")
+    if not gains:
+        notes.append("None: no extension was accepted and recalibrated with.")
+    return Table("C7", "Target codes: the accepted extensions other DEM codes can run, and the set the export "
+                 "writes", ("Extension", "Mechanism", "Target", "Expresses it", "Exported set"), ("",) * 5,
+                 tuple(rows), notes=tuple(notes),
+                 sources=({"kind": "critique", **c.critique_source, "path": "heap_gains"},))
+
+
 def critique_tables(c: Campaign) -> list[Table]:
-    """Tables C1-C6 of the critique: model discrepancies, data effects, the causes of the
-    discrepancies, extensions, covariate tests and the extensions' heap-side gains."""
+    """Tables C1-C7 of the critique: model discrepancies, data effects, the causes of the
+    discrepancies, extensions, covariate tests, the extensions' heap-side gains and what the
+    target codes can take of them."""
     if c.critique is None:
         return []
     cr, src = c.critique, c.critique_source
@@ -1087,7 +1103,7 @@ def critique_tables(c: Campaign) -> list[Table]:
                           cr.model_findings, MODEL_FINDING_COLUMNS, ("evidence",), src, "model_findings"),
             _record_table("C3", "Model extensions and their gain on held-out trials", cr.extensions,
                           EXTENSION_COLUMNS, ("held_out", "fitted", "note"), src, "extension_records"),
-            table_covariate_tests(c), table_heap_parameters(c), table_heap_observables(c)]
+            table_covariate_tests(c), table_heap_parameters(c), table_heap_observables(c), table_target_codes(c)]
 
 
 # ----------------------------------------------------------------------------------------------

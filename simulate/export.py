@@ -29,7 +29,11 @@ lever, the distance from the contact point to the centre of mass, which runs fro
 radius at the middle sphere to the half length at the tips), and the export says which.
 
 Engine hooks of demcal that the target codes lack (velocity-dependent restitution, a size
-distribution, multi-contact damping) are listed in every export as not carried over.
+distribution, the contact effective mass) are listed in every export as not carried over.
+When the critique accepted such an extension and recalibrated with it
+(``ExportModel.accepted``), the export keeps the set calibrated without it, which is what the
+target can run (its values compensate for what the target cannot express), says so, and gives
+the set calibrated with it beside it.
 
 The material name comes from the workbook and the results file's name from the command line:
 the JSON keeps them exact, the other formats write them as one line (``demcal.text.one_line``)
@@ -51,7 +55,7 @@ from demcal.errors import InputError
 from demcal.jsonio import to_jsonable
 from demcal.simulate.clump import ClumpTemplate, segment_from_parameters
 from demcal.simulate.contact.rolling import ROLLING_LEVERS
-from demcal.simulate.extensions import engine_hooks
+from demcal.simulate.extensions import ENGINE_HOOKS, describe, engine_hooks
 from demcal.simulate.materials import youngs_modulus
 from demcal.simulate.params import DEMParameters
 from demcal.text import no_formula, one_line
@@ -64,6 +68,14 @@ EXPORT_FILES = {"liggghts": "liggghts_materials.in", "yade": "yade_materials.py"
 #: LIGGGHTS ``rolling_friction cdt`` takes R_eff, EDEM's standard rolling friction the
 #: distance from the contact point to the centre of mass. Yade's Hertz-Mindlin law has none.
 TARGET_LEVER = {"liggghts": "liggghts_reff", "edem": "edem_com", "yade": None, "json": None}
+
+#: demcal engine hooks (``simulate.extensions.ENGINE_HOOKS``) each target expresses itself:
+#: LIGGGHTS has the spring-dashpot rolling model (``rolling_friction epsd``); the JSON is demcal's own.
+TARGET_HOOKS = {"liggghts": frozenset({"rolling_spring_dashpot"}), "yade": frozenset(), "edem": frozenset(),
+                "json": frozenset(ENGINE_HOOKS)}
+
+#: Names of the target codes in sentences.
+TARGET_NAMES = {"liggghts": "LIGGGHTS", "yade": "Yade", "edem": "EDEM"}
 
 #: LIGGGHTS refuses a Young's modulus above this without ``hard_particles yes`` [Pa].
 LIGGGHTS_SOFT_LIMIT_PA = 1e9
@@ -208,6 +220,9 @@ class ExportModel:
         Provenance: the results file and its SHA-256, the code version.
     intervals : dict
         Parameter -> 95 % plausible interval of the calibration (empty when it has none).
+    accepted : tuple of CalibratedWith
+        Extensions the critique accepted and recalibrated with; ``params`` is the set
+        calibrated without them.
     """
 
     params: DEMParameters
@@ -215,6 +230,7 @@ class ExportModel:
     material: str = "segment"
     source: dict = field(default_factory=dict)
     intervals: dict = field(default_factory=dict)
+    accepted: tuple = ()
 
     @property
     def youngs_moduli(self) -> tuple:
@@ -226,8 +242,7 @@ class ExportModel:
     def untransferred_hooks(self, target: str) -> list:
         """demcal engine hooks in use that ``target`` has no equivalent of (LIGGGHTS has the
         spring-dashpot rolling model, ``rolling_friction epsd``)."""
-        carried = {"rolling_spring_dashpot"} if target == "liggghts" else set()
-        return [h["extension"] for h in engine_hooks(self.params) if h["extension"] not in carried]
+        return [h["extension"] for h in engine_hooks(self.params) if not expresses(target, h["extension"])]
 
     def spheres(self) -> np.ndarray:
         """(x, y, z, r) of each sphere in the principal frame [m], rounding noise removed."""
@@ -235,14 +250,73 @@ class ExportModel:
         return np.column_stack([xyz, self.template.radii])
 
 
+def expresses(target: str, extension: str) -> bool:
+    """Whether ``target`` can run demcal's model ``extension``: an engine hook it has an
+    equivalent of, or an extension that only sets parameter values (any code takes those)."""
+    return extension not in ENGINE_HOOKS or extension in TARGET_HOOKS.get(target, frozenset())
+
+
+@dataclass(frozen=True)
+class CalibratedWith:
+    """A model extension the critique accepted and the calibration with it
+    (``analyse.critique.heap_gain.HeapGain``).
+
+    Attributes
+    ----------
+    extension, mechanism : str
+    settings : dict
+        The ``DEMParameters`` fields that switch it on.
+    campaign : str
+        Folder of the recalibration, relative to the campaign.
+    parameters : dict
+        Calibrated parameter -> (value with the extension, its 95 % interval or None).
+    """
+
+    extension: str
+    mechanism: str
+    settings: dict
+    campaign: str
+    parameters: dict
+
+    def __post_init__(self):
+        describe(self.extension)                    # a known extension, else refused by name
+        unknown = sorted(set(self.parameters) - set(DEMParameters.names()))
+        if unknown:
+            raise InputError(f"extension {self.extension}: unknown DEM parameter(s) {', '.join(unknown)}")
+
+    def statements(self, target: str, params: DEMParameters) -> list:
+        """Lines for ``target``'s export: whether it can run the extension, and the parameters
+        calibrated without it (the export's values) and with it, one per line."""
+        name = TARGET_NAMES.get(target, target)
+        head = (f"The critique accepted model extension {self.extension} "
+                f"({_text(self.mechanism, target)}); {name} "
+                + ("expresses it." if expresses(target, self.extension) else
+                   f"cannot express it: the values below are calibrated without it and compensate for "
+                   f"it, which is what {name} needs."))
+        lines = [head, f"  parameter: calibrated without it (exported) -> with it, for demcal "
+                       f"({_text(self.campaign, target)})"]
+        for n, (v, ci) in self.parameters.items():
+            lines.append(f"  {n}: {_g(getattr(params, n))} -> {_g(v)}"
+                         + ("" if ci is None else f" [{_g(ci[0])}, {_g(ci[1])}]"))
+        return lines
+
+    def to_dict(self) -> dict:
+        return {"extension": self.extension, "mechanism": self.mechanism, "settings": dict(self.settings),
+                "campaign": self.campaign,
+                "calibrated_with": {n: {"value": v, "ci95": None if ci is None else list(ci)}
+                                    for n, (v, ci) in self.parameters.items()},
+                "expressed_by": {t: expresses(t, self.extension) for t in TARGET_NAMES}}
+
+
 def export_model(params: DEMParameters, *, material: str = "segment", source: dict | None = None,
-                 intervals: dict | None = None) -> ExportModel:
-    """The ``ExportModel`` of a parameter set (the segment template built as demcal builds it)."""
+                 intervals: dict | None = None, accepted=()) -> ExportModel:
+    """The ``ExportModel`` of a parameter set (the segment template built as demcal builds it);
+    ``accepted``: the ``CalibratedWith`` of each extension the critique accepted."""
     if not isinstance(params, DEMParameters):
         raise InputError(f"params must be a DEMParameters, got {type(params).__name__}")
     # the template of the mean segment; a size distribution is listed as not carried over
     template = segment_from_parameters(params.with_(segment_sizes=None))
-    return ExportModel(params, template, material, dict(source or {}), dict(intervals or {}))
+    return ExportModel(params, template, material, dict(source or {}), dict(intervals or {}), tuple(accepted))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -274,6 +348,8 @@ def _header(model: ExportModel, target: str, title: str, comment: str) -> list:
     lines += ["  " + c.statement() for c in rolling_conversion(model.params, model.template, target)]
     for hook in model.untransferred_hooks(target):
         lines.append(f"NOT carried over: demcal engine hook {hook} (the target has no equivalent)")
+    for accepted in model.accepted:
+        lines += accepted.statements(target, model.params)
     return [f"{comment} {line}".rstrip() for line in lines]
 
 
@@ -445,6 +521,7 @@ def json_document(model: ExportModel) -> dict:
                         "for_targets": {t: [c.statement() for c in rolling_conversion(model.params, model.template, t)]
                                         for t in ("liggghts", "edem", "yade")}},
             "engine_hooks": engine_hooks(model.params),
+            "accepted_extensions": [a.to_dict() for a in model.accepted],
             "source": model.source}
 
 

@@ -64,7 +64,7 @@ from demcal.analyse.critique.twins import (Discrepancy, TwinRunner, constant_dis
 from demcal.analyse.results import read_campaign_results
 from demcal.errors import InputError
 from demcal.jsonio import check_schema, read_json, to_jsonable
-from demcal.provenance import Provenance
+from demcal.provenance import Provenance, sha256_file
 
 RIGS = ("drop", "incline", "repose")
 #: Extensions evaluated by default (the others need engine hooks or a new campaign).
@@ -188,6 +188,19 @@ class Critique:
                        provenance=Provenance(**d["provenance"]) if d.get("provenance") else Provenance())
         except (KeyError, TypeError) as exc:
             raise InputError(f"{where}: not a critique of this layout ({type(exc).__name__}: {exc})") from None
+
+
+def load_critique(out_dir) -> tuple[Critique | None, dict]:
+    """The critique of a campaign folder (``critique.json``, typed) and ``{"file", "sha256"}``."""
+    p = Path(out_dir) / "critique.json"
+    if not p.exists():
+        return None, {}
+    try:
+        doc = read_json(p)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{p} is not valid JSON ({exc})") from None
+    # named relative to the campaign folder, so that a moved or copied folder still audits
+    return Critique.from_dict(doc, str(p)), {"file": "critique.json", "sha256": sha256_file(p)}
 
 
 def load_source(source, reading=None):

@@ -559,7 +559,7 @@ def test_report_command_renders_critique_json(campaign, tmp_path, capsys):
     # no drop twin: the report says the question of sqrt(h2/h1) was not assessed
     assert "Not assessed: this critique ran no drop twin" in html
     assert tables["C4"]["rows"] == [] and "None: critique.json holds no covariate tests." in tables["C4"]["notes"]
-    assert tables["C5"]["rows"] == [] and tables["C6"]["rows"] == []
+    assert tables["C5"]["rows"] == [] and tables["C6"]["rows"] == [] and tables["C7"]["rows"] == []
     # a critique.json missing a documented key is refused by name, not half-rendered
     del critique["discrepancies"][0]["measured_ci95"]
     (out / "critique.json").write_text(json.dumps(critique))
@@ -782,10 +782,25 @@ def test_pdf_shows_the_critique_summary_and_table_c4(critique_report):
     assert squeeze("residual:restitution.particle-steel") in flat and squeeze("significant: cause") in flat
 
 
+def test_table_c7_says_which_target_codes_can_run_each_accepted_extension(critique_report):
+    from demcal.simulate.export import TARGET_HOOKS
+
+    c7 = critique_report["tables"]["C7"]
+    # contact_effective_mass is a demcal engine hook none of the three codes has
+    assert "contact_effective_mass" not in TARGET_HOOKS["liggghts"] | TARGET_HOOKS["yade"] | TARGET_HOOKS["edem"]
+    assert [(r[0], r[2], r[3]) for r in c7["rows"]] == [("contact_effective_mass", t, "no")
+                                                        for t in ("LIGGGHTS", "Yade", "EDEM")]
+    assert all(r[4].startswith("calibrated without it (Table C5, Before): it compensates") for r in c7["rows"])
+    assert c7["notes"] == ["LIGGGHTS, Yade, EDEM cannot express contact_effective_mass: the export gives them the "
+                           "parameters calibrated without it, and the set calibrated with it (Table C5, After; "
+                           "heap_gain/contact_effective_mass) beside them, for demcal."]
+    assert 'id="table-C7"' in critique_report["html"]
+
+
 def test_audit_rederives_the_critique_tables(critique_report, capsys, tmp_path):
     code, text = _audit(capsys, critique_report["out"])
     assert code == 0, text
-    for tid in ("C1", "C2", "C3", "C4"):
+    for tid in ("C1", "C2", "C3", "C4", "C7"):
         assert re.search(rf"^Table {tid} \(.*\): OK$", text, re.M), tid
     # a changed C4 cell is named
     out = tmp_path / "copy"

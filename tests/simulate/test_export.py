@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 from demcal.cli import main
-from demcal.simulate.export import (EXPORT_FILES, export_model, liggghts_seeds, render,
+from demcal.simulate.export import (EXPORT_FILES, CalibratedWith, export_model, liggghts_seeds, render,
                                     rolling_conversion)
 from demcal.simulate.params import DEMParameters
 
@@ -93,6 +93,50 @@ def test_engine_hooks_the_target_lacks_are_listed_as_not_carried_over():
     assert "rolling_spring_dashpot" not in render(model, "liggghts")      # LIGGGHTS has epsd
     assert "rolling_friction epsd" in render(model, "liggghts")
     assert "NOT carried over: demcal engine hook rolling_spring_dashpot" in render(model, "edem")
+
+
+def _accepted(extension="contact_effective_mass", campaign="heap_gain/contact_effective_mass"):
+    return CalibratedWith(extension, extension, {extension: True}, campaign,
+                          {"e_pw": (0.36, (0.3, 0.42)), "mu_s_pw": (0.19, None)})
+
+
+def test_an_accepted_extension_no_target_expresses_gives_both_sets_in_every_export():
+    params = DEMParameters(e_pw=0.71, mu_s_pw=0.18)
+    model = export_model(params, accepted=(_accepted(),))
+    for target in ("liggghts", "yade", "edem"):
+        text = render(model, target)
+        lines = ([row[0] for row in csv.reader(io.StringIO(text)) if row] if target == "edem"
+                 else text.splitlines())
+        head = [ln for ln in lines if ln.startswith("#") and "contact_effective_mass" in ln]
+        assert any("cannot express it: the values below are calibrated without it" in ln for ln in head), target
+        assert "e_pw: 0.71 -> 0.36 [0.3, 0.42]" in text and "mu_s_pw: 0.18 -> 0.19" in text
+    # the values the target runs are the set calibrated without it
+    assert _fix_values(render(model, "liggghts"), "m3")[1] == pytest.approx(0.71)
+    doc = json.loads(render(model, "json"))
+    (acc,) = doc["accepted_extensions"]
+    assert acc["expressed_by"] == {"liggghts": False, "yade": False, "edem": False}
+    assert acc["calibrated_with"] == {"e_pw": {"value": 0.36, "ci95": [0.3, 0.42]},
+                                      "mu_s_pw": {"value": 0.19, "ci95": None}}
+    assert doc["parameters"]["e_pw"] == 0.71
+
+
+def test_an_accepted_extension_liggghts_expresses_is_said_so_there_only():
+    model = export_model(DEMParameters(), accepted=(_accepted("rolling_spring_dashpot"),))
+    assert "LIGGGHTS expresses it." in render(model, "liggghts")
+    assert "Yade cannot express it" in render(model, "yade")
+    assert json.loads(render(model, "json"))["accepted_extensions"][0]["expressed_by"]["liggghts"] is True
+
+
+def test_an_accepted_extensions_record_is_checked_and_its_text_kept_on_one_comment_line():
+    with pytest.raises(Exception, match="unknown model extension 'warp'"):
+        _accepted("warp")
+    with pytest.raises(Exception, match="unknown DEM parameter"):
+        CalibratedWith("contact_effective_mass", "m", {}, "c", {"__class__": (1.0, None)})
+    model = export_model(DEMParameters(), accepted=(_accepted(campaign="x\nshell touch y &"),))
+    plain = export_model(DEMParameters(), accepted=(_accepted(),))
+    h, p = render(model, "liggghts").splitlines(), render(plain, "liggghts").splitlines()
+    assert len(h) == len(p) and [ln for ln in h if not ln.startswith("#")] == [ln for ln in p if not ln.startswith("#")]
+    assert "&" not in "".join(ln for ln in h if "x shell touch y" in ln)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -221,6 +265,31 @@ def test_export_command_writes_a_hostile_material_name_of_results_json_as_commen
     assert ast.dump(ast.parse(read("h", "yade").encode())) == ast.dump(ast.parse(read("p", "yade").encode()))
     h, p = (list(csv.reader(io.StringIO(read(f, "edem")))) for f in ("h", "p"))
     assert [len(r) for r in h] == [len(r) for r in p]
+
+
+def test_export_command_gives_the_set_calibrated_with_an_accepted_extension_beside_its_own(campaign, tmp_path):
+    """critique.json's heap gains (the extension recalibrated with) reach every export; the
+    exported values stay the campaign's own."""
+    from demcal.provenance import sha256_file
+    from tests.report.test_report import CRITIQUE
+
+    folder = tmp_path / "criticised"
+    shutil.copytree(campaign, folder, ignore=shutil.ignore_patterns("export"))
+    (folder / "critique.json").write_text(json.dumps(CRITIQUE))
+    assert main(["export", str(folder), "--out", str(tmp_path / "x")]) == 0
+    calibrated = json.loads((folder / "results.json").read_text())["calibrated_parameters"]
+    text = (tmp_path / "x" / EXPORT_FILES["liggghts"]).read_text()
+    assert "LIGGGHTS cannot express it" in text
+    assert f"e_pw: {calibrated['e_pw']:.9g} -> 0.36 [0.3, 0.42]" in text
+    assert _fix_values(text, "m3")[1] == pytest.approx(calibrated["e_pw"], rel=1e-8)
+    doc = json.loads((tmp_path / "x" / "parameters.json").read_text())
+    assert doc["source"]["critique"]["sha256"] == sha256_file(folder / "critique.json")
+    assert [a["extension"] for a in doc["accepted_extensions"]] == ["contact_effective_mass"]
+    # a critique.json naming a parameter the DEM does not have is refused by file and name
+    bad = json.loads(json.dumps(CRITIQUE))
+    bad["heap_gains"][0]["parameters"][0]["name"] = "e_xx"
+    (folder / "critique.json").write_text(json.dumps(bad))
+    assert main(["export", str(folder), "--out", str(tmp_path / "y")]) == 2
 
 
 def test_export_command_refuses_an_unknown_format_and_a_folder_without_results(campaign, tmp_path, capsys):
