@@ -14,8 +14,12 @@ Mass models (``mass_model``):
     sphere on each line of a regular midpoint grid in (y, z). Deterministic; relative error
     about 1e-5 at the default resolution. Spheres that do not overlap (a single sphere
     included) are summed exactly instead (``disjoint_spheres_mass_properties``).
+``"body"``
+    The body the spheres stand for, of the particle's shape (``simulate.shapes``): a solid
+    cylinder for a segment, a sphere, an ellipsoid for a kernel.
 ``"cylinder"``
-    A solid cylinder of the segment's length and diameter (the LIGGGHTS benchmark case).
+    A solid cylinder of the segment's length and diameter (the LIGGGHTS benchmark case): the
+    segment's ``"body"``, under the name stored results use.
 ``"scaled"``
     The union's mass and inertia multiplied by ``mean_mass / union mass`` (a measured mean
     mass, same shape).
@@ -32,7 +36,7 @@ import numpy as np
 
 from demcal.errors import InputError
 
-MASS_MODELS = ("union", "cylinder", "scaled")
+MASS_MODELS = ("union", "body", "cylinder", "scaled")
 
 
 @dataclass(frozen=True)
@@ -242,11 +246,13 @@ class ClumpTemplate:
 
 def make_template(centres, radii, density: float, *, name: str = "clump", mass_model: str = "union",
                   mean_mass: float | None = None, cylinder: tuple[float, float] | None = None,
-                  resolution: int = 600) -> ClumpTemplate:
+                  body: MassProperties | None = None, resolution: int = 600) -> ClumpTemplate:
     """Build a ``ClumpTemplate`` from sphere centres [m], radii [m] and a density [kg/m3].
 
-    ``mass_model="cylinder"`` needs ``cylinder=(length, diameter)`` [m] (a cylinder along the
-    template x axis, centred at the origin); ``"scaled"`` needs ``mean_mass`` [kg].
+    ``mass_model="body"`` needs ``body``, the mass properties of the body the spheres stand for
+    in the template frame; ``"cylinder"`` needs ``cylinder=(length, diameter)`` [m] (a
+    cylinder along the template x axis, centred at the origin); ``"scaled"`` needs
+    ``mean_mass`` [kg].
     """
     centres = np.asarray(centres, dtype=float).reshape(-1, 3)
     radii = np.broadcast_to(np.asarray(radii, dtype=float), (centres.shape[0],)).copy()
@@ -271,8 +277,12 @@ def make_template(centres, radii, density: float, *, name: str = "clump", mass_m
         props = MassProperties(float(mean_mass), union.centre_of_mass, union.inertia * k)
     elif mass_model == "cylinder":
         if cylinder is None:
-            raise InputError("mass_model='cylinder' needs cylinder=(length, diameter) [m]")
+            raise InputError("mass_model='cylinder' is a segment's body: it needs cylinder=(length, diameter) [m]")
         props = cylinder_mass_properties(cylinder[0], cylinder[1], density)
+    elif mass_model == "body":
+        if body is None:
+            raise InputError(f"mass_model='body' needs the mass properties of the body of {name!r}")
+        props = body
     else:
         raise InputError(f"unknown mass_model {mass_model!r}; valid: {', '.join(MASS_MODELS)}")
     moments, axes = principal_frame(props.inertia)

@@ -1,0 +1,144 @@
+"""What every particle shape knows (docs/design.md, "Shapes and rigs").
+
+A shape is a frozen dataclass of one particle's size in metres (the mean specimen, or one
+specimen of a size distribution). The DEM sees it only through :meth:`Shape.template`; measure
+through :meth:`Shape.from_specimen` and :meth:`Shape.volume`; the report through
+:meth:`Shape.describe` and :meth:`Shape.rows`; run keys and exports through
+:meth:`Shape.to_dict`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields, replace
+from typing import ClassVar
+
+import numpy as np
+
+from demcal.errors import InputError
+from demcal.simulate.clump import ClumpTemplate, MassProperties, make_template
+from demcal.units import MM
+
+
+@dataclass(frozen=True)
+class Shape:
+    """Base of the particle shapes (``simulate.shapes.SHAPES``).
+
+    Class attributes
+    ----------------
+    name : str
+        The workbook's meta ``shape`` value.
+    specimen_columns : tuple of tuple of str
+        Alternative sets of ``specimens`` columns [mm] the shape is measured by, the first
+        preferred (a sphere: its diameter, or three axes).
+    sizes : tuple of str
+        The fields that hold a length [m]: what a specimen's measurement sets and what
+        :meth:`scaled_to` changes.
+    """
+
+    name: ClassVar[str] = ""
+    specimen_columns: ClassVar[tuple] = ()
+    sizes: ClassVar[tuple] = ()
+
+    def __post_init__(self):
+        for name in self.sizes:
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise InputError(f"{self.name} shape: {name} must be a length > 0 [m], got {value!r}")
+            object.__setattr__(self, name, float(value))
+
+    # -- measured ------------------------------------------------------------------------------
+
+    @classmethod
+    def columns_of(cls, available) -> tuple:
+        """The first of ``specimen_columns`` that ``available`` (column names) holds; refused,
+        naming what is missing, when none is there."""
+        have = set(available)
+        for option in cls.specimen_columns:
+            if set(option) <= have:
+                return tuple(option)
+        wanted = " or ".join("(" + ", ".join(o) + ")" for o in cls.specimen_columns)
+        raise InputError(f"shape {cls.name} is measured by the specimens columns {wanted}; "
+                         f"missing {', '.join(c for c in cls.specimen_columns[0] if c not in have)}")
+
+    @classmethod
+    def from_specimen(cls, row: dict, **settings) -> "Shape":
+        """The shape of one specimen from its calliper readings ``row`` (column -> mm).
+
+        Raises ``InputError`` naming the column of a reading the shape cannot take."""
+        raise NotImplementedError
+
+    def scaled_to(self, other: "Shape") -> "Shape":
+        """This shape's settings (sphere counts, a clump table) at ``other``'s size."""
+        return replace(self, **{n: getattr(other, n) for n in self.sizes})
+
+    # -- geometry ------------------------------------------------------------------------------
+
+    def spheres(self) -> tuple[np.ndarray, np.ndarray]:
+        """(centres (n, 3), radii (n,)) [m] in the shape's frame: centre of the body at the
+        origin, longest axis x, then y."""
+        raise NotImplementedError
+
+    def volume(self) -> float:
+        """Volume of the body the spheres stand for [m3] (the envelope volume of a specimen)."""
+        raise NotImplementedError
+
+    def body_mass_properties(self, density: float) -> MassProperties:
+        """Mass properties of that body at ``density`` [kg/m3], in the shape's frame."""
+        raise NotImplementedError
+
+    @property
+    def extent(self) -> np.ndarray:
+        """Extent of the sphere model along x, y, z [m]."""
+        c, r = self.spheres()
+        return (c + r[:, None]).max(axis=0) - (c - r[:, None]).min(axis=0)
+
+    def template(self, density: float, mass_model: str = "union", mean_mass: float | None = None,
+                 name: str | None = None) -> ClumpTemplate:
+        """The DEM's clump of this shape (``simulate.clump.make_template``'s mass models; the
+        ``body`` model takes :meth:`body_mass_properties`)."""
+        centres, radii = self.spheres()
+        body = self.body_mass_properties(density) if mass_model == "body" else None
+        return make_template(centres, radii, density, name=name or self.name, mass_model=mass_model,
+                             mean_mass=mean_mass, body=body, cylinder=self._cylinder())
+
+    def _cylinder(self):
+        """(length, diameter) of the cylinder of the ``cylinder`` mass model (a segment's)."""
+        return None
+
+    # -- words ---------------------------------------------------------------------------------
+
+    def describe(self) -> str:
+        """One sentence for the report: the sphere model of the measured particle."""
+        raise NotImplementedError
+
+    def rows(self) -> list:
+        """(quantity, value, unit) rows for the report's model table: the sizes in mm, the
+        spheres, and the volume of the sphere model against the body's."""
+        c, r = self.spheres()
+        out = [(n.removesuffix("_m").replace("_", " "), getattr(self, n) / MM, "mm") for n in self.sizes]
+        out.append(("spheres", int(r.size), ""))
+        out.append(("sphere radii", f"{r.min() / MM:.4g}-{r.max() / MM:.4g}" if np.ptp(r) > 0 else
+                    f"{r[0] / MM:.4g}", "mm"))
+        return out
+
+    # -- stored --------------------------------------------------------------------------------
+
+    def to_dict(self) -> dict:
+        return {"shape": self.name, **asdict(self)}
+
+    @classmethod
+    def field_names(cls) -> tuple:
+        return tuple(f.name for f in fields(cls))
+
+
+def specimen_value(row: dict, column: str, shape: str) -> float:
+    """A reading of ``row`` [mm] as metres, refused unless a finite number > 0."""
+    value = row.get(column)
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise InputError(f"column {column}: shape {shape} needs a length > 0 [mm], got {row.get(column)!r}")
+    return value * MM
