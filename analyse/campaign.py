@@ -57,7 +57,7 @@ from demcal.analyse.screening import plackett_burman_screening
 from demcal.errors import AnalysisError, InputError
 from demcal.jsonio import write_json
 from demcal.provenance import Provenance
-from demcal.units import MM
+from demcal.simulate.timestep import material_time_step
 
 #: Screening factors: letter, DEM parameter, measured quantity (``{wall}`` = the rig's plate
 #: material from the workbook meta), as the source paper's Plackett-Burman table.
@@ -140,9 +140,11 @@ class CampaignConfig:
         Least and most factors carried from the screening to the Box-Behnken design; when the
         screening flags fewer or more, the largest effects fill up or are kept (and it is said).
     model_extensions : dict
-        Engine-hook fields of ``DEMParameters`` (``simulate.extensions.ENGINE_HOOKS``) set on
-        every run of the campaign, e.g. ``{"contact_effective_mass": True}``: the model extended
-        (the critique's heap-side gain recalibrates this way). Empty: the default model.
+        Model settings of ``DEMParameters`` set on every run of the campaign (``MODEL_SETTINGS``):
+        an engine hook's fields (``simulate.extensions.ENGINE_HOOKS``), e.g.
+        ``{"contact_effective_mass": True}``, the model extended (the critique's heap-side gain
+        recalibrates this way); the time step ``dt``; the rolling lever; the mass model; the
+        segment's sphere count. Empty: the default model.
     """
 
     profile: str = "quick"
@@ -201,12 +203,10 @@ class CampaignConfig:
             raise InputError(f"likelihood must be 'joint' or 'heap', got {self.likelihood!r}")
         if not self.discrepancy_sd >= 0:
             raise InputError(f"discrepancy_sd must be >= 0, got {self.discrepancy_sd!r}")
-        from demcal.simulate.extensions import ENGINE_HOOKS
-        hooks = sorted(f for fields_ in ENGINE_HOOKS.values() for f in fields_)
-        unknown = sorted(set(self.model_extensions) - set(hooks))
+        unknown = sorted(set(self.model_extensions) - set(model_settings()))
         if unknown:
-            raise InputError(f"model_extensions: {', '.join(unknown)} not an extension's parameter; valid: "
-                             f"{', '.join(hooks)}")
+            raise InputError(f"model_extensions: {', '.join(unknown)} not a model setting; valid: "
+                             f"{', '.join(model_settings())}")
 
     @classmethod
     def from_dict(cls, d: dict) -> "CampaignConfig":
@@ -224,6 +224,16 @@ class CampaignConfig:
         if "model_extensions" in d:
             d["model_extensions"] = current_names(d["model_extensions"])
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+
+
+def model_settings() -> tuple:
+    """The ``DEMParameters`` fields a campaign may set on every run (``--set``): the engine
+    hooks' fields, the time step, the rolling lever, the mass model and the segment's sphere
+    count. The others are calibrated or measured."""
+    from demcal.simulate.extensions import ENGINE_HOOKS
+
+    hooks = sorted(f for fields_ in ENGINE_HOOKS.values() for f in fields_)
+    return tuple(hooks) + ("dt", "rolling_lever", "mass_model", "mean_mass_kg", "spheres_per_clump")
 
 
 def campaign_runner(inputs: dict) -> dict:
@@ -295,15 +305,15 @@ def factor_levels(measurement, levels: str = "minmax") -> dict:
 
 def base_parameters(measurement):
     """DEM parameters from the measured shape, density and materials (meta), paper defaults
-    for the rest. Returns a ``simulate.params.DEMParameters``."""
+    for the rest. The time step is the meta ``time_step_s`` when the workbook states one, else
+    the one that follows the material (``simulate.timestep.material_time_step``). Returns a
+    ``simulate.params.DEMParameters``."""
     from demcal.simulate.params import DEMParameters
 
     q, meta = measurement.quantities, measurement.meta
-    changes = {}
-    if "length_mm" in q:
-        changes["segment_length_m"] = q["length_mm"].value * MM
-    if "diameter_mm" in q:
-        changes["segment_diameter_m"] = q["diameter_mm"].value * MM
+    changes = {"dt": meta.get("time_step_s")}
+    if measurement.shape:
+        changes["shape"] = measurement.shape
     if "particle_density_kg_m3" in q:
         changes["particle_density_kg_m3"] = q["particle_density_kg_m3"].value
     for key, name in (("particle_shear_modulus_pa", "shear_modulus_pa"),
@@ -488,6 +498,7 @@ def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
                          "'repose' photos and no meta 'target_repose_deg'")
     factors = factor_levels(measurement, config.levels)
     base = base_parameters(measurement).with_(**config.model_extensions)
+    material_time_step(base)          # a time step above the safe limit is refused before any run
     geometry = repose_geometry(measurement.meta)
     if config.workflow == "plausible":
         from demcal.analyse.plausible import derive_plausible

@@ -88,6 +88,7 @@ def measured_prior(measurement, factors, constraints: dict | None = None) -> Pri
     for f in factors.values():
         est = measurement.quantities[f["quantity"]]
         c = constraints.get(f["parameter"])
+        c = c if c is not None and c.informative else None     # an uninformative twin: the measured prior
         names.append(f["parameter"])
         mean.append(float(c.mean if c else est.value))
         sd.append(float(c.sd if c else est.sd))

@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from demcal.errors import AnalysisError
+from scipy import stats
 
 #: Grid points per parameter; drops are cheap (about 0.06 s each), the incline more so.
 GRID = {"drop": 9, "incline": 7}
@@ -67,6 +67,15 @@ class TwinConstraint:
         inside it.
     runs : list of dict
         Run references (key, seed) of every twin run.
+    response : float or None
+        How much the twin's mean reading changes from one end of the grid to the other
+        (least-squares line through the readings), in the lab quantity's unit.
+    informative : bool
+        The response exceeds the half-width of the 95 % interval of the lab's mean: the twin
+        tells the grid's ends apart at the lab's precision. An uninformative twin (a sphere on
+        the sliding incline rolls first, whatever its friction) does not constrain its
+        parameter, which keeps its measured prior; ``note`` says why.
+    note : str
     """
 
     parameter: str
@@ -83,6 +92,9 @@ class TwinConstraint:
     trials: int
     at_edge: bool
     runs: list = field(default_factory=list)
+    response: float | None = None
+    informative: bool = True
+    note: str = ""
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -142,7 +154,8 @@ def twin_constraints(measurement, base, factors: dict, execute, run_refs) -> dic
             sim = sim.reshape(len(grid), len(rows))
             rig = "drop"
         elif family in ("static_friction", "rolling_friction"):
-            mode = "slide" if family == "static_friction" else "roll"
+            modes = [m for (q, s, m) in groups if q == quantity and s == surface]
+            mode = "sled" if "sled" in modes else modes[0] if modes else "roll"
             rows = groups.get((quantity, surface, mode), [])
             rig_surface = "steel" if surface == wall else surface if surface == "particle" else None
             if len(rows) < 2 or rig_surface is None:
@@ -153,7 +166,7 @@ def twin_constraints(measurement, base, factors: dict, execute, run_refs) -> dic
             tasks = [{"rig": "incline", "params": base.with_(**{name: float(g)}).to_dict(), "mode": mode,
                       "surface": rig_surface, "seed": 0} for g in grid]
             records = execute(f"incline twins, {name}", tasks)
-            key = "static_friction_apparent" if mode == "slide" else "rolling_friction_apparent"
+            key = "rolling_friction_apparent" if mode == "roll" else "static_friction_apparent"
             onset = np.array([r["result"]["observable"].get(key) for r in records], dtype=float)
             y = np.array([r[1] for r in rows])
             sim = np.repeat(onset[:, None], len(rows), axis=1)
@@ -161,14 +174,31 @@ def twin_constraints(measurement, base, factors: dict, execute, run_refs) -> dic
         else:
             continue
         ok = np.all(np.isfinite(sim), axis=1)
+        half = float(stats.t.ppf(0.975, len(y) - 1)) * float(np.std(y, ddof=1)) / math.sqrt(len(y))
         if ok.sum() < 3:
-            raise AnalysisError(f"{rig} twins of {name}: fewer than 3 of {len(grid)} grid values gave a "
-                                "reading; the twin cannot constrain it")
+            out[name] = TwinConstraint(
+                name, quantity, rig, grid.tolist(), [], [], math.nan, math.nan, math.nan, float(est.value),
+                float(est.sd), int(len(y)), False, run_refs(records), None, False,
+                f"the {rig} twin gave a reading at {int(ok.sum())} of {len(grid)} grid values of {name}; it "
+                f"does not constrain it, which keeps its measured prior")
+            continue
         resid = y[None, :] - sim[ok]
         r_mean = resid.mean(axis=1)
         r_se = resid.std(axis=1, ddof=1) / math.sqrt(len(y))
         mean, sd, edge = _grid_posterior(grid[ok], r_mean, r_se)
+        response = _response(grid[ok], sim[ok].mean(axis=1))
+        informative = bool(abs(response) > half)
+        note = "" if informative else (
+            f"the {rig} twin's reading changes by {response:.3g} over {name} {grid[ok][0]:.3g}-{grid[ok][-1]:.3g}, "
+            f"less than the lab mean's 95 % half-width {half:.3g}: it does not respond to its parameter, "
+            f"which keeps its measured prior")
         out[name] = TwinConstraint(name, quantity, rig, grid[ok].tolist(), r_mean.tolist(), r_se.tolist(),
                                    mean, sd, sd * math.sqrt(len(y)), float(est.value), float(est.sd),
-                                   int(len(y)), edge, run_refs(records))
+                                   int(len(y)), edge, run_refs(records), response, informative, note)
     return out
+
+
+def _response(grid, readings) -> float:
+    """Change of the readings over the grid along their least-squares line."""
+    slope = np.polyfit(np.asarray(grid, float), np.asarray(readings, float), 1)[0]
+    return float(slope * (grid[-1] - grid[0]))

@@ -64,6 +64,7 @@ t0 = time.perf_counter()
 import sys
 sys.path.insert(0, {root!r})
 from demcal.simulate.params import DEMParameters
+from demcal.simulate.shapes.segment import Segment
 from demcal.simulate.scenes import build_paper_repose_case
 sim = build_paper_repose_case(DEMParameters(rolling_lever="liggghts_reff", mass_model="cylinder"),
                               seed=1, n_clumps=5)
@@ -83,8 +84,8 @@ def benchmark_parameters(case=None):
         particle_density_kg_m3=c.particle_density, e_pp=c.restitution_pp, e_pw=c.restitution_ps,
         mu_s_pp=c.friction_pp, mu_s_pw=c.friction_ps, mu_r_pp=c.rolling_pp, mu_r_pw=c.rolling_ps,
         wall_poisson_ratio=c.steel_poisson, wall_shear_modulus_pa=c.steel_shear_modulus,
-        segment_length_m=c.segment_length, segment_diameter_m=c.segment_diameter,
-        spheres_per_clump=len(c.sphere_offsets), mass_model="cylinder", rolling_lever="liggghts_reff")
+        shape=Segment(c.segment_length, c.segment_diameter, len(c.sphere_offsets)), mass_model="cylinder",
+        rolling_lever="liggghts_reff")
 
 
 def machine() -> dict:

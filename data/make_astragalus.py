@@ -211,6 +211,7 @@ def meta():
         ("particle_shear_modulus_pa", PAPER["segment"]["particle_shear_modulus_pa"]["value"]),
         ("box_length_mm", 200), ("box_width_mm", 100), ("box_height_mm", 250),
         ("plate_lift_speed_mm_s", 100), ("fill_count", 500),
+        ("shape", "segment"), ("time_step_s", PAPER["simulation"]["time_step_s"]),
         ("synthetic", SYNTHETIC_NOTE),
     ]
     return pd.DataFrame(rows, columns=["key", "value"])

@@ -55,9 +55,10 @@ def register(subparsers) -> None:
                      help="equivalence tolerance of the validation [deg] (default: the larger of "
                           "1 deg and the lab's heap-to-heap sd)")
     cal.add_argument("--set", dest="sets", action="append", default=[], metavar="NAME=VALUE",
-                     help="switch a model extension on for every run (repeatable), e.g. --set "
-                          "contact_effective_mass=true; only the extensions' parameters "
-                          "(simulate.extensions.ENGINE_HOOKS)")
+                     help="a model setting for every run (repeatable): an extension, e.g. --set "
+                          "contact_effective_mass=true; the time step, --set dt=2e-5 (default: the "
+                          "workbook's meta time_step_s, else 0.2 of the Rayleigh time); --set "
+                          "rolling_lever=edem_com; --set mass_model=body; --set spheres_per_clump=7")
     add_workbook_options(cal)
     cal.add_argument("--no-report", action="store_true",
                      help="skip the HTML/PDF report (and its check of the workbook text before the campaign)")
@@ -66,13 +67,14 @@ def register(subparsers) -> None:
 
 def extension_settings(items) -> dict:
     """``--set NAME=VALUE`` items as typed ``DEMParameters`` values (``CampaignConfig``
-    checks that each names an extension's parameter)."""
+    checks that each names a model setting); the segment's ``spheres_per_clump`` as its count."""
     from demcal.simulate.cli import parameters, parse_sets
-    from demcal.simulate.params import current_names
+    from demcal.simulate.params import SEGMENT_FIELDS, current_names
 
     names = current_names(parse_sets(items))
     params = parameters(items)
-    return {name: getattr(params, name) for name in names}
+    return {name: getattr(params.shape, SEGMENT_FIELDS[name]) if name in SEGMENT_FIELDS else getattr(params, name)
+            for name in names}
 
 
 def _run_calibrate(args) -> int:

@@ -20,8 +20,9 @@ from demcal.jsonio import to_jsonable
 #: damping (``contact_effective_mass``, then named ``multi_contact_damping``) damps the
 #: effective mass at each contact. Revision 3: the drop rig reads the rebound to the first apex
 #: in free flight after the whole impact sequence (a tilted body's centre of mass descending
-#: between its end impacts no longer ends it).
-MODEL_VERSION = 3
+#: between its end impacts no longer ends it). Revision 4: a run's parameters carry the particle's
+#: shape (``simulate.shapes``) and time step, so runs of revision 3 and earlier no longer replay.
+MODEL_VERSION = 4
 
 
 def run_key(inputs: dict) -> str:

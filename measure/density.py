@@ -1,10 +1,10 @@
 """Particle density: by liquid displacement in a measuring cylinder, and from the envelope.
 
-The source paper measured the density of the root segments "using a measuring cylinder"
-(0.912 g/cm^3): pieces of known mass are immersed and the rise of the liquid gives their
-volume (Archimedes' principle). The envelope density uses instead the geometric volume of each
-segment, a cylinder of the calliper length and diameter. The two differ by the segments'
-departure from a cylinder and by any open porosity the liquid fills.
+Pieces of known mass are immersed in a measuring cylinder and the rise of the liquid gives
+their volume (Archimedes' principle). The envelope density uses instead the geometric volume of
+each specimen, the body of its shape at its calliper readings (a cylinder for a segment, a
+sphere, an ellipsoid for a kernel; ``simulate.shapes``). The two differ by the particles'
+departure from that body and by any open porosity the liquid fills.
 
 References
 ----------
@@ -18,9 +18,8 @@ from __future__ import annotations
 import numpy as np
 
 from demcal.errors import InputError
-from demcal.measure.dimensions import cylinder_volume
 from demcal.measure.estimate import summarise
-from demcal.units import MM
+from demcal.measure.shape import specimen_shapes
 
 GRAM = 1e-3         # [kg]
 MILLILITRE = 1e-6   # [m^3]
@@ -48,24 +47,6 @@ def displacement_density(mass, volume_before, volume_after):
     return mass / displaced
 
 
-def envelope_density(mass, length, diameter):
-    """Envelope density of a cylindrical segment, rho = m / (pi d^2 L / 4) [1]_.
-
-    Parameters
-    ----------
-    mass : array_like
-        Segment mass [kg].
-    length, diameter : array_like
-        Calliper length and diameter [m].
-
-    Returns
-    -------
-    numpy.ndarray
-        Density [kg/m^3].
-    """
-    return np.asarray(mass, dtype=float) / cylinder_volume(length, diameter)
-
-
 def density_estimates(workbook, *, outliers="none") -> dict:
     """``particle_density_kg_m3`` (``density`` sheet) and ``envelope_density_kg_m3`` (``specimens``).
 
@@ -87,12 +68,12 @@ def density_estimates(workbook, *, outliers="none") -> dict:
     sheet = workbook.sheet("specimens")
     if sheet is not None and sheet.rows:
         f = sheet.frame
-        rho = envelope_density(f["mass_g"].to_numpy(float) * GRAM,
-                               f["length_mm"].to_numpy(float) * MM,
-                               f["diameter_mm"].to_numpy(float) * MM)
+        shapes = specimen_shapes(workbook)
+        rho = f["mass_g"].to_numpy(float) * GRAM / np.array([s.volume() for _, s in shapes])
         records = [{"id": f.at[r, "specimen_id"], "covariates": sheet.covariates_of(r)} for r in sheet.rows]
+        body = type(shapes[0][1]).body
         out["envelope_density_kg_m3"] = summarise(
             "envelope_density_kg_m3", rho, sheet.rows, unit="kg/m^3", source=sheet.source(),
-            method="envelope density of a cylinder, m / (pi d^2 L / 4), callipers and balance (Mohsenin 1986)",
+            method=f"envelope density m / V, V the volume of {body}, callipers and balance (Mohsenin 1986)",
             outliers=outliers, per_row=records)
     return out

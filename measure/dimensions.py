@@ -1,40 +1,18 @@
 """Size and mass of the particles: calliper and balance readings of the ``specimens`` sheet.
 
-The source paper (Table 1 and 2) reports the mean length, diameter and mass of cut
-*Astragalus membranaceus* segments measured with vernier callipers and an electronic
-balance; these estimators give the same means with their spread, n and 95 % interval.
+Labs report the mean sizes and mass of their particles measured with vernier callipers and an
+electronic balance (which sizes, the particle's shape says: ``measure.shape``); these
+estimators give the same means with their spread, n and 95 % interval.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
 
-import numpy as np
-
 from demcal.measure.estimate import Estimate, summarise
 
 #: Method text shared by the dimension and mass statistics.
 METHOD = "sample mean, sd (n - 1) and Student-t 95 % CI of calliper/balance readings (Student 1908)"
-
-
-def cylinder_volume(length, diameter):
-    """Volume of a right circular cylinder, V = pi d^2 L / 4.
-
-    Parameters
-    ----------
-    length : array_like
-        Cylinder length L [m].
-    diameter : array_like
-        Cylinder diameter d [m].
-
-    Returns
-    -------
-    numpy.ndarray
-        Volume [m^3].
-    """
-    length = np.asarray(length, dtype=float)
-    diameter = np.asarray(diameter, dtype=float)
-    return np.pi * diameter**2 * length / 4.0
 
 
 def specimen_statistics(specimens, *, outliers="none") -> dict:
@@ -50,16 +28,20 @@ def specimen_statistics(specimens, *, outliers="none") -> dict:
     Returns
     -------
     dict of str -> Estimate
-        ``length_mm`` [mm], ``diameter_mm`` [mm] and ``mass_g`` [g], named and expressed in
-        the units of docs/workbook.md. ``extra`` holds the minimum and maximum of the rows used.
+        Each calliper column the sheet was read with for its shape (``length_mm``,
+        ``diameter_mm``, ``width_mm``, ``thickness_mm``) [mm] and ``mass_g`` [g], named and
+        expressed in the units of docs/workbook.md. ``extra`` holds the minimum and maximum of
+        the rows used.
     """
+    from demcal.measure.shape import size_columns
+
     if specimens is None or not specimens.rows:
         return {}
     frame = specimens.frame
     records = [{"id": frame.at[r, "specimen_id"], "covariates": specimens.covariates_of(r)}
                for r in specimens.rows]
     out: dict[str, Estimate] = {}
-    for column, unit in (("length_mm", "mm"), ("diameter_mm", "mm"), ("mass_g", "g")):
+    for column, unit in [(c, "mm") for c in size_columns(specimens)] + [("mass_g", "g")]:
         est = summarise(column, frame[column].to_numpy(float), specimens.rows, unit=unit,
                         source=specimens.source(), method=METHOD, outliers=outliers,
                         per_row=records)

@@ -293,11 +293,11 @@ def _segment_length(workbook, sheet, row) -> float:
     specimens = workbook.sheet("specimens")
     matches = [] if specimens is None else [
         r for r in specimens.rows if specimens.frame.at[r, "specimen_id"] == specimen]
-    if len(matches) != 1:
-        found = "no" if not matches else f"{len(matches)}"
+    if len(matches) != 1 or "length_mm" not in specimens.frame:
+        found = ("no length_mm in the specimens sheet" if matches and len(matches) == 1 else
+                 f"{'no' if not matches else len(matches)} specimens rows with this specimen_id")
         raise sheet.error(f"radial loading needs the segment length: add length_mm to this row "
-                          f"({found} specimens rows with this specimen_id)", row=row,
-                          column="specimen_id", value=specimen)
+                          f"({found})", row=row, column="specimen_id", value=specimen)
     return specimens.frame.at[matches[0], "length_mm"] * MM
 
 

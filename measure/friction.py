@@ -130,7 +130,8 @@ def friction_estimates(workbook, *, outliers="none") -> dict:
         values, records = [], []
         for r in rows:
             angle = f.at[r, "angle_deg"] if "angle_deg" in f else math.nan
-            rec = {"id": f.at[r, "trial_id"], "surface": surface, "mode": mode}
+            rec = {"id": f.at[r, "trial_id"], "surface": surface, "mode": mode,
+                   "carrier": f.at[r, "carrier"] if "carrier" in f else "particle"}
             if not math.isnan(angle):
                 values.append(float(from_tilt_angle(math.radians(angle))))
                 rec.update(method="tilt", angle_rad=math.radians(angle))

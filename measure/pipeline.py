@@ -9,8 +9,12 @@
                            "rows_rejected": [{"row", "reason"}],
                            "source": {"file", "sheet", "sha256"}, "method", "extra"}},
      "per_row": {NAME: [{"row", "value", "used", ..., "covariates": {...}}]},
-     "meta": {...}, "unknown_sheets": [...], "workbook": {...}, "provenance": {...},
-     "notes": [...]}
+     "meta": {...}, "shape": {"shape": NAME, ...}, "unknown_sheets": [...], "workbook": {...},
+     "provenance": {...}, "notes": [...]}
+
+``shape`` is the particle's shape at the mean readings (``simulate.shapes``, the meta ``shape``,
+default ``segment``), what the DEM's clumps are built from; a note compares the mass of its
+sphere model at the measured particle density with the balance's.
 
 Quantity names are those of docs/workbook.md: ``length_mm``, ``diameter_mm``, ``mass_g``,
 ``particle_density_kg_m3``, ``envelope_density_kg_m3``, ``restitution.<pair>``,
@@ -47,11 +51,12 @@ from demcal.measure.estimate import Estimate, parse_outlier_rule, summarise
 from demcal.measure.friction import friction_estimates
 from demcal.measure.images import MAX_PHOTO_PIXELS
 from demcal.measure.restitution import restitution_estimates
+from demcal.measure.shape import mean_shape
 from demcal.measure.workbook import ReadOptions, Workbook, read_workbook
 from demcal.units import GRAVITY
 
 #: Order of the quantities in outputs (prefixes stand for their families).
-ORDER = ("length_mm", "diameter_mm", "mass_g", "particle_density_kg_m3", "envelope_density_kg_m3",
+ORDER = ("length_mm", "diameter_mm", "width_mm", "thickness_mm", "mass_g", "particle_density_kg_m3", "envelope_density_kg_m3",
          "restitution.", "static_friction.", "rolling_friction.", "poisson_ratio",
          "elastic_modulus_pa", "shear_modulus_pa", "repose_angle_deg")
 
@@ -82,6 +87,9 @@ class Measurement:
         Code version, input hashes and the options used.
     notes : list of str
         What the user should know (e.g. photos not measured because no estimator was available).
+    shape : dict
+        The particle's shape at the mean readings (``simulate.shapes.Shape.to_dict``); empty
+        when a size has no estimate.
     """
 
     material: str
@@ -90,6 +98,7 @@ class Measurement:
     meta: dict
     provenance: Provenance
     notes: list = field(default_factory=list)
+    shape: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         """The JSON layout described in the module docstring."""
@@ -97,6 +106,7 @@ class Measurement:
                 "quantities": {n: e.to_dict() for n, e in self.quantities.items()},
                 "per_row": {n: [dict(r) for r in e.per_row] for n, e in self.quantities.items()},
                 "meta": dict(self.meta),
+                "shape": dict(self.shape),
                 "unknown_sheets": list(self.workbook.get("unknown_sheets", [])),
                 "workbook": dict(self.workbook),
                 "provenance": self.provenance.to_dict(),
@@ -109,7 +119,7 @@ class Measurement:
         quantities = {n: Estimate.from_dict(q, per_row.get(n, [])) for n, q in d["quantities"].items()}
         return cls(material=d["material"], quantities=quantities, workbook=dict(d.get("workbook", {})),
                    meta=dict(d.get("meta", {})), provenance=Provenance(**d["provenance"]),
-                   notes=list(d.get("notes", [])))
+                   notes=list(d.get("notes", [])), shape=dict(d.get("shape") or _segment_of(quantities)))
 
     @property
     def read_options(self) -> ReadOptions:
@@ -206,6 +216,30 @@ def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir, max_phot
     return replace(est, extra=dict(est.extra, **extra))
 
 
+def _segment_of(quantities: dict) -> dict:
+    """The segment shape a measurement stored before shapes existed describes (its mean length
+    and diameter), or an empty dict."""
+    from demcal.simulate.shapes.segment import Segment
+    from demcal.units import MM
+
+    if "length_mm" in quantities and "diameter_mm" in quantities:
+        return Segment(quantities["length_mm"].value * MM, quantities["diameter_mm"].value * MM).to_dict()
+    return {}
+
+
+def shape_note(shape, quantities: dict) -> str | None:
+    """The mass of the shape's sphere model (union) and of its body at the measured particle
+    density against the balance's mean mass, as a sentence; None without both."""
+    rho, mass = quantities.get("particle_density_kg_m3"), quantities.get("mass_g")
+    if shape is None or rho is None or mass is None:
+        return None
+    union = shape.template(rho.value).mass * 1e3
+    body = rho.value * shape.volume() * 1e3
+    return (f"particle model: {shape.describe()}; at the measured particle density "
+            f"({rho.value:.4g} kg/m^3) its spheres weigh {union:.4g} g and its body ({type(shape).body}) "
+            f"{body:.4g} g, against the balance's mean {mass.value:.4g} g (ratio {union / mass.value:.3g})")
+
+
 def _check_finite(est: Estimate) -> None:
     """Refuse an estimate that is not a finite number (an sd and interval may be undefined only
     for a single value, or a stated override): JSON would write it as null."""
@@ -253,6 +287,20 @@ def repose_estimate(wb: Workbook, *, photo_estimator=None, outliers="none", anno
     notes.append(f"repose_angle_deg: meta target_repose_deg = {target:g} deg overrides the photo estimate"
                  + ("" if photo is None else f" ({photo.value:.4g} deg)"))
     return override, notes
+
+
+def measure_particle(wb, reading: ReadOptions | None = None) -> Measurement:
+    """The particle alone (what a twin needs to simulate the workbook's material): the
+    specimens' sizes and mass, the densities, the shape and the meta; no drop, incline,
+    compression or photo is measured."""
+    if not isinstance(wb, Workbook):
+        wb = read_workbook(wb, reading)
+    quantities = {**specimen_statistics(wb.sheet("specimens")), **density_estimates(wb)}
+    shape = mean_shape(wb, quantities)
+    return Measurement(material=str(wb.meta["material"]), quantities=quantities,
+                       workbook={"source": str(wb.source), "files": dict(wb.files)}, meta=dict(wb.meta),
+                       provenance=Provenance(inputs=dict(wb.files), options={"reading": wb.options.to_dict()}),
+                       shape={} if shape is None else shape.to_dict())
 
 
 def measure_workbook(wb, *, photo_estimator=None, outliers="none", annotate_dir=None,
@@ -310,6 +358,10 @@ def measure_workbook(wb, *, photo_estimator=None, outliers="none", annotate_dir=
     for est in quantities.values():
         _check_finite(est)
     notes = list(wb.notes) + notes
+    shape = mean_shape(wb, quantities)
+    note = shape_note(shape, quantities)
+    if note:
+        notes.append(note)
     sheets = {name: {"file": str(s.file), "sha256": s.sha256, "rows": len(s.rows),
                      "required": list(s.required), "optional": list(s.optional),
                      "covariates": list(s.covariates)} for name, s in wb.sheets.items()}
@@ -327,4 +379,4 @@ def measure_workbook(wb, *, photo_estimator=None, outliers="none", annotate_dir=
     options["reading"] = wb.options.to_dict()
     return Measurement(material=str(wb.meta["material"]), quantities=quantities, workbook=info,
                        meta=dict(wb.meta), provenance=Provenance(inputs=dict(wb.files), options=options),
-                       notes=notes)
+                       notes=notes, shape={} if shape is None else shape.to_dict())

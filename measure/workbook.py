@@ -70,6 +70,8 @@ from demcal.errors import InputError, WorkbookError
 from demcal.measure import rawsheets
 from demcal.measure.rawsheets import RawSheet, is_missing_marker, row_ranges
 from demcal.provenance import sha256_file
+from demcal.simulate.shapes import DEFAULT_SHAPE, shape_class
+from demcal.simulate.shapes.base import SpecimenError
 from demcal.text import control_characters, one_line
 
 #: A material name: a letter, then letters, digits or underscores (lower case after reading).
@@ -77,7 +79,11 @@ NAME_PATTERN = re.compile(r"[a-z][a-z0-9_]*")
 MODES = ("slide", "roll")
 AXES = ("radial", "axial")
 SIDES = ("left", "right", "both")
+#: What carries the particle down an incline: the particle itself, or a sled of glued particles.
+CARRIERS = ("particle", "sled")
 ROLLOUT_COLUMNS = ("slope_deg", "release_height_mm", "runout_mm")
+#: Calliper columns of the ``specimens`` sheet; the meta ``shape`` says which it needs.
+SIZE_COLUMNS = ("length_mm", "diameter_mm", "width_mm", "thickness_mm")
 
 
 @dataclass(frozen=True)
@@ -101,8 +107,12 @@ class SheetSpec:
 
 SHEETS = {
     "meta": SheetSpec(required=("key", "value")),
-    "specimens": SheetSpec(required=("specimen_id", "length_mm", "diameter_mm", "mass_g"),
-                           ids=("specimen_id",), positive=("length_mm", "diameter_mm", "mass_g")),
+    # the size columns required are those of the meta's shape (simulate.shapes)
+    "specimens": SheetSpec(required=("specimen_id", "mass_g"), optional=SIZE_COLUMNS,
+                           ids=("specimen_id",), positive=SIZE_COLUMNS + ("mass_g",)),
+    # sphere centres and radii of one reference particle, for the meta shape clump
+    "clump": SheetSpec(required=("x_mm", "y_mm", "z_mm", "radius_mm"), optional=("sphere_id",),
+                       ids=("sphere_id",), positive=("radius_mm",), numeric=("x_mm", "y_mm", "z_mm")),
     "density": SheetSpec(required=("sample_id", "mass_g", "volume_before_ml", "volume_after_ml"),
                          ids=("sample_id",),
                          positive=("mass_g", "volume_before_ml", "volume_after_ml")),
@@ -111,9 +121,9 @@ SHEETS = {
                       nonnegative=("rebound_height_mm",), choices=("pair",),
                       files=(("track_file", "track"),)),
     "incline": SheetSpec(required=("trial_id", "surface", "mode"),
-                         optional=("angle_deg",) + ROLLOUT_COLUMNS, ids=("trial_id",),
+                         optional=("angle_deg", "carrier") + ROLLOUT_COLUMNS, ids=("trial_id",),
                          positive=("release_height_mm",), nonnegative=("runout_mm",),
-                         angles=("angle_deg", "slope_deg"), choices=("surface", "mode")),
+                         angles=("angle_deg", "slope_deg"), choices=("surface", "mode", "carrier")),
     "compression": SheetSpec(required=("specimen_id", "axis", "width_before_mm", "width_after_mm",
                                        "thickness_before_mm", "thickness_after_mm"),
                              optional=("curve_file", "length_mm"), ids=("specimen_id",),
@@ -136,7 +146,9 @@ ATTACHMENTS = {"curve": (("displacement_mm", "force_N"), ()),
 #: Meta keys we check when present (others are kept as read).
 META_POSITIVE = ("contact_density_kg_m3", "contact_shear_modulus_pa", "particle_shear_modulus_pa",
                  "box_length_mm", "box_width_mm", "box_height_mm", "plate_lift_speed_mm_s",
-                 "fill_count")
+                 "fill_count", "time_step_s", "spheres_per_particle")
+#: Meta keys that must be whole numbers.
+META_WHOLE = ("fill_count", "spheres_per_particle")
 
 #: Physically plausible range of each number, inclusive, in the unit its name carries: wide
 #: enough for anything from a rapeseed to a tuber and a lab's rigs, narrow enough that a typo
@@ -145,6 +157,9 @@ META_POSITIVE = ("contact_density_kg_m3", "contact_shear_modulus_pa", "particle_
 RANGES = {
     # specimens and compression [mm, g]
     "length_mm": (0.05, 1000.0), "diameter_mm": (0.05, 1000.0), "mass_g": (1e-6, 1e4),
+    "width_mm": (0.05, 1000.0), "thickness_mm": (0.05, 1000.0),
+    # clump sheet [mm] (its y_mm shares the range of a track's, below)
+    "x_mm": (-1e6, 1e6), "z_mm": (-1e6, 1e6), "radius_mm": (0.01, 1000.0),
     "width_before_mm": (0.05, 1000.0), "width_after_mm": (0.05, 1000.0),
     "thickness_before_mm": (0.05, 1000.0), "thickness_after_mm": (0.05, 1000.0),
     # density [ml]
@@ -158,7 +173,7 @@ RANGES = {
     "contact_density_kg_m3": (10.0, 1e5), "contact_shear_modulus_pa": (1e3, 1e13),
     "particle_shear_modulus_pa": (1e3, 1e13), "box_length_mm": (1.0, 1e5),
     "box_width_mm": (1.0, 1e5), "box_height_mm": (1.0, 1e5), "plate_lift_speed_mm_s": (1e-3, 1e5),
-    "fill_count": (1.0, 1e6),
+    "fill_count": (1.0, 1e6), "time_step_s": (1e-9, 1e-2), "spheres_per_particle": (1.0, 100.0),
     # curve and track files [mm, N, s, deg]
     "displacement_mm": (-1e3, 1e3), "force_N": (-1e6, 1e6), "t_s": (-1e4, 1e4),
     "y_mm": (-1e6, 1e6), "track.angle_deg": (-1e6, 1e6),
@@ -484,7 +499,7 @@ def _check_choice(column: str, value: str | None) -> str | None:
             return None
         return ("unknown surface; valid: particle, steel or another material name "
                 "(a letter then letters, digits or _)")
-    valid = {"mode": MODES, "axis": AXES, "side": SIDES}[column]
+    valid = {"mode": MODES, "axis": AXES, "side": SIDES, "carrier": CARRIERS}[column]
     if value in valid:
         return None
     return f"unknown {column}; valid: {', '.join(valid)}"
@@ -536,6 +551,8 @@ def _typed_frame(name: str, spec: SheetSpec, raw: RawSheet, frame: pd.DataFrame,
                 value = _name(cell)
                 if value is None and col == "side":
                     value = "both"
+                if value is None and col == "carrier":
+                    value = "particle"
                 problem = _check_choice(col, value)
                 if problem:
                     raise err(problem, row, None if _is_empty(cell) else cell)
@@ -609,7 +626,7 @@ def _require_cells(name: str, frame: pd.DataFrame, columns, file: Path, rows=Non
                 raise WorkbookError("missing value", file=str(file), sheet=name, row=row, column=col)
 
 
-def _row_rules(name: str, frame: pd.DataFrame, file: Path) -> None:
+def _row_rules(name: str, frame: pd.DataFrame, file: Path, required, meta: dict) -> None:
     """Checks across the cells of a row, and required cells that may be empty in some rows."""
     def err(message, row, column, value=None):
         return WorkbookError(message, file=str(file), sheet=name, row=row, column=column, value=value)
@@ -637,6 +654,9 @@ def _row_rules(name: str, frame: pd.DataFrame, file: Path) -> None:
             if not has_angle and not rollout:
                 raise err("missing value (or give slope_deg, release_height_mm and runout_mm "
                           "for a roll-out trial)", row, "angle_deg")
+            if "carrier" in frame and frame.at[row, "carrier"] == "sled" and frame.at[row, "mode"] != "slide":
+                raise err("a sled of glued particles measures static friction: mode must be slide", row,
+                          "carrier", "sled")
             if rollout:
                 missing = [c for c in ROLLOUT_COLUMNS if c not in rollout]
                 if missing:
@@ -645,7 +665,15 @@ def _row_rules(name: str, frame: pd.DataFrame, file: Path) -> None:
                     raise err("a roll-out trial measures rolling friction: mode must be roll",
                               row, "mode", frame.at[row, "mode"])
         return
-    _require_cells(name, frame, spec.required, file)
+    _require_cells(name, frame, required, file)
+    if name == "specimens":
+        shape = shape_class(meta.get("shape") or DEFAULT_SHAPE)
+        sizes = [c for c in required if c in SIZE_COLUMNS]
+        for row in frame.index:
+            try:
+                shape.from_specimen({c: frame.at[row, c] for c in sizes}, table=((0.0, 0.0, 0.0, 1.0),))
+            except SpecimenError as exc:
+                raise err(exc.reason, row, exc.column, frame.at[row, exc.column]) from None
     if name == "density":
         for row in frame.index:
             v0, v1 = frame.at[row, "volume_before_ml"], frame.at[row, "volume_after_ml"]
@@ -660,9 +688,19 @@ def _row_rules(name: str, frame: pd.DataFrame, file: Path) -> None:
                           "thickness_after_mm", t1)
 
 
-def _required_columns(name: str, columns: list, file: Path) -> list:
+def _required_columns(name: str, columns: list, file: Path, meta: dict) -> list:
     spec = SHEETS[name]
     required = list(spec.required)
+    if name == "specimens":
+        shape = shape_class(meta.get("shape") or DEFAULT_SHAPE)
+        options = shape.specimen_columns
+        chosen = next((o for o in options if set(o) <= set(columns)), None)
+        if chosen is None:
+            wanted = " or ".join("(" + ", ".join(o) + ")" for o in options)
+            missing = next(c for c in options[0] if c not in columns)
+            raise WorkbookError(f"missing required column: shape {shape.name} (meta shape) is measured by "
+                                f"{wanted}", file=str(file), sheet=name, column=missing)
+        required[1:1] = list(chosen)
     if name == "incline":
         has_rollout = [c for c in ROLLOUT_COLUMNS if c in columns]
         if has_rollout:
@@ -714,7 +752,7 @@ def _parse_meta(frame: pd.DataFrame, file: Path, options: ReadOptions) -> dict:
             if value is not None:
                 if key in META_POSITIVE and not value > 0:
                     raise bad("must be positive")
-                if key == "fill_count" and not float(value).is_integer():
+                if key in META_WHOLE and not float(value).is_integer():
                     raise bad("must be a whole number")
                 if key == "contact_poisson" and not -1 < value < 0.5:
                     raise bad("a Poisson's ratio must lie in (-1, 0.5)")
@@ -724,6 +762,11 @@ def _parse_meta(frame: pd.DataFrame, file: Path, options: ReadOptions) -> dict:
                 if bounds is not None and not bounds[0] <= value <= bounds[1]:
                     raise bad(f"outside the plausible range {bounds[0]:g} to {bounds[1]:g} "
                               f"(docs/workbook.md; --range {key}=LO:HI sets another)")
+        if key == "shape" and value is not None:
+            try:
+                value = shape_class(value).name
+            except InputError as exc:
+                raise bad(str(exc)) from None
         meta[key] = value
     if not isinstance(meta.get("material"), str) or not meta["material"]:
         raise WorkbookError("meta key 'material' is missing or empty", file=str(file), sheet="meta",
@@ -930,7 +973,7 @@ def read_workbook(path, options: ReadOptions | None = None) -> Workbook:
         file = raw.file
         spec = SHEETS[key]
         frame = _drop_empty_rows(_canonical_columns(raw.frame, spec.required + spec.optional, file, key))
-        required = _required_columns(key, list(frame.columns), file)
+        required = _required_columns(key, list(frame.columns), file, meta)
         if key in REQUIRED_SHEETS and frame.empty:
             raise WorkbookError("the sheet has no data rows", file=str(file), sheet=key)
         if key == "meta":
@@ -940,7 +983,7 @@ def read_workbook(path, options: ReadOptions | None = None) -> Workbook:
                                  index=frame.index, dtype=object)
         else:
             typed = _typed_frame(key, spec, raw, frame, file, options, notes)
-            _row_rules(key, typed, file)
+            _row_rules(key, typed, file, required, meta)
             _check_unique(key, typed, file)
             _check_files(state, key, spec, typed, file)
         optional = [c for c in spec.optional if c in typed.columns and c not in required]
@@ -948,6 +991,10 @@ def read_workbook(path, options: ReadOptions | None = None) -> Workbook:
         sheets[key] = Sheet(name=key, file=file, sha256=files[str(file)], frame=typed,
                             required=required, optional=optional, covariates=covariates)
 
+    if (meta.get("shape") == "clump") != ("clump" in sheets):
+        raise WorkbookError("the meta shape clump needs the clump sheet (x_mm, y_mm, z_mm, radius_mm), and the "
+                            "clump sheet needs the meta shape clump", file=str(source),
+                            sheet="clump" if "clump" not in sheets else "meta")
     unknown = []
     for key, original in by_key.items():
         if key in SHEETS:

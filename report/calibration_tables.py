@@ -49,20 +49,26 @@ def table_twins(c: Campaign) -> Table | None:
     rows = []
     for name, t in twins.items():
         label, symbol = parameter_label(name, wall)
+        used = t.get("informative", True)
         rows.append((label, symbol, t["quantity"], t["rig"], t["trials"], t["measured_mean"], t["measured_sd"],
-                     t["mean"], t["sd"], [t["grid"][0], t["grid"][-1]], "yes" if t["at_edge"] else "no"))
+                     t["mean"] if used else None, t["sd"] if used else None, [t["grid"][0], t["grid"][-1]],
+                     "yes" if t["at_edge"] else "no", "yes" if used else "no"))
     keys = [run["key"] for t in twins.values() for run in t["runs"]]
+    deaf = tuple(f"{parameter_label(n, wall)[0]}: {t['note']}." for n, t in twins.items()
+                 if not t.get("informative", True))
     return Table("P1a", "Every lab test's twin: the DEM parameter that reproduces each reading",
                  ("Parameter", "Symbol", "Measured quantity", "Twin", "Trials", "Lab reading", "SD",
-                  "Twin-implied value", "SD", "Grid", "At the grid's edge"),
-                 ("", "", "", "", "", "", "", "", "", "", ""), tuple(rows),
+                  "Twin-implied value", "SD", "Grid", "At the grid's edge", "Informative"),
+                 ("",) * 12, tuple(rows),
                  notes=("The twin of each lab trial (the logged drop height and landing orientation; the "
                         "incline surface and mode) run over a grid of the parameter; the value whose twin "
                         "readings match the lab's on average, and the spread of single readings carried "
                         "through the twin. These are the prior of the joint calibration (Table P1); Poisson's "
-                        "ratio has no twin and keeps its measurement.",),
+                        "ratio has no twin and keeps its measurement. A twin whose reading changes over its "
+                        "grid by less than the lab mean's 95 % half-width is uninformative: its parameter "
+                        "keeps the measured prior.",) + deaf,
                  sources=({"kind": "runs", "keys": keys}, _results_source("calibration.twins")),
-                 formats=("", "", "", "", "d", ".4g", ".3g", ".4g", ".3g", ".3g", ""))
+                 formats=("", "", "", "", "d", ".4g", ".3g", ".4g", ".3g", ".3g", "", ""))
 
 
 def table_joint_vs_heap(c: Campaign) -> Table | None:

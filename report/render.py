@@ -221,6 +221,14 @@ def _runner_text(r: CampaignResult) -> tuple[str, bool]:
             "numbers below exercise the analysis, they are not a DEM calibration of the material."), True
 
 
+def particle_model(base: dict) -> str:
+    """The DEM particle of a campaign's base parameters (``DEMParameters.to_dict``, stored
+    results of any version) in words."""
+    from demcal.simulate.params import DEMParameters
+
+    return DEMParameters.from_names(base).shape.describe()
+
+
 def differences(c: Campaign) -> list[str]:
     """Where this campaign's procedure differs from the paper's, from the stored settings."""
     if c.results.workflow == "plausible":
@@ -237,11 +245,11 @@ def differences(c: Campaign) -> list[str]:
                    f"{sim.get('plate_withdrawn_at_s', 4):g} s, {sim.get('total_time_s', 10):g} s in all).")
     base = r.base_parameters
     if base:
-        out.append(f"Segment model: {base.get('spheres_per_clump')} spheres of radius "
-                   f"{1e3 * base.get('segment_diameter_m', float('nan')) / 2:.4g} mm along a "
-                   f"{1e3 * base.get('segment_length_m', float('nan')):.4g} mm segment (from the measured "
-                   f"means), mass model '{base.get('mass_model')}', rolling-friction lever "
-                   f"'{base.get('rolling_lever')}'; the paper: 5 spheres of 5.5 mm.")
+        seg = p.get("segment", {})
+        paper = (f"; the paper: {seg['spheres_per_clump']} spheres of {seg['sphere_radius_mm']:g} mm radius"
+                 if {"spheres_per_clump", "sphere_radius_mm"} <= set(seg) else "")
+        out.append(f"Particle model: {particle_model(base)} (from the measured means), mass model "
+                   f"'{base.get('mass_model')}', rolling-friction lever '{base.get('rolling_lever')}'{paper}.")
     rep = q.get("repose_angle_deg", {})
     if (rep.get("extra") or {}).get("override"):
         out.append(f"Target angle {rep['value']:.4g}° from the workbook's meta target_repose_deg "
@@ -345,12 +353,17 @@ def abstract_plausible(c: Campaign) -> dict:
     # the lab readings the twins translate into other DEM values (beyond a reading's spread)
     moved = [f"{parameter_label(n, wall)[0].lower()} {t['mean']:.3g} where the lab reads {t['measured_mean']:.3g}"
              for n, t in cal.twins.items()
-             if abs(t["mean"] - t["measured_mean"]) > t["measured_sd"]]
+             if t.get("informative", True) and abs(t["mean"] - t["measured_mean"]) > t["measured_sd"]]
     twins = (" The twins of the drop and incline tests put " + "; ".join(moved)
              + ": the lab's reading is not the DEM's parameter there." if moved else "")
+    deaf = [f"{parameter_label(n, wall)[0].lower()} ({t['note']})" for n, t in cal.twins.items()
+            if not t.get("informative", True)]
+    if deaf:
+        twins += " Uninformative twins, not used: " + "; ".join(deaf) + "."
+    specimens = next((e.get("n", 0) for k, e in q.items() if k.endswith("_mm") and isinstance(e, dict)), 0)
     text = (f"The physical and contact parameters of {m.get('material')} were measured "
-            f"({q.get('length_mm', {}).get('n', 0)} segments measured with callipers: "
-            f"{_f(q.get('length_mm', {}).get('value'))} mm × {_f(q.get('diameter_mm', {}).get('value'))} mm). "
+            f"({specimens} particles measured with callipers; the DEM particle: "
+            f"{particle_model(r.base_parameters)}). "
             f"The angle of repose of the heap, {_f(rep.get('value'), '.4g')}° (n = {rep.get('n')}), is the "
             f"calibration target. One simulated heap scatters by {noise.all_points.sd:.2g}° (SD) from "
             f"seed to seed, so the calibration ran {runs} independent heaps over the measured range of the "
@@ -551,6 +564,7 @@ def render_html(c: Campaign, tables: list[dict], figures: list) -> str:
         "marked": {t["id"]: marked_rows(t) for t in tables},
         "references": REFERENCES, "results": r,
         "critique_ids": [t["id"] for t in tables if t["id"].startswith("C")],
+        "particle_model": particle_model(r.base_parameters) if r is not None and r.base_parameters else "",
     }
     if r is not None:
         runner_text, runner_warn = _runner_text(r)

@@ -5,8 +5,9 @@ Public API (details in each module's docstring):
 - ``Simulation`` (``simulate.engine``): state, walls, factories, ``run``, state readers.
 - ``DEMParameters`` (``simulate.params``): the parameter set with the paper's defaults.
 - ``MaterialTable`` (``simulate.materials``): materials and per-pair contact parameters.
-- ``ClumpTemplate``, ``segment_template``, ``segment_from_parameters``, ``make_template``
-  (``simulate.clump``): clump shapes and their mass properties.
+- ``ClumpTemplate``, ``segment_template``, ``make_template`` (``simulate.clump``): clumps and
+  their mass properties; ``DEMParameters.template()`` builds the clump of its shape
+  (``simulate.shapes``).
 - ``Plane``, ``Rectangle``, ``box_rectangles`` (``simulate.walls``).
 - ``ParticleFactory`` (``simulate.factory``).
 - ``rayleigh_time`` (``simulate.timestep``).
@@ -14,7 +15,7 @@ Public API (details in each module's docstring):
 - ``write_vtp`` (``simulate.vtk``): frames for ParaView.
 """
 
-from demcal.simulate.clump import ClumpTemplate, make_template, segment_from_parameters, segment_template
+from demcal.simulate.clump import ClumpTemplate, make_template, segment_template
 from demcal.simulate.engine import Escape, RunSummary, Simulation
 from demcal.simulate.factory import ParticleFactory
 from demcal.simulate.materials import MaterialTable
@@ -26,5 +27,5 @@ from demcal.simulate.walls import Plane, Rectangle, box_rectangles
 
 __all__ = ["ClumpTemplate", "DEMParameters", "Escape", "MaterialTable", "ParticleFactory", "Plane",
            "Rectangle", "RunSummary", "Simulation", "box_rectangles", "build_paper_repose_case",
-           "make_template", "rayleigh_time", "segment_from_parameters", "segment_template",
+           "make_template", "rayleigh_time", "segment_template",
            "write_vtp"]

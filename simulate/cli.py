@@ -45,12 +45,14 @@ def register(subparsers) -> None:
     p.add_argument("--vtk", metavar="DIR",
                    help=f"write about {VTK_FRAMES} frames of the spheres and the walls to DIR "
                         "(.vtp), and their time series particles.pvd and walls.pvd for ParaView")
+    p.add_argument("--workbook", metavar="PATH",
+                   help="simulate the workbook's particle: its shape and sizes, densities and moduli "
+                        "(and for the repose rig the carton, lift speed and fill count of its meta); "
+                        "--set changes them further")
     g = p.add_argument_group("repose rig")
     g.add_argument("--profile", choices=("paper", "quick"), default="quick",
                    help="paper: the source paper's case (10 s simulated); quick: the same carton and "
                         "fill with the idle time cut (about 2.5 s), for calibration campaigns (default)")
-    g.add_argument("--workbook", metavar="PATH",
-                   help="take the carton, lift speed and fill count from this workbook's meta sheet")
     g.add_argument("--annotate", metavar="PNG", help="write the annotated side view of the heap")
     add_workbook_options(p)
     g = p.add_argument_group("drop and incline rigs")
@@ -66,8 +68,9 @@ def register(subparsers) -> None:
     g.add_argument("--surface", default="steel",
                    help="incline: plate surface, steel (default), particle or another material "
                         "(needs --surface-material)")
-    g.add_argument("--mode", choices=("slide", "roll"), default="slide",
-                   help="incline: slide (segment along the slope) or roll (across it)")
+    g.add_argument("--mode", choices=("slide", "roll", "sled"), default="slide",
+                   help="incline: slide (the particle along the slope), roll (across it) or sled (a sled of "
+                        "glued particles, for round particles that roll first)")
     g.add_argument("--tilt-rate", type=float, default=1.0, metavar="DEG_S",
                    help="incline: tilt rate [deg/s] (default 1)")
     g.add_argument("--surface-material", dest="surface_values", action="append", default=[],
@@ -92,12 +95,12 @@ def parse_sets(items) -> dict:
     return out
 
 
-def parameters(items):
-    """``DEMParameters`` with the ``--set`` items applied."""
+def parameters(items, base=None):
+    """``DEMParameters`` (``base``, default the paper's) with the ``--set`` items applied."""
     from demcal.simulate.params import DEMParameters
     values = parse_sets(items)
     try:
-        return DEMParameters.from_names(values)
+        return (base or DEMParameters()).with_(**values)
     except InputError as exc:
         raise InputError(f"--set: {exc}") from None
 
@@ -217,10 +220,18 @@ def result_json(result, full_record: bool = False) -> dict:
 def run(args) -> int:
     from demcal.simulate.rigs import run_rig
 
-    params = parameters(args.sets)
+    base, particle = None, None
+    if args.workbook:
+        from demcal.analyse.campaign import base_parameters
+        from demcal.measure.pipeline import measure_particle
+        particle = measure_particle(args.workbook, read_options(args))
+        base = base_parameters(particle)
+    params = parameters(args.sets, base)
     if args.seed < 0:
         raise InputError(f"--seed must be >= 0, got {args.seed}")
     opts, inputs = rig_options(args)
+    if particle is not None:
+        inputs.update(particle.provenance.inputs)
     monitor = _Monitor(args.vtk)
     result = run_rig(args.rig, params, args.seed, callback=monitor, **opts)
     if inputs:

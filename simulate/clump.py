@@ -308,10 +308,3 @@ def segment_template(length: float, diameter: float, n_spheres: int, density: fl
     centres = segment_centres(length, diameter, n_spheres)
     return make_template(centres, diameter / 2.0, density, name=name, mass_model=mass_model,
                          mean_mass=mean_mass, cylinder=(length, diameter))
-
-
-def segment_from_parameters(params, name: str = "segment") -> ClumpTemplate:
-    """``segment_template`` from a ``DEMParameters``."""
-    return segment_template(params.segment_length_m, params.segment_diameter_m,
-                            int(params.spheres_per_clump), params.particle_density_kg_m3,
-                            mass_model=params.mass_model, mean_mass=params.mean_mass_kg, name=name)

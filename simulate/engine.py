@@ -2,12 +2,12 @@
 
 Building and running a simulation
 ---------------------------------
->>> from simulate import Simulation, MaterialTable, DEMParameters, segment_from_parameters
+>>> from simulate import Simulation, MaterialTable, DEMParameters
 >>> from simulate.walls import Plane, Rectangle
 >>> params = DEMParameters()
 >>> sim = Simulation(MaterialTable.from_parameters(params), domain_lo=(-0.1, -0.1, -0.01),
 ...                  domain_hi=(0.1, 0.1, 0.6), dt=7.43678e-5)
->>> seg = sim.add_template(segment_from_parameters(params))        # template id
+>>> seg = sim.add_template(params.template())        # template id
 >>> floor = sim.add_wall(Plane((0, 0, 0), (0, 0, 1), material="steel"))
 >>> body = sim.add_clump(seg, position=(0, 0, 0.4), orientation=(1, 0, 0, 0),
 ...                      material="particle")                      # body id

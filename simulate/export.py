@@ -53,7 +53,7 @@ import numpy as np
 
 from demcal.errors import InputError
 from demcal.jsonio import to_jsonable
-from demcal.simulate.clump import ClumpTemplate, segment_from_parameters
+from demcal.simulate.clump import ClumpTemplate
 from demcal.simulate.contact.rolling import ROLLING_LEVERS
 from demcal.simulate.extensions import ENGINE_HOOKS, describe, engine_hooks
 from demcal.simulate.materials import youngs_modulus
@@ -315,7 +315,7 @@ def export_model(params: DEMParameters, *, material: str = "segment", source: di
     if not isinstance(params, DEMParameters):
         raise InputError(f"params must be a DEMParameters, got {type(params).__name__}")
     # the template of the mean segment; a size distribution is listed as not carried over
-    template = segment_from_parameters(params.with_(segment_sizes=None))
+    template = params.template()
     return ExportModel(params, template, material, dict(source or {}), dict(intervals or {}), tuple(accepted))
 
 

@@ -84,13 +84,14 @@ elastic-plastic spheres. Powder Technol. 99, 154-162.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 from scipy import stats
 
 from demcal.errors import InputError
-from demcal.simulate.clump import ClumpTemplate, segment_template
+from demcal.simulate.clump import ClumpTemplate
+from demcal.simulate.shapes.segment import Segment
 from demcal.simulate.contact.rolling import epsd_damping, epsd_rolling_torque, epsd_stiffness  # noqa: F401
 from demcal.simulate.params import DEMParameters
 from demcal.units import GRAVITY, MM
@@ -525,12 +526,15 @@ def with_size_distribution(params: DEMParameters, distribution: SizeDistribution
 def segment_of_size(params: DEMParameters, length: float, diameter: float) -> ClumpTemplate:
     """The segment template of ``params`` with another length and diameter [m] (same number of
     spheres, density and mass model; a ``scaled`` mass model keeps its mass per volume)."""
+    shape = params.shape
+    if not isinstance(shape, Segment):
+        raise InputError(f"a segment size distribution needs the segment shape; the shape is {shape.name}")
+    sized = replace(shape, length_m=float(length), diameter_m=float(diameter))
     mean_mass = params.mean_mass_kg
     if params.mass_model == "scaled" and mean_mass:
-        mean_mass = mean_mass * (length * diameter ** 2) / (params.segment_length_m * params.segment_diameter_m ** 2)
-    return segment_template(length, diameter, int(params.spheres_per_clump), params.particle_density_kg_m3,
-                            mass_model=params.mass_model, mean_mass=mean_mass,
-                            name=f"segment {length * 1e3:.2f} x {diameter * 1e3:.2f} mm")
+        mean_mass = mean_mass * sized.volume() / shape.volume()
+    return sized.template(params.particle_density_kg_m3, params.mass_model, mean_mass,
+                          name=f"segment {length * 1e3:.2f} x {diameter * 1e3:.2f} mm")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -562,10 +566,14 @@ def with_more_spheres(params: DEMParameters, n_spheres: int | None = None, *,
         if not max_ripple > 0:
             raise InputError(f"max_ripple must be positive, got {max_ripple!r}")
         n_spheres = 2
-        while surface_ripple(params.segment_length_m, params.segment_diameter_m, n_spheres) > max_ripple:
+        if not isinstance(params.shape, Segment):
+            raise InputError(f"more spheres by surface ripple: a segment's; the shape is {params.shape.name}")
+        while surface_ripple(params.shape.length_m, params.shape.diameter_m, n_spheres) > max_ripple:
             n_spheres += 1
             if n_spheres > 200:
                 raise InputError(f"max_ripple {max_ripple!r} m needs more than 200 spheres")
     if int(n_spheres) != n_spheres or n_spheres < 1:
         raise InputError(f"n_spheres must be a positive integer, got {n_spheres!r}")
-    return params.with_(spheres_per_clump=int(n_spheres))
+    if not hasattr(params.shape, "n_spheres"):
+        raise InputError(f"more spheres per clump: shape {params.shape.name} has no sphere count")
+    return params.with_(shape=replace(params.shape, n_spheres=int(n_spheres)))

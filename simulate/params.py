@@ -5,8 +5,15 @@ names (``from_names({"e_pp": 0.32})``, what ``--set NAME=VALUE`` uses); unknown 
 refused with the list of valid ones.
 
 Defaults (docs/design.md, "Paper defaults"): the paper's measured means for the contact parameters,
-its segment geometry and densities; the particle shear modulus (1e7 Pa) is not in the paper and
-is demcal's stated default.
+its segment (``shape``), densities and time step; the particle shear modulus (1e7 Pa) is not in
+the paper and is demcal's stated default. A parameter set built from a workbook takes its
+material's shape and, unless the workbook states one, the time step that follows the material
+(``dt=None``: ``simulate.timestep.TIME_STEP_FRACTION`` of the Rayleigh time of the shape's
+smallest sphere).
+
+The shape (``simulate.shapes``) is one field. The segment's former fields
+(``segment_length_m``, ``segment_diameter_m``, ``spheres_per_clump``) are still read: they set
+the sizes of a segment shape (``SEGMENT_FIELDS``).
 
 Four engine extensions (``simulate.extensions.ENGINE_HOOKS``) are switched by fields here and
 so recorded with every run; all are off by default: a velocity-dependent restitution
@@ -20,12 +27,22 @@ truth files keep their meaning.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from dataclasses import dataclass, fields
 
 from demcal.errors import InputError
-from demcal.simulate.clump import MASS_MODELS
+from demcal.simulate.clump import MASS_MODELS, ClumpTemplate
 from demcal.simulate.contact.rolling import EPSD_DAMPING_RATIO, ROLLING_LEVERS, ROLLING_MODELS
+from demcal.simulate.shapes import Shape, shape_class, shape_from_dict
+from demcal.simulate.shapes.segment import Segment
+
+#: The source paper's time step [s] (EDEM, 0.41 of the Rayleigh time of its 5.5 mm spheres).
+PAPER_TIME_STEP = 7.43678e-5
+
+#: Former fields of the segment -> the ``Segment`` field each sets.
+SEGMENT_FIELDS = {"segment_length_m": "length_m", "segment_diameter_m": "diameter_m",
+                  "spheres_per_clump": "n_spheres"}
 
 
 @dataclass(frozen=True)
@@ -48,14 +65,17 @@ class DEMParameters:
         Rolling friction coefficient particle-particle and particle-wall [-].
     wall_density_kg_m3, wall_poisson_ratio, wall_shear_modulus_pa : float
         Wall material (steel) density [kg/m3], Poisson's ratio [-] and shear modulus [Pa].
-    segment_length_m, segment_diameter_m : float
-        Length and diameter of one segment [m].
-    spheres_per_clump : int
-        Number of equal spheres along the segment axis.
+    shape : simulate.shapes.Shape
+        The particle: its kind and measured size (default the paper's segment, 25 x 11 mm in 5
+        spheres). ``--set shape=sphere:0.0066`` style values are read by :func:`parse_shape`.
+    dt : float or None
+        Time step of the bulk rigs [s]; None: ``TIME_STEP_FRACTION`` of the Rayleigh time of
+        the shape's smallest sphere (``simulate.timestep.material_time_step``). Default: the
+        paper's.
     mass_model : str
-        ``"union"`` (mass and inertia of the sphere union, EDEM's default), ``"cylinder"``
-        (solid cylinder of the segment's length and diameter) or ``"scaled"`` (the union scaled
-        to ``mean_mass_kg``).
+        ``"union"`` (mass and inertia of the sphere union, EDEM's default), ``"body"`` (the body
+        the shape stands for: a cylinder, a sphere, an ellipsoid), ``"cylinder"`` (a segment's
+        body, its former name) or ``"scaled"`` (the union scaled to ``mean_mass_kg``).
     mean_mass_kg : float or None
         Measured mean segment mass [kg], used only by ``mass_model="scaled"``.
     rolling_lever : str
@@ -81,8 +101,8 @@ class DEMParameters:
     rolling_damping_ratio : float
         Rolling damping ratio eta_r of the ``"epsd"`` model [-] (default 0.3, Ai et al. 2011).
     segment_sizes : tuple of (float, float) or None
-        (length, diameter) pairs [m] of a measured size distribution (callipers): when given,
-        the repose scene draws each segment from them (equal weight per pair, duplicates
+        (length, diameter) pairs [m] of a measured size distribution of a segment shape
+        (callipers): when given, the repose scene draws each segment from them (equal weight per pair, duplicates
         counting twice; ``simulate.extensions.SizeDistribution``) instead of
         ``segment_length_m`` x ``segment_diameter_m``. Default None (one size).
     contact_effective_mass : bool
@@ -106,9 +126,8 @@ class DEMParameters:
     wall_density_kg_m3: float = 7850.0
     wall_poisson_ratio: float = 0.3
     wall_shear_modulus_pa: float = 8.0e10
-    segment_length_m: float = 0.025
-    segment_diameter_m: float = 0.011
-    spheres_per_clump: int = 5
+    shape: Shape = Segment(0.025, 0.011, 5)
+    dt: float | None = PAPER_TIME_STEP
     mass_model: str = "union"
     mean_mass_kg: float | None = None
     rolling_lever: str = "liggghts_reff"
@@ -137,15 +156,16 @@ class DEMParameters:
             if not -1.0 < value < 0.5:
                 raise InputError(f"{name} must be in (-1, 0.5), got {value!r}")
         for name in ("shear_modulus_pa", "particle_density_kg_m3", "wall_density_kg_m3",
-                     "wall_shear_modulus_pa", "segment_length_m", "segment_diameter_m"):
+                     "wall_shear_modulus_pa"):
             value = getattr(self, name)
             if not value > 0.0:
                 raise InputError(f"{name} must be > 0, got {value!r}")
-        if int(self.spheres_per_clump) != self.spheres_per_clump or self.spheres_per_clump < 1:
-            raise InputError(f"spheres_per_clump must be a positive integer, got {self.spheres_per_clump!r}")
-        if self.segment_diameter_m > self.segment_length_m:
-            raise InputError(f"segment_diameter_m ({self.segment_diameter_m!r}) must not exceed "
-                             f"segment_length_m ({self.segment_length_m!r})")
+        if not isinstance(self.shape, Shape):
+            object.__setattr__(self, "shape", parse_shape(self.shape))
+        if self.dt is not None and not (isinstance(self.dt, (int, float)) and math.isfinite(self.dt) and self.dt > 0):
+            raise InputError(f"dt must be a time step > 0 [s] (or none: from the material), got {self.dt!r}")
+        if self.segment_sizes is not None and not isinstance(self.shape, Segment):
+            raise InputError(f"segment_sizes is a size distribution of segments; the shape is {self.shape.name}")
         if self.mass_model not in MASS_MODELS:
             raise InputError(f"mass_model must be one of {', '.join(MASS_MODELS)}; got {self.mass_model!r}")
         if self.mass_model == "scaled" and not (self.mean_mass_kg and self.mean_mass_kg > 0):
@@ -185,13 +205,28 @@ class DEMParameters:
 
     def with_(self, **changes) -> "DEMParameters":
         """A copy with ``changes`` applied; unknown names raise ``InputError`` listing the valid ones.
-        A former name (``RENAMED``) sets the field it became."""
+        A former name (``RENAMED``) sets the field it became; a former segment field
+        (``SEGMENT_FIELDS``) sets the size of a segment shape."""
         changes = current_names(changes)
+        segment = {SEGMENT_FIELDS[k]: _coerce_number(k, changes.pop(k), int if k == "spheres_per_clump" else float)
+                   for k in list(changes) if k in SEGMENT_FIELDS}
         unknown = sorted(set(changes) - set(self.names()))
         if unknown:
             raise InputError(f"unknown DEM parameter(s) {', '.join(map(repr, unknown))}; "
                              f"valid names: {', '.join(self.names())}")
-        return dataclasses.replace(self, **{k: _coerce(k, v) for k, v in changes.items()})
+        out = {k: _coerce(k, v) for k, v in changes.items()}
+        if segment:
+            shape = out.get("shape", self.shape)
+            if not isinstance(shape, Segment):
+                raise InputError(f"{', '.join(k for k in SEGMENT_FIELDS if SEGMENT_FIELDS[k] in segment)} "
+                                 f"set(s) the size of a segment; the shape is {shape.name}")
+            out["shape"] = dataclasses.replace(shape, **segment)
+        return dataclasses.replace(self, **out)
+
+    def template(self, shape: Shape | None = None, name: str | None = None) -> ClumpTemplate:
+        """The clump of ``shape`` (default this set's) with this set's density and mass model."""
+        shape = self.shape if shape is None else shape
+        return shape.template(self.particle_density_kg_m3, self.mass_model, self.mean_mass_kg, name=name)
 
     @classmethod
     def from_names(cls, values: dict) -> "DEMParameters":
@@ -200,7 +235,8 @@ class DEMParameters:
         return cls().with_(**dict(values))
 
     def to_dict(self) -> dict:
-        d = dataclasses.asdict(self)
+        d = {f.name: getattr(self, f.name) for f in fields(self)}
+        d["shape"] = self.shape.to_dict()
         if not self.contact_effective_mass:
             # off is the model every stored run was made with: leaving it out keeps their keys
             del d["contact_effective_mass"]
@@ -242,12 +278,55 @@ def _size_pairs(value) -> tuple:
     return pairs
 
 
+def parse_shape(value) -> Shape:
+    """A shape from a ``Shape``, its ``to_dict()`` layout, that layout as JSON text, or
+    ``NAME:SIZE[:SIZE...]`` in metres in the order of the shape's ``sizes`` (``sphere:0.0066``,
+    ``kernel:0.0072:0.003:0.0021``, ``segment:0.025:0.011``)."""
+    if isinstance(value, Shape):
+        return value
+    if isinstance(value, dict):
+        return shape_from_dict(value)
+    text = str(value).strip()
+    if text.startswith("{"):
+        try:
+            return shape_from_dict(json.loads(text))
+        except json.JSONDecodeError:
+            raise InputError(f"DEM parameter shape: not JSON: {text!r}") from None
+    name, *sizes = text.split(":")
+    cls = shape_class(name)
+    if len(sizes) != len(cls.sizes):
+        raise InputError(f"DEM parameter shape: {cls.name} needs {len(cls.sizes)} size(s) [m] "
+                         f"({', '.join(cls.sizes)}), e.g. {cls.name}:" + ":".join(["0.005"] * len(cls.sizes))
+                         + f"; got {text!r}")
+    try:
+        return cls(**{n: _coerce_number(f"shape {n}", v, float) for n, v in zip(cls.sizes, sizes)})
+    except TypeError:   # a shape with more than sizes (a clump's table)
+        example = json.dumps({"shape": cls.name, **{n: "..." for n in cls.field_names()}})
+        raise InputError(f"DEM parameter shape: give the {cls.name} shape as JSON, e.g. {example}") from None
+
+
+def _coerce_number(name: str, value, kind):
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"DEM parameter {name} needs a number, got {value!r}") from None
+    if kind is int:
+        if number != int(number):
+            raise InputError(f"DEM parameter {name} needs an integer, got {value!r}")
+        return int(number)
+    return number
+
+
 def _coerce(name: str, value):
     """Convert a ``--set`` string to the field's type; name the field on failure."""
     default = next(f.default for f in fields(DEMParameters) if f.name == name)
+    if name == "shape":
+        return parse_shape(value)
     if not isinstance(value, str):
         return value
     text = value.strip()
+    if name == "dt" and text.lower() in ("", "none", "auto"):
+        return None
     if name == "segment_sizes":
         if text.lower() in ("", "none"):
             return None

@@ -22,15 +22,13 @@ from collections import Counter
 
 import numpy as np
 
-from demcal.simulate.clump import segment_from_parameters
 from demcal.simulate.engine import Simulation
 from demcal.simulate.factory import ParticleFactory
 from demcal.simulate.materials import MaterialTable
 from demcal.simulate.params import DEMParameters
+from demcal.simulate.timestep import material_time_step
 from demcal.simulate.walls import Plane, Rectangle
 
-#: The paper's time step [s].
-PAPER_TIME_STEP = 7.43678e-5
 #: The paper's total simulated time [s].
 PAPER_DURATION = 10.0
 
@@ -40,7 +38,7 @@ def build_paper_repose_case(params: DEMParameters, seed, n_clumps: int = 500, *,
                             box_height: float = 0.250, lift_speed: float = 0.1,
                             lift_time: float = 4.0, fill_time: float = 1.0,
                             fill_margin: float = 0.010, fill_bottom: float = 0.100,
-                            fill_top: float = 0.240, dt: float = PAPER_TIME_STEP,
+                            fill_top: float = 0.240, dt: float | None = None,
                             outside_length: float = 0.45, outside_width: float = 0.25,
                             force: bool = False,
                             chunk_steps: int = 200, size_distribution=None) -> Simulation:
@@ -65,8 +63,8 @@ def build_paper_repose_case(params: DEMParameters, seed, n_clumps: int = 500, *,
     fill_margin, fill_bottom, fill_top : float
         Factory region: x and y inset by ``fill_margin`` from the carton walls, z from
         ``fill_bottom`` to ``fill_top`` [m].
-    dt : float
-        Time step [s].
+    dt : float, optional
+        Time step [s]; default ``params``' (``simulate.timestep.material_time_step``).
     outside_length, outside_width : float
         Floor kept inside the simulation domain beyond the plate (x) and on either side of the
         carton (y) [m]; a segment leaving it is recorded in ``sim.escaped``.
@@ -85,6 +83,7 @@ def build_paper_repose_case(params: DEMParameters, seed, n_clumps: int = 500, *,
         ``carton y+`` and ``end plate`` (``sim.wall_index(name)``).
     """
     materials = MaterialTable.from_parameters(params)
+    dt = material_time_step(params) if dt is None else dt
     L, W, H = box_length, box_width, box_height
     sim = Simulation(materials,
                      domain_lo=(-0.05, -outside_width, -0.02),
@@ -119,7 +118,7 @@ def _segment_templates(sim: Simulation, params: DEMParameters, size_distribution
     """Add the segment template(s) to ``sim``; returns their ids and weights (None for one)."""
     sizes = segment_sizes(params, size_distribution)
     if sizes is None:
-        return sim.add_template(segment_from_parameters(params)), None
+        return sim.add_template(params.template()), None
     from demcal.simulate.extensions import segment_of_size   # scipy only when a distribution is used
 
     counts = Counter((float(length), float(dia)) for length, dia in sizes)

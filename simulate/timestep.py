@@ -6,8 +6,11 @@ the time a Rayleigh surface wave takes to cross a sphere of radius R (Li, Xu & T
 the form used by EDEM, which recommends a step of 20-40 % of T_R). R is the smallest sphere,
 rho, G and nu its material's density, shear modulus and Poisson's ratio.
 
-demcal refuses a step above ``DEFAULT_MAX_FRACTION`` = 0.5 of T_R unless forced. The paper's
-7.43678e-5 s is 0.41 T_R for its 5.5 mm spheres at G = 1e7 Pa, nu = 0.25, rho = 912 kg/m3.
+demcal refuses a step above ``DEFAULT_MAX_FRACTION`` = 0.5 of T_R. The paper's 7.43678e-5 s is
+0.41 T_R for its 5.5 mm spheres at G = 1e7 Pa, nu = 0.25, rho = 912 kg/m3. A parameter set that
+states no step (``DEMParameters.dt`` None, what a workbook without ``time_step_s`` gives) runs
+at ``TIME_STEP_FRACTION`` = 0.2 of T_R of its shape's smallest sphere, the lower end of EDEM's
+recommendation (:func:`material_time_step`).
 
 Accuracy at that step: a Hertz impact of these spheres at 0.5-2 m/s lasts only 6-8 steps, so
 the restitution the integrator realises differs from the set one: measured for a sphere on
@@ -29,6 +32,12 @@ from demcal.errors import InputError, UnsafeTimeStepError
 
 DEFAULT_MAX_FRACTION = 0.5
 
+#: Fraction of the Rayleigh time a parameter set without a stated time step runs at.
+TIME_STEP_FRACTION = 0.2
+
+#: How a user changes the time step, for the messages that refuse one.
+TIME_STEP_OPTION = "--set dt=SECONDS (or dt=none for 0.2 of the Rayleigh time)"
+
 
 def rayleigh_time(radius: float, density: float, shear_modulus: float, poisson_ratio: float) -> float:
     """Rayleigh time T_R [s] of a sphere of ``radius`` [m], ``density`` [kg/m3],
@@ -49,5 +58,31 @@ def check_time_step(dt: float, t_rayleigh: float, max_fraction: float = DEFAULT_
         raise UnsafeTimeStepError(
             f"time step dt = {dt:.6g} s is {fraction:.3f} of the Rayleigh time T_R = {t_rayleigh:.6g} s, "
             f"above the allowed fraction {max_fraction:g} (limit dt <= {max_fraction * t_rayleigh:.6g} s); "
-            f"use a smaller dt or force=True")
+            f"give a smaller time step: {TIME_STEP_OPTION}")
     return fraction
+
+
+def smallest_radius(params) -> float:
+    """Radius [m] of the smallest sphere a ``DEMParameters`` puts in a scene (its shape's, and
+    a segment size distribution's)."""
+    radius = float(params.shape.spheres()[1].min())
+    if params.segment_sizes:
+        radius = min(radius, min(d for _, d in params.segment_sizes) / 2.0)
+    return radius
+
+
+def material_rayleigh_time(params) -> float:
+    """T_R [s] of the smallest sphere of a ``DEMParameters`` at its particle material."""
+    return rayleigh_time(smallest_radius(params), params.particle_density_kg_m3, params.shear_modulus_pa,
+                         params.poisson_ratio)
+
+
+def material_time_step(params) -> float:
+    """The time step [s] of the bulk rigs for a ``DEMParameters``: its ``dt`` when it states one
+    (refused above ``DEFAULT_MAX_FRACTION`` of the Rayleigh time, naming the option), else
+    ``TIME_STEP_FRACTION`` of the Rayleigh time of its smallest sphere."""
+    t_r = material_rayleigh_time(params)
+    if params.dt is None:
+        return TIME_STEP_FRACTION * t_r
+    check_time_step(float(params.dt), t_r)
+    return float(params.dt)

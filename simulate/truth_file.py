@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from demcal.errors import InputError
-from demcal.simulate.params import DEMParameters
+from demcal.simulate.params import SEGMENT_FIELDS, DEMParameters
 from demcal.simulate.virtual_lab import PHOTO_MODES, Truth, write_virtual_workbook
 
 #: Valid range of each numeric field of ``Truth``: (low, high, low included, high included).
@@ -137,11 +137,12 @@ def parse_params(values, where: str = "params") -> DEMParameters:
         return DEMParameters()
     if not isinstance(values, dict):
         raise InputError(f"{where}: must be a mapping of DEM parameter names to values, got {values!r}")
-    names = DEMParameters.names()
+    names = DEMParameters.names() + tuple(SEGMENT_FIELDS)
     unknown = [k for k in values if k not in names]
     if unknown:
         raise InputError(f"{where}: unknown DEM parameter {unknown[0]!r}; valid: {', '.join(names)}")
     defaults = {f.name: f.default for f in dataclasses.fields(DEMParameters)}
+    defaults.update({k: 0.0 for k in SEGMENT_FIELDS})         # the segment's former fields: numbers
     for name, value in values.items():
         default = defaults[name]
         if isinstance(value, bool) != isinstance(default, bool) and isinstance(default, (int, float)):

@@ -63,7 +63,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -109,6 +109,14 @@ ORIENTATION_STEP_DEG = 10.0
 
 PHOTO_MODES = ("analytic", "dem", "none")
 
+#: Shapes whose static friction the lab measures with a sled of glued particles (they roll first).
+SLED_SHAPES = ("sphere",)
+
+#: Shapes whose radial compression the measure stage reads (a contact strip of the specimen's
+#: width and length); a sphere or clump is written without a compression sheet, and its shear
+#: modulus is the meta's.
+COMPRESSED_SHAPES = ("segment", "kernel")
+
 
 @dataclass(frozen=True)
 class Truth:
@@ -125,6 +133,8 @@ class Truth:
         Specimen-to-specimen scatter of static and rolling friction [-].
     length_sd_m, diameter_sd_m : float
         Spread of segment length and diameter [m].
+    size_sd_rel : float
+        Relative spread of each size of any other shape [-].
     envelope_ratio : float
         Envelope density / particle density of the segments [-].
     density_sd : float
@@ -156,6 +166,7 @@ class Truth:
     mu_sd: float = 0.02
     length_sd_m: float = 1.6e-3
     diameter_sd_m: float = 0.9e-3
+    size_sd_rel: float = 0.06
     envelope_ratio: float = 0.965
     density_sd: float = 15.0
     moisture_pct: float = 48.0
@@ -175,7 +186,7 @@ class Truth:
     def __post_init__(self):
         if not isinstance(self.params, DEMParameters):
             raise InputError(f"Truth.params must be a DEMParameters, got {type(self.params).__name__}")
-        for name in ("e_sd", "mu_sd", "length_sd_m", "diameter_sd_m", "density_sd", "moisture_sd_pct",
+        for name in ("e_sd", "mu_sd", "length_sd_m", "diameter_sd_m", "size_sd_rel", "density_sd", "moisture_sd_pct",
                      "repose_sd_deg", "poisson_sd", "modulus_sd_rel", "height_noise_mm",
                      "angle_noise_deg", "camera_roll_sd_deg"):
             if not getattr(self, name) >= 0:
@@ -433,19 +444,43 @@ def force_curve(rng: np.random.Generator, stiffness_n_per_m: float, max_disp_mm:
 
 
 def _specimens(truth: Truth, rng, n: int) -> pd.DataFrame:
+    """The specimens sheet: each specimen's calliper readings of the truth's shape (a segment's
+    length and diameter with their own spreads; any other shape's sizes with the relative
+    spread ``size_sd_rel``, a kernel's axes kept in order), its mass from the envelope density
+    and the volume of its shape's body, moisture and batch."""
+    from demcal.simulate.shapes.segment import Segment
+
     p = truth.params
-    length = np.clip(rng.normal(p.segment_length_m, truth.length_sd_m, n), 0.6 * p.segment_length_m,
-                     1.4 * p.segment_length_m)
-    dia = np.clip(rng.normal(p.segment_diameter_m, truth.diameter_sd_m, n), 0.6 * p.segment_diameter_m,
-                  np.minimum(1.4 * p.segment_diameter_m, length))
+    shape = p.shape
+    if isinstance(shape, Segment):
+        length = np.clip(rng.normal(shape.length_m, truth.length_sd_m, n), 0.6 * shape.length_m, 1.4 * shape.length_m)
+        dia = np.clip(rng.normal(shape.diameter_m, truth.diameter_sd_m, n), 0.6 * shape.diameter_m,
+                      np.minimum(1.4 * shape.diameter_m, length))
+        sizes = {"length_m": length, "diameter_m": dia}
+    else:
+        sizes = {}
+        for name in shape.sizes:
+            mean = getattr(shape, name)
+            x = np.clip(rng.normal(mean, truth.size_sd_rel * mean, n), 0.6 * mean, 1.4 * mean)
+            for bigger in sizes.values():          # a kernel's axes: length >= width >= thickness
+                x = np.minimum(x, bigger)
+            sizes[name] = x
+    volume = np.array([replace(shape, **{k: float(v[i]) for k, v in sizes.items()}).volume() for i in range(n)])
     env = truth.envelope_ratio * p.particle_density_kg_m3 * (1.0 + 0.02 * rng.standard_normal(n))
-    mass = env * math.pi / 4.0 * dia ** 2 * length          # kg
+    mass = env * volume          # kg
+    columns = {column: (sizes[name] * 1e3).round(2) for name, column in zip(shape.sizes, size_columns(shape))}
     return pd.DataFrame({
-        "specimen_id": [f"S{i + 1:02d}" for i in range(n)],
-        "length_mm": (length * 1e3).round(2), "diameter_mm": (dia * 1e3).round(2),
+        "specimen_id": [f"S{i + 1:02d}" for i in range(n)], **columns,
         "mass_g": (mass * 1e3).round(3),
         "moisture_pct": rng.normal(truth.moisture_pct, truth.moisture_sd_pct, n).round(1),
         "batch": rng.choice(list(truth.batches), n)})
+
+
+def _clump(shape) -> pd.DataFrame:
+    """The clump sheet of a clump-table shape: its reference spheres [mm]."""
+    t = np.asarray(shape.table, float) * 1e3
+    return pd.DataFrame({"sphere_id": [f"s{i + 1}" for i in range(len(t))], "x_mm": t[:, 0].round(6),
+                         "y_mm": t[:, 1].round(6), "z_mm": t[:, 2].round(6), "radius_mm": t[:, 3].round(6)})
 
 
 def _density(truth: Truth, rng, n: int) -> pd.DataFrame:
@@ -489,8 +524,19 @@ def _by_day(effects, sheet: str) -> bool:
     return any(e.kind == "block_effect" and e.sheet == sheet and e.covariate == "date" for e in effects)
 
 
-def _join_specimens(frame: pd.DataFrame, specimens: pd.DataFrame) -> pd.DataFrame:
-    return frame.merge(specimens[["specimen_id", "length_mm", "moisture_pct", "batch"]],
+def size_column(params: DEMParameters) -> str:
+    """The specimens column of the particle's first size (``length_mm``, a sphere's
+    ``diameter_mm``): the covariate a planted size dependence follows."""
+    return size_columns(params.shape)[0]
+
+
+def size_columns(shape) -> list:
+    """The specimens columns [mm] of a shape's sizes, in the order of ``shape.sizes``."""
+    return [name.removesuffix("_m") + "_mm" for name in shape.sizes]
+
+
+def _join_specimens(frame: pd.DataFrame, specimens: pd.DataFrame, size: str) -> pd.DataFrame:
+    return frame.merge(specimens[["specimen_id", size, "moisture_pct", "batch"]],
                        on="specimen_id", how="left", suffixes=("", "_spec"))
 
 
@@ -509,7 +555,8 @@ def _contributions(effects, sheet: str, quantity: str, rows: pd.DataFrame, truth
             h = rows["drop_height_mm"].to_numpy(float)
             out[k] = eff.size * (h - height_ref_mm)
         elif eff.kind == "size_dependence":
-            out[k] = eff.size * (rows["length_mm"].to_numpy(float) - specimens_mean["length_mm"])
+            size = size_column(truth.params)
+            out[k] = eff.size * (rows[size].to_numpy(float) - specimens_mean[size])
         elif eff.kind == "trial_order_drift":
             t = rows["trial_order"].to_numpy(float)
             out[k] = eff.size * (t - (0.5 * (n + 1) if order_centre is None else order_centre))
@@ -521,9 +568,10 @@ def _contributions(effects, sheet: str, quantity: str, rows: pd.DataFrame, truth
     return out
 
 
-def _expected(effects, k: int, sheet: str, quantity: str, rows: pd.DataFrame, delta) -> dict:
+def _expected(effects, k: int, sheet: str, quantity: str, rows: pd.DataFrame, delta, size: str) -> dict:
     eff = effects[k]
-    cov = EFFECT_DEFAULTS[eff.kind]["covariate"] if eff.kind != "block_effect" else eff.covariate
+    cov = (eff.covariate if eff.kind == "block_effect" else size if eff.kind == "size_dependence" else
+           EFFECT_DEFAULTS[eff.kind]["covariate"])
     if eff.kind == "block_effect":
         size = _block_range(rows[cov], delta)
         unit = "quantity (range of level means)"
@@ -541,7 +589,8 @@ def _drops(truth: Truth, rng, effects, specimens, *, pairs, heights_mm, n_drop, 
     n_pair = n_drop * len(heights_mm)
     orders = rng.permutation(np.arange(1, n_pair * len(pairs) + 1)) if interleaved else None
     orient = [e for e in effects if e.kind == "orientation_rotation"]
-    spec_mean = {"length_mm": float(specimens["length_mm"].mean())}
+    size = size_column(truth.params)
+    spec_mean = {size: float(specimens[size].mean())}
     trial = 0
     for pair in pairs:
         e_pair = truth.restitution(pair)
@@ -558,7 +607,7 @@ def _drops(truth: Truth, rng, effects, specimens, *, pairs, heights_mm, n_drop, 
         lo = min([e.size for e in hand]) if hand else orientation_range[0]
         hi = 90.0 if hand else orientation_range[1]
         rows["orientation_deg"] = rng.uniform(lo, hi, n).round(1)
-        rows = _join_specimens(rows, specimens)
+        rows = _join_specimens(rows, specimens, size)
         contrib = _contributions(effects, "drop", f"restitution.{pair}", rows, truth, spec_mean,
                                  height_ref_mm=float(np.mean(heights_mm)),
                                  order_centre=0.5 * (n_pair * len(pairs) + 1) if interleaved else None)
@@ -574,7 +623,7 @@ def _drops(truth: Truth, rng, effects, specimens, *, pairs, heights_mm, n_drop, 
         apparent = contact * ratio
         # expected sizes, on the noise-free apparent restitution
         for k, c in contrib.items():
-            expected.append(_expected(effects, k, "drop", f"restitution.{pair}", rows, c * ratio))
+            expected.append(_expected(effects, k, "drop", f"restitution.{pair}", rows, c * ratio, size))
         for eff in hand:
             expected.append({"kind": eff.kind, "sheet": "drop", "quantity": f"restitution.{pair}",
                              "covariate": "orientation_deg",
@@ -603,7 +652,8 @@ def _drops(truth: Truth, rng, effects, specimens, *, pairs, heights_mm, n_drop, 
 
 def _inclines(truth: Truth, rng, effects, specimens, *, surfaces, n_incline, trials_per_specimen=None):
     frames, expected = [], []
-    spec_mean = {"length_mm": float(specimens["length_mm"].mean())}
+    size = size_column(truth.params)
+    spec_mean = {size: float(specimens[size].mean())}
     trial = 0
     day = truth.days[min(1, len(truth.days) - 1)]
     for surface in surfaces:
@@ -613,7 +663,9 @@ def _inclines(truth: Truth, rng, effects, specimens, *, surfaces, n_incline, tri
                                          spread_days=_by_day(effects, "incline"),
                                          trials_per_specimen=trials_per_specimen))
             rows["surface"], rows["mode"] = surface, mode
-            rows = _join_specimens(rows, specimens)
+            # a round particle rolls first: its lab slides a sled of glued particles
+            rows["carrier"] = "sled" if mode == "slide" and truth.params.shape.name in SLED_SHAPES else "particle"
+            rows = _join_specimens(rows, specimens, size)
             contrib = _contributions(effects, "incline", quantity, rows, truth, spec_mean)
             block = {k: c for k, c in contrib.items() if effects[k].kind == "block_effect"}
             shifts = {k: c for k, c in contrib.items() if k not in block}
@@ -627,14 +679,14 @@ def _inclines(truth: Truth, rng, effects, specimens, *, surfaces, n_incline, tri
             everything = set(contrib)
             for k in contrib:
                 delta = np.tan(np.radians(reading(everything))) - np.tan(np.radians(reading(everything - {k})))
-                expected.append(_expected(effects, k, "incline", quantity, rows, delta))
+                expected.append(_expected(effects, k, "incline", quantity, rows, delta, size))
             angle = reading(everything) + rng.normal(0.0, truth.angle_noise_deg, n_incline)
             rows["angle_deg"] = np.clip(angle, 0.1, 89.0).round(1)
             rows["trial_id"] = [f"I{trial + i + 1:03d}" for i in range(n_incline)]
             trial += n_incline
             frames.append(rows)
     inc = pd.concat(frames, ignore_index=True)
-    return inc[["trial_id", "surface", "mode", "angle_deg", "specimen_id", "operator", "date",
+    return inc[["trial_id", "surface", "mode", "carrier", "angle_deg", "specimen_id", "operator", "date",
                 "trial_order"]], expected
 
 
@@ -646,8 +698,9 @@ def _compression(truth: Truth, rng, specimens, n: int, root: Path) -> pd.DataFra
         spec = specimens.iloc[i]
         nu = float(np.clip(rng.normal(p.poisson_ratio, truth.poisson_sd), 0.05, 0.45))
         E = youngs_modulus(p.shear_modulus_pa, p.poisson_ratio) * (1.0 + truth.modulus_sd_rel * rng.standard_normal())
-        t0 = float(spec["diameter_mm"]) * (1.0 + 0.01 * rng.standard_normal())
-        w0 = float(spec["diameter_mm"]) * (1.0 + 0.01 * rng.standard_normal())
+        # radial loading across the thickness (a segment's diameter), the width across
+        t0 = float(spec.get("thickness_mm", spec.get("diameter_mm"))) * (1.0 + 0.01 * rng.standard_normal())
+        w0 = float(spec.get("width_mm", spec.get("diameter_mm"))) * (1.0 + 0.01 * rng.standard_normal())
         eps_t = 0.30 * (0.55 + 0.1 * rng.random())
         k = E * (w0 * 1e-3) * (float(spec["length_mm"]) * 1e-3) / (t0 * 1e-3)
         name = f"curves/C{i + 1:02d}.csv"
@@ -757,13 +810,16 @@ def _meta(truth: Truth, effects, geometry=None) -> pd.DataFrame:
 
     p = truth.params
     g = geometry or ReposeGeometry()
-    rows = [("material", "Virtual root segments (demcal virtual lab)"), ("contact_material", "steel"),
+    material = "root segments" if p.shape.name == "segment" else f"{p.shape.name} particles"
+    rows = [("material", f"Virtual {material} (demcal virtual lab)"), ("contact_material", "steel"),
             ("contact_density_kg_m3", p.wall_density_kg_m3), ("contact_poisson", p.wall_poisson_ratio),
             ("contact_shear_modulus_pa", p.wall_shear_modulus_pa),
             ("particle_shear_modulus_pa", p.shear_modulus_pa),
             ("box_length_mm", round(g.box_length * 1e3, 6)), ("box_width_mm", round(g.box_width * 1e3, 6)),
             ("box_height_mm", round(g.box_height * 1e3, 6)),
             ("plate_lift_speed_mm_s", round(g.lift_speed * 1e3, 6)), ("fill_count", g.fill_count),
+            ("shape", p.shape.name)] + ([("time_step_s", p.dt)] if p.dt is not None else []) + (
+            [("spheres_per_particle", p.shape.n_spheres)] if hasattr(p.shape, "n_spheres") else []) + [
             ("virtual_lab", "made by simulate.virtual_lab from a known truth (truth.json); planted: "
              + (", ".join(e.kind for e in effects) or "none"))]
     return pd.DataFrame(rows, columns=["key", "value"])
@@ -842,7 +898,9 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
         Disk cache of the drop-twin table (default ``$DEMCAL_CACHE``, else memory only).
     geometry : simulate.rigs.repose.ReposeGeometry, optional
         The repose rig's carton and fill (written to the meta sheet, and used for the heaps of
-        ``photos="dem"``); default the paper's 200 x 100 x 250 mm carton of 500 segments.
+        ``photos="dem"``); default the carton in proportion to the truth's particle
+        (``ReposeGeometry.for_particle``: for the paper's segments, its 200 x 100 x 250 mm carton
+        of 500).
     trials_per_specimen : int, optional
         Drop and incline trials per specimen: each sheet's trials go to that many trials on
         each of a random subset of the specimens (with ``Truth.icc`` a clustered design);
@@ -870,6 +928,11 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
                  drop_heights_mm=drop_heights_mm)
     lo, hi = (float(v) for v in orientation_range_deg)
 
+    stated_geometry = geometry
+    if geometry is None:
+        from demcal.simulate.rigs.repose import ReposeGeometry
+        geometry = ReposeGeometry.for_particle(truth.params.shape)
+
     path = Path(path)
     xlsx = path.suffix.lower() == ".xlsx"
     root = path.parent if xlsx else path
@@ -877,6 +940,8 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
     specimens = _specimens(truth, rng, n_specimens)
     sheets = {"meta": _meta(truth, effects, geometry), "specimens": specimens,
               "density": _density(truth, rng, n_density)}
+    if truth.params.shape.name == "clump":
+        sheets["clump"] = _clump(truth.params.shape)
     expected = []
     if pairs:
         sheets["drop"], exp = _drops(truth, rng, effects, specimens, pairs=tuple(pairs),
@@ -889,6 +954,8 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
         sheets["incline"], exp = _inclines(truth, rng, effects, specimens, surfaces=tuple(surfaces),
                                            n_incline=n_incline, trials_per_specimen=trials_per_specimen)
         expected += exp
+    if truth.params.shape.name not in COMPRESSED_SHAPES:
+        n_compression = 0             # recorded as written: none
     if n_compression:
         sheets["compression"] = _compression(truth, rng, specimens, n_compression, root)
     discarded_heaps: list = []
@@ -908,7 +975,7 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
                "n_incline": n_incline, "n_compression": n_compression, "n_photos": n_photos,
                "trials_per_specimen": trials_per_specimen,
                "discarded_heaps": discarded_heaps,
-               "geometry": None if geometry is None else geometry.to_dict()}
+               "geometry": None if stated_geometry is None else stated_geometry.to_dict()}
     result = VirtualWorkbook(path=path, truth=truth, effects=effects, expected=tuple(expected), seed=seed,
                              provenance=Provenance(seed=seed, options=options))
     write_json(root / "truth.json", result.to_dict())

@@ -49,7 +49,6 @@ from scipy import stats
 from demcal.analyse.critique.diagnosis import MIN_ROWS, PRACTICAL_THRESHOLDS, trend_test
 from demcal.analyse.critique.gain import N_BOOTSTRAP, _gain, split_trials
 from demcal.analyse.critique.twins import Discrepancy, drop_task, drop_twin_runner, run_drop_twins
-from demcal.simulate.clump import segment_from_parameters
 from demcal.simulate.extensions import engine_hooks
 from demcal.simulate.rigid_impact import rigid_drop
 
@@ -234,7 +233,7 @@ def _rigid_body_signature(runner, params, on_params, rig_pair: str, trials, twin
     logged orientation: each against ``simulate.rigid_impact.rigid_drop`` of the segment at its
     orientation and height, contact restitution ``e_c``. Without one: a flat landing of the
     twin at the median height (run here), against the flat rigid body (``e_c``)."""
-    body = segment_from_parameters(params)
+    body = params.template()
     logged = [(row, h, o) for row, _, h, o, _, _ in trials if o is not None and row in twins]
     if logged:
         reference = float(np.mean([rigid_drop(body, float(o), e_c, float(h)).apparent_restitution

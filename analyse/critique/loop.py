@@ -388,7 +388,7 @@ def _incline_twins(runner, measurement, workbook, params, wall, discrepancies):
     for key, res in zip(keys, results):
         quantity, surface, mode = key
         ob = res["observable"]
-        value = ob["static_friction_apparent" if mode == "slide" else "rolling_friction_apparent"]
+        value = ob["rolling_friction_apparent" if mode == "roll" else "static_friction_apparent"]
         note = f"tan(onset angle) of the {mode} twin on {surface}"
         if value is None or not math.isfinite(value):
             other = ob.get("slide_angle_deg") if mode == "roll" else ob.get("roll_angle_deg")

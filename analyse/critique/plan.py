@@ -330,8 +330,7 @@ def truth_from_measurement(measurement, workbook):
               "mu_r_pp": value("rolling_friction.particle"), "mu_r_pw": value("rolling_friction.steel"),
               "particle_density_kg_m3": value("particle_density_kg_m3"),
               "poisson_ratio": value("poisson_ratio"), "shear_modulus_pa": value("shear_modulus_pa"),
-              "segment_length_m": None if value("length_mm") is None else value("length_mm") * 1e-3,
-              "segment_diameter_m": None if value("diameter_mm") is None else value("diameter_mm") * 1e-3}
+              "shape": measurement.shape or None}
     fields = {"height_noise_mm": 0.0, "angle_noise_deg": 0.0}
     e_sd = _pooled_sd([e for n, e in q.items() if n.startswith("restitution.")])
     mu_sd = _pooled_sd([e for n, e in q.items() if n.startswith(("static_friction.", "rolling_friction."))])
@@ -362,7 +361,8 @@ def truth_from_measurement(measurement, workbook):
         if levels:
             fields[name] = tuple(levels)
     try:
-        base = Truth().params.with_(**{k: v for k, v in params.items() if v is not None})
+        base = Truth().params.with_(**{k: v for k, v in params.items() if v is not None},
+                                    dt=measurement.meta.get("time_step_s"))   # None: from the material
         return Truth(params=base, **fields)
     except InputError as exc:
         raise InputError(f"{workbook.source}: its measured values are no valid truth for the virtual lab: "

@@ -261,7 +261,9 @@ def run_drop_twins(runner: TwinRunner, params, trials, rig_pair_name: str, *, qu
 
 
 def incline_groups(measurement, workbook=None) -> dict:
-    """``(quantity, surface, mode)`` -> used rows ``(row, measured mu, covariates)``."""
+    """``(quantity, surface, mode)`` -> used rows ``(row, measured mu, covariates)``; ``mode``
+    is the incline twin's: ``slide`` or ``roll``, or ``sled`` for static friction measured with a
+    sled of glued particles (the rows' ``carrier``)."""
     from demcal.analyse.critique.diagnosis import row_covariates, specimen_lookup
 
     specimens = specimen_lookup(workbook)
@@ -270,10 +272,12 @@ def incline_groups(measurement, workbook=None) -> dict:
         family, _, surface = name.partition(".")
         if family not in ("static_friction", "rolling_friction"):
             continue
-        mode = "slide" if family == "static_friction" else "roll"
-        rows = [(int(r["row"]), float(r["value"]), row_covariates(r, "incline", specimens))
-                for r in est.per_row if r.get("used", True) and r.get("value") is not None]
-        out[(name, surface, mode)] = rows
+        for r in est.per_row:
+            if r.get("used", True) and r.get("value") is not None:
+                mode = "roll" if family == "rolling_friction" else \
+                    "sled" if r.get("carrier") == "sled" else "slide"
+                out.setdefault((name, surface, mode), []).append(
+                    (int(r["row"]), float(r["value"]), row_covariates(r, "incline", specimens)))
     return out
 
 

@@ -43,7 +43,8 @@ instead; ``simulate.rigid_impact`` gives the rigid body's rebound to compare wit
 
 Time step. Contacts must be resolved: by default dt = t_c / 100, t_c the elastic Hertz contact
 duration (Johnson 1985, sec. 11.4) of one member sphere carrying 1/n of the body's mass at the
-impact speed sqrt(2 g h), capped at 0.4 of the Rayleigh time. Far from the plate the rig runs
+impact speed sqrt(2 g h), capped at 0.4 of the Rayleigh time (and at the parameter set's own
+``dt`` when that is finer). Far from the plate the rig runs
 in long chunks that cannot reach the plate, shrinking to single steps as it approaches (so the
 first contact is found to the step). While the body touches the plate it runs chunks of steps
 (from t_c / 10, doubling while nothing happens; ``CONTACT_CHUNK_FRACTION``) and records their
@@ -76,7 +77,7 @@ import numpy as np
 
 from demcal.errors import InputError
 from demcal.provenance import Provenance
-from demcal.simulate.clump import ClumpTemplate, segment_from_parameters
+from demcal.simulate.clump import ClumpTemplate
 from demcal.simulate.contact.hertz_mindlin import contact_duration_elastic, effective_modulus
 from demcal.simulate.engine import Simulation
 from demcal.simulate.integrate import axis_angle_quat, matrix_from_quat, quat_multiply
@@ -214,14 +215,14 @@ def run_drop(params: DEMParameters, seed: int = 0, *, height: float = PAPER_DROP
     surface_name = surface_from_pair(pair)
     surface = make_surface(params, surface_name, surface_material=surface_material,
                            surface_contact=surface_contact)
-    tpl = template if template is not None else _segment(params)
+    tpl = template if template is not None else _template(params)
     if not isinstance(tpl, ClumpTemplate):
         raise InputError(f"template must be a ClumpTemplate, got {type(tpl).__name__}")
     rng = np.random.default_rng(seed)
     q, angle = release_orientation(orientation_deg, rng)
     g = GRAVITY
-    if dt is None:
-        dt = automatic_time_step(tpl, surface, height, g)
+    if dt is None:   # a finer step the parameter set states is honoured, a coarser one not
+        dt = min(automatic_time_step(tpl, surface, height, g), params.dt or math.inf)
 
     # release with the lowest point `height` above the plate z = 0; fall analytically to
     # START_GAP above it
@@ -356,17 +357,12 @@ def run_drop(params: DEMParameters, seed: int = 0, *, height: float = PAPER_DROP
                      Provenance(seed=seed, options=options))
 
 
-def _segment(params: DEMParameters) -> ClumpTemplate:
-    """``segment_from_parameters(params)``, built once per parameter set: the union's mass
-    properties take about 0.1 s, longer than most drops (the critique runs hundreds of drops
-    with one parameter set)."""
-    try:
-        return _segment_cached(params)
-    except TypeError:       # unhashable parameters
-        return segment_from_parameters(params)
-
-
-_segment_cached = functools.lru_cache(maxsize=8)(segment_from_parameters)
+@functools.lru_cache(maxsize=8)
+def _template(params: DEMParameters) -> ClumpTemplate:
+    """``params.template()``, built once per parameter set: the union's mass properties take
+    about 0.1 s, longer than most drops (the critique runs hundreds of drops with one
+    parameter set)."""
+    return params.template()
 
 
 def _event_within(prev, row, touching0, touching1) -> bool:

@@ -1,9 +1,12 @@
-"""Incline rig: the twin of the inclinometer test (a segment on a plate tilted slowly).
+"""Incline rig: the twin of the inclinometer test (a particle on a plate tilted slowly).
 
-The lab lays a segment on the test plane and rotates the plane slowly until the segment
-moves; tan(angle) is then read as the static friction (segment "placed along the length of
-the test plane", so it can only slide) or as the rolling friction (segment across the slope,
-free to roll).
+The lab lays a particle on the test plane and rotates the plane slowly until it moves;
+tan(angle) is then read as the static friction (a segment "placed along the length of the test
+plane", so it can only slide) or as the rolling friction (across the slope, free to roll). A
+round particle rolls before it slides whatever its friction, so labs measure its static
+friction with a sled: a light plate carrying particles glued to its underside (``mode="sled"``:
+a rigid body of ``SLED_ROWS`` x ``SLED_ROWS`` particles side by side, lying as on the plate,
+which cannot roll; its onset is where the glued particles slide, tan(angle) = mu_s).
 
 Tilting. The plate stays the plane z = 0 and gravity turns instead,
 
@@ -44,17 +47,21 @@ import numpy as np
 
 from demcal.errors import InputError
 from demcal.provenance import Provenance
-from demcal.simulate.clump import ClumpTemplate, segment_from_parameters
+from demcal.simulate.clump import ClumpTemplate
 from demcal.simulate.engine import Simulation
 from demcal.simulate.integrate import axis_angle_quat, matrix_from_quat
 from demcal.simulate.params import DEMParameters
 from demcal.simulate.rigs import RigResult, RunTally, check_seed, run_meta
 from demcal.simulate.rigs.surfaces import PARTICLE, make_surface
-from demcal.simulate.scenes import PAPER_TIME_STEP
+from demcal.simulate.timestep import material_time_step
 from demcal.simulate.walls import Plane
 from demcal.units import GRAVITY
 
-MODES = ("slide", "roll")
+MODES = ("slide", "roll", "sled")
+#: Particles along each side of the sled's square of glued particles.
+SLED_ROWS = 3
+#: Gap between neighbouring glued particles, relative to the particle's extent [-].
+SLED_GAP = 0.2
 #: Tilt held constant over each chunk [deg].
 CHUNK_DEG = 0.01
 #: Movement after which the run ends [m].
@@ -91,9 +98,9 @@ def run_incline(params: DEMParameters, seed: int = 0, *, mode: str = "slide", su
         Particle, wall and contact parameters, segment shape, mass model, rolling lever.
     seed : int
         Recorded only: the rig is deterministic.
-    mode : {"slide", "roll"}
+    mode : {"slide", "roll", "sled"}
         "slide": long axis down the slope (it can only slide); "roll": long axis across the
-        slope, free to roll.
+        slope, free to roll; "sled": a sled of glued particles (:func:`sled_template`).
     surface : str
         ``steel``, ``particle`` or another material (``simulate.rigs.surfaces``).
     surface_material, surface_contact : dict, optional
@@ -110,9 +117,9 @@ def run_incline(params: DEMParameters, seed: int = 0, *, mode: str = "slide", su
     settle_time : float
         Time the segment rests on the plate at ``start_deg`` before the rotation [s].
     template : ClumpTemplate, optional
-        Body shape; default the segment of ``params``.
+        Body; default the template of ``params``' shape.
     dt : float, optional
-        Time step [s]; default the paper's 7.43678e-5 s.
+        Time step [s]; default ``params``' (``simulate.timestep.material_time_step``).
     callback : callable, optional
         ``callback(sim, t_end, final)`` after each chunk (see ``simulate.rigs``).
 
@@ -140,13 +147,15 @@ def run_incline(params: DEMParameters, seed: int = 0, *, mode: str = "slide", su
         raise InputError(f"max_tilt_deg ({max_tilt_deg!r}) must exceed start_deg ({start_deg!r})")
     surf = make_surface(params, surface, surface_material=surface_material,
                         surface_contact=surface_contact)
-    tpl = template if template is not None else segment_from_parameters(params)
+    tpl = template if template is not None else params.template()
+    if mode == "sled":
+        tpl = sled_template(tpl)
     if not isinstance(tpl, ClumpTemplate):
         raise InputError(f"template must be a ClumpTemplate, got {type(tpl).__name__}")
-    dt = PAPER_TIME_STEP if dt is None else float(dt)
+    dt = material_time_step(params) if dt is None else float(dt)
 
     # long axis (template x) down the slope (x) to slide, across it (y) to roll
-    q = np.array([1.0, 0.0, 0.0, 0.0]) if mode == "slide" else axis_angle_quat((0.0, 0.0, 1.0), math.pi / 2)
+    q = np.array([1.0, 0.0, 0.0, 0.0]) if mode != "roll" else axis_angle_quat((0.0, 0.0, 1.0), math.pi / 2)
     rel = (tpl.centres - tpl.centre_of_mass) @ matrix_from_quat(q).T
     z0 = -float((rel[:, 2] - tpl.radii).min())          # lowest point on the plate
     reach = tpl.bounding_radius
@@ -186,7 +195,7 @@ def run_incline(params: DEMParameters, seed: int = 0, *, mode: str = "slide", su
             onset["slide"] = tilt
         if math.isnan(onset["roll"]) and arc > threshold:
             onset["roll"] = tilt
-        if not math.isnan(onset[mode]) or abs(moved) > STOP_DISTANCE or not sim.active()[0]:
+        if not math.isnan(onset[ONSET[mode]]) or abs(moved) > STOP_DISTANCE or not sim.active()[0]:
             break
     if callback is not None:
         callback(sim, t_end, True)
@@ -207,12 +216,36 @@ def run_incline(params: DEMParameters, seed: int = 0, *, mode: str = "slide", su
                "start_deg": start_deg, "max_tilt_deg": max_tilt_deg, "threshold": threshold,
                "settle_time": settle_time, "template": tpl.name if template is not None else None,
                "dt": dt}
-    notes = [] if not math.isnan(onset[mode]) else [
+    notes = [] if not math.isnan(onset[ONSET[mode]]) else [
         f"no {mode} onset up to {tilt:.2f} deg" + (" (the segment moved otherwise first)"
                                                     if rows and abs(rows[-1][2]) > STOP_DISTANCE else "")]
     meta = run_meta(seed, dt, tally, sim.n_spheres, sim.time, notes=notes, surface=surf.to_dict(),
                     template=tpl.to_dict())
     return RigResult("incline", observable, rec, meta, params.to_dict(), Provenance(seed=seed, options=options))
+
+
+#: The onset each mode reads.
+ONSET = {"slide": "slide", "roll": "roll", "sled": "slide"}
+
+
+def sled_template(particle: ClumpTemplate) -> ClumpTemplate:
+    """A sled: ``SLED_ROWS`` x ``SLED_ROWS`` copies of ``particle`` in its principal frame (its
+    longest axis x, its thinnest z, as it lies on a plate), side by side in x and y with gaps of
+    ``SLED_GAP`` of its extent, glued into one rigid body of their summed mass and inertia."""
+    from demcal.simulate.clump import MassProperties, principal_frame
+
+    offsets, radii = particle.offsets, particle.radii
+    extent = (offsets + radii[:, None]).max(axis=0) - (offsets - radii[:, None]).min(axis=0)
+    step = extent * (1.0 + SLED_GAP)
+    k = np.arange(SLED_ROWS) - (SLED_ROWS - 1) / 2.0
+    shifts = np.array([(i * step[0], j * step[1], 0.0) for i in k for j in k])
+    centres = np.concatenate([offsets + s for s in shifts])
+    one = np.diag(particle.principal_moments)
+    inertia = sum(one + particle.mass * ((s @ s) * np.eye(3) - np.outer(s, s)) for s in shifts)
+    props = MassProperties(particle.mass * len(shifts), np.zeros(3), inertia)
+    moments, axes = principal_frame(props.inertia)
+    return ClumpTemplate(f"sled of {len(shifts)} {particle.name}", centres, np.tile(radii, len(shifts)),
+                         props.mass, props.centre_of_mass, moments, axes, particle.mass_model)
 
 
 def _gravity(tilt_deg: float) -> tuple:

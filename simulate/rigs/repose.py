@@ -28,7 +28,7 @@ Profiles (``PROFILES``):
     The source paper's case: the workbook's carton and fill count (default 500 segments in
     200 x 100 x 250 mm), segments inserted at random during the first second in the upper part
     of the carton (z from 0.4 to 0.96 of its height), the end plate lifted at t = 4 s at the
-    logged speed, 10 s in all, dt = 7.43678e-5 s.
+    logged speed, 10 s in all, at the parameter set's time step (the paper's 7.43678e-5 s).
 ``quick``
     For calibration campaigns (about 45 runs within 15 minutes on 2 cores). The same carton,
     fill count, lift speed, time step and contact model as the paper case; only the idle
@@ -61,7 +61,8 @@ from demcal.errors import InputError, WorkbookError
 from demcal.provenance import Provenance
 from demcal.simulate.params import DEMParameters
 from demcal.simulate.rigs import RigResult, RunTally, check_seed, run_meta
-from demcal.simulate.scenes import PAPER_DURATION, PAPER_TIME_STEP, build_paper_repose_case
+from demcal.simulate.scenes import PAPER_DURATION, build_paper_repose_case
+from demcal.simulate.timestep import material_time_step
 from demcal.units import MM
 
 #: rms speed of the bodies below which a fill or a heap counts as settled [m/s].
@@ -70,6 +71,10 @@ SETTLED_SPEED = 0.005
 PX_PER_M = 2000.0
 #: Spacing of the top profile [m].
 PROFILE_STEP = 0.001
+
+
+#: The particle the default carton and fill were made for: segments of 25 x 11 mm [m].
+REFERENCE_LENGTH, REFERENCE_WIDTH = 0.025, 0.011
 
 
 @dataclass(frozen=True)
@@ -135,6 +140,19 @@ class ReposeGeometry:
                 values[name] = number * factor
         return cls(**values)
 
+    @classmethod
+    def for_particle(cls, shape) -> "ReposeGeometry":
+        """The default carton in proportion to a particle (``simulate.shapes``): scaled by the
+        particle's width over ``REFERENCE_WIDTH``, the width it was made for, and filled with as
+        many particles as make the same bulk volume (at least 10)."""
+        from demcal.simulate.shapes.segment import Segment
+
+        default = cls()
+        factor = float(shape.extent[1]) / REFERENCE_WIDTH
+        reference = Segment(REFERENCE_LENGTH, REFERENCE_WIDTH).volume() * factor ** 3
+        return replace(default.scaled(factor),
+                       fill_count=max(10, int(round(default.fill_count * reference / shape.volume()))))
+
     def scaled(self, factor: float) -> "ReposeGeometry":
         """The carton scaled by ``factor`` in every dimension, the fill count by its cube (at
         least 10), the lift speed kept."""
@@ -155,8 +173,6 @@ class ReposeProfile:
     name : str
     scale : float
         Linear scale of the carton (fill count scaled by its cube) [-].
-    dt : float
-        Time step [s].
     fill_time : float
         Segments are inserted uniformly over [0, fill_time] [s].
     fill_bottom, fill_top : float
@@ -173,7 +189,6 @@ class ReposeProfile:
 
     name: str
     scale: float
-    dt: float
     fill_time: float
     fill_bottom: float
     fill_top: float
@@ -187,9 +202,9 @@ class ReposeProfile:
 
 
 PROFILES = {
-    "paper": ReposeProfile("paper", scale=1.0, dt=PAPER_TIME_STEP, fill_time=1.0, fill_bottom=0.4,
+    "paper": ReposeProfile("paper", scale=1.0, fill_time=1.0, fill_bottom=0.4,
                            fill_top=0.96, lift_time=4.0, duration=PAPER_DURATION, early_end=False),
-    "quick": ReposeProfile("quick", scale=1.0, dt=PAPER_TIME_STEP, fill_time=0.5, fill_bottom=0.1,
+    "quick": ReposeProfile("quick", scale=1.0, fill_time=0.5, fill_bottom=0.1,
                            fill_top=0.96, lift_time=None, duration=4.0, early_end=True),
 }
 
@@ -399,18 +414,19 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
     geo = base.scaled(prof.scale) if prof.scale != 1.0 else base
     L, W, H = geo.box_length, geo.box_width, geo.box_height
     fill_margin = min(0.010, 0.1 * W)
+    dt = material_time_step(params)
     sim = build_paper_repose_case(
         params, seed, n_clumps=geo.fill_count, box_length=L, box_width=W, box_height=H,
         lift_speed=geo.lift_speed, lift_time=prof.lift_time if prof.lift_time is not None else math.inf,
         fill_time=prof.fill_time, fill_margin=fill_margin, fill_bottom=prof.fill_bottom * H,
-        fill_top=prof.fill_top * H, dt=prof.dt, outside_length=prof.outside_length * L, force=force)
+        fill_top=prof.fill_top * H, dt=dt, outside_length=prof.outside_length * L, force=force)
     plate = sim.wall_index("end plate")
     tally = RunTally()
     ke_t, ke = [], []
     chunk = 0.05                      # simulated seconds between checks [s]
 
     def advance(seconds):
-        n = int(round(seconds / prof.dt))
+        n = int(round(seconds / dt))
         if n < 1:
             return False
         tally.add(sim.run(n_steps=n))
@@ -439,10 +455,10 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
         t_lift = sim.time
     else:
         advance_to(min(t_lift, prof.duration))
-    # the plate is clear once its lower edge is a segment diameter above the highest sphere
+    # the plate is clear once its lower edge is a particle's width above the highest sphere
     z_top = float((sim.sphere_positions()[:, 2] + sim.sphere_radii()).max()) if sim.n_spheres else 0.0
-    dia = max(d for _, d in params.segment_sizes) if params.segment_sizes else params.segment_diameter_m
-    t_clear = t_lift + (z_top + dia) / geo.lift_speed
+    width = max(d for _, d in params.segment_sizes) if params.segment_sizes else float(params.shape.extent[1])
+    t_clear = t_lift + (z_top + width) / geo.lift_speed
     if prof.early_end:
         sim.set_wall_motion(plate, (0.0, 0.0, geo.lift_speed), t_lift, t_clear)
     else:
@@ -484,7 +500,7 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
     hooks = engine_hooks(params)
     if hooks:
         options["extensions"] = hooks
-    meta = run_meta(seed, prof.dt, tally, sim.n_spheres, sim.time, profile=prof.name, notes=notes,
+    meta = run_meta(seed, dt, tally, sim.n_spheres, sim.time, profile=prof.name, notes=notes,
                     profile_settings=prof.to_dict(), bodies=sim.n_bodies,
                     inserted=inserted)
     return RigResult("repose", observable, rec, meta, params.to_dict(), Provenance(seed=seed, options=options))

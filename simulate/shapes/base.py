@@ -20,6 +20,15 @@ from demcal.simulate.clump import ClumpTemplate, MassProperties, make_template
 from demcal.units import MM
 
 
+class SpecimenError(InputError):
+    """A specimen's reading that the shape cannot take, with the column it is in."""
+
+    def __init__(self, column: str, message: str):
+        super().__init__(f"column {column}: {message}")
+        self.column = column
+        self.reason = message
+
+
 @dataclass(frozen=True)
 class Shape:
     """Base of the particle shapes (``simulate.shapes.SHAPES``).
@@ -34,11 +43,14 @@ class Shape:
     sizes : tuple of str
         The fields that hold a length [m]: what a specimen's measurement sets and what
         :meth:`scaled_to` changes.
+    body : str
+        The body the spheres stand for, in words (the envelope density's method).
     """
 
     name: ClassVar[str] = ""
     specimen_columns: ClassVar[tuple] = ()
     sizes: ClassVar[tuple] = ()
+    body: ClassVar[str] = ""
 
     def __post_init__(self):
         for name in self.sizes:
@@ -65,7 +77,7 @@ class Shape:
     def from_specimen(cls, row: dict, **settings) -> "Shape":
         """The shape of one specimen from its calliper readings ``row`` (column -> mm).
 
-        Raises ``InputError`` naming the column of a reading the shape cannot take."""
+        Raises :class:`SpecimenError` naming the column of a reading the shape cannot take."""
         raise NotImplementedError
 
     def scaled_to(self, other: "Shape") -> "Shape":
@@ -140,5 +152,5 @@ def specimen_value(row: dict, column: str, shape: str) -> float:
     except (TypeError, ValueError):
         value = math.nan
     if not (math.isfinite(value) and value > 0):
-        raise InputError(f"column {column}: shape {shape} needs a length > 0 [mm], got {row.get(column)!r}")
+        raise SpecimenError(column, f"shape {shape} needs a length > 0 [mm], got {row.get(column)!r}")
     return value * MM

@@ -33,16 +33,17 @@ class ClumpTable(Shape):
     name: ClassVar[str] = "clump"
     specimen_columns: ClassVar[tuple] = (("length_mm", "width_mm", "thickness_mm"), ("length_mm",))
     sizes: ClassVar[tuple] = ("length_m",)
+    body: ClassVar[str] = "the union of the clump table's spheres at the specimen's scale"
 
-    length_m: float = 0.01
-    table: tuple = ((0.0, 0.0, 0.0, 0.005),)
+    length_m: float
+    table: tuple
 
     def __post_init__(self):
         super().__post_init__()
         object.__setattr__(self, "table", normalised_table(self.table))
 
     @classmethod
-    def from_specimen(cls, row: dict, table=((0.0, 0.0, 0.0, 0.005),), **_) -> "ClumpTable":
+    def from_specimen(cls, row: dict, table=(), **_) -> "ClumpTable":
         ref = normalised_table(table)
         extent = _extent(ref)
         length = specimen_value(row, "length_mm", cls.name)

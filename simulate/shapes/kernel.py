@@ -24,7 +24,7 @@ from typing import ClassVar
 import numpy as np
 from demcal.errors import InputError
 from demcal.simulate.clump import MassProperties, principal_frame, union_mass_properties
-from demcal.simulate.shapes.base import Shape, specimen_value
+from demcal.simulate.shapes.base import Shape, SpecimenError, specimen_value
 from demcal.units import MM
 
 #: Offset of the side rows of a flat kernel, in units of (semi-width - semi-thickness).
@@ -42,10 +42,11 @@ class Kernel(Shape):
     name: ClassVar[str] = "kernel"
     specimen_columns: ClassVar[tuple] = (("length_mm", "width_mm", "thickness_mm"),)
     sizes: ClassVar[tuple] = ("length_m", "width_m", "thickness_m")
+    body: ClassVar[str] = "an ellipsoid of the three calliper axes, pi L W T / 6"
 
-    length_m: float = 0.0072
-    width_m: float = 0.0030
-    thickness_m: float = 0.0021
+    length_m: float
+    width_m: float
+    thickness_m: float
     n_spheres: int = 9
 
     def __post_init__(self):
@@ -104,9 +105,11 @@ def _check_axes(length, width, thickness, columns: bool = False):
     for (big, small), (nb, ns) in (((length, width), ("length", "width")),
                                    ((width, thickness), ("width", "thickness"))):
         if small > big:
-            where = f"column {ns}_mm: " if columns else "kernel shape: "
-            raise InputError(f"{where}{ns} {small / MM:.4g} mm exceeds the {nb} {big / MM:.4g} mm; a kernel's "
-                             "axes are length >= width >= thickness")
+            message = (f"{ns} {small / MM:.4g} mm exceeds the {nb} {big / MM:.4g} mm; a kernel's axes are "
+                       "length >= width >= thickness")
+            if columns:
+                raise SpecimenError(f"{ns}_mm", message)
+            raise InputError(f"kernel shape: {message}")
 
 
 @lru_cache(maxsize=4096)

@@ -15,7 +15,7 @@ import numpy as np
 
 from demcal.errors import InputError
 from demcal.simulate.clump import MassProperties, cylinder_mass_properties, segment_centres
-from demcal.simulate.shapes.base import Shape, specimen_value
+from demcal.simulate.shapes.base import Shape, SpecimenError, specimen_value
 from demcal.units import MM
 
 
@@ -26,9 +26,10 @@ class Segment(Shape):
     name: ClassVar[str] = "segment"
     specimen_columns: ClassVar[tuple] = (("length_mm", "diameter_mm"),)
     sizes: ClassVar[tuple] = ("length_m", "diameter_m")
+    body: ClassVar[str] = "a cylinder of the calliper length and diameter, pi d^2 L / 4"
 
-    length_m: float = 0.025
-    diameter_m: float = 0.011
+    length_m: float
+    diameter_m: float
     n_spheres: int = 5
 
     def __post_init__(self):
@@ -46,8 +47,8 @@ class Segment(Shape):
         length = specimen_value(row, "length_mm", cls.name)
         diameter = specimen_value(row, "diameter_mm", cls.name)
         if diameter > length:
-            raise InputError(f"column diameter_mm: {diameter / MM:.4g} mm exceeds the length_mm "
-                             f"{length / MM:.4g} mm, which a segment cannot (meta key shape: sphere or kernel)")
+            raise SpecimenError("diameter_mm", f"{diameter / MM:.4g} mm exceeds the length_mm {length / MM:.4g} mm, "
+                                "which a segment cannot (meta key shape: sphere or kernel)")
         return cls(length, diameter, n_spheres)
 
     def spheres(self):

@@ -25,8 +25,9 @@ class Sphere(Shape):
     name: ClassVar[str] = "sphere"
     specimen_columns: ClassVar[tuple] = (("diameter_mm",), ("length_mm", "width_mm", "thickness_mm"))
     sizes: ClassVar[tuple] = ("diameter_m",)
+    body: ClassVar[str] = "a sphere of the diameter, pi d^3 / 6"
 
-    diameter_m: float = 0.0066
+    diameter_m: float
 
     @classmethod
     def from_specimen(cls, row: dict, **_) -> "Sphere":

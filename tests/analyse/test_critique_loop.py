@@ -184,7 +184,6 @@ def test_the_effective_mass_signature_reads_the_logged_orientations_or_a_flat_la
     drop's logged orientation and height; drops with no orientation logged are judged by a
     flat landing of the twin, whose rigid-body reference is the contact restitution."""
     from demcal.analyse.critique.attribution import _rigid_body_signature
-    from demcal.simulate.clump import segment_from_parameters
     from demcal.simulate.params import DEMParameters
     from demcal.simulate.rigid_impact import rigid_drop
 
@@ -199,7 +198,7 @@ def test_the_effective_mass_signature_reads_the_logged_orientations_or_a_flat_la
     trials = [(1, 0.3, 0.4, 60.0, {}, None), (2, 0.3, 0.2, 2.0, {}, None)]
     where, reference, off, on_mean = _rigid_body_signature(runner, params, on, "particle-steel", trials,
                                                            {1: (0.1, 0.2), 2: (0.05, 0.35)}, 0.36)
-    body = segment_from_parameters(params)
+    body = params.template()
     assert reference == pytest.approx(np.mean([rigid_drop(body, 60.0, 0.36, 0.4).apparent_restitution,
                                                rigid_drop(body, 2.0, 0.36, 0.2).apparent_restitution]))
     assert (off, on_mean) == pytest.approx((0.075, 0.275)) and "2 drops" in where and not ran

@@ -158,7 +158,6 @@ def test_orientation_design_reads_the_twins_sensitivity_to_the_contact_restituti
     """End on, one contact through the centre of mass: the rebound is the contact restitution,
     d apparent / d e = 1. Tilted, on a stiff frictionless plate, the twin's sensitivity is the
     rigid body's (``simulate.rigid_impact``, differenced the same way) within 0.1."""
-    from demcal.simulate.clump import segment_from_parameters
     from demcal.simulate.extensions import with_contact_effective_mass
     from demcal.simulate.params import DEMParameters
     from demcal.simulate.rigid_impact import rigid_drop
@@ -166,7 +165,7 @@ def test_orientation_design_reads_the_twins_sensitivity_to_the_contact_restituti
     (end_on,) = orientation_design(DEMParameters(), ["particle-steel"], 0.4, grid=(90,))
     assert end_on.sensitivity == pytest.approx(1.0, abs=0.03)
     stiff = with_contact_effective_mass(DEMParameters(e_pw=0.36, mu_s_pw=0.0, mu_r_pw=0.0, shear_modulus_pa=1e10))
-    body = segment_from_parameters(stiff)
+    body = stiff.template()
     for row in orientation_design(stiff, ["particle-steel"], 0.1, grid=(10, 30, 60)):
         rigid = [rigid_drop(body, row.orientation_deg, e, 0.1).apparent_restitution for e in (0.31, 0.41)]
         assert row.sensitivity == pytest.approx((rigid[1] - rigid[0]) / 0.1, abs=0.1), row

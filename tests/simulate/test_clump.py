@@ -96,7 +96,7 @@ def test_cylinder_and_scaled_mass_models():
 def test_bad_templates_are_refused():
     with pytest.raises(InputError, match="mean_mass"):
         segment_template(0.025, 0.011, 5, 912.0, mass_model="scaled")
-    with pytest.raises(InputError, match="valid: union, cylinder, scaled"):
+    with pytest.raises(InputError, match="valid: union, body, cylinder, scaled"):
         segment_template(0.025, 0.011, 5, 912.0, mass_model="voxel")
     with pytest.raises(InputError, match="exceeds its length"):
         segment_template(0.010, 0.011, 5, 912.0)

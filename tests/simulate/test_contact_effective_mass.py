@@ -21,7 +21,6 @@ import numpy as np
 import pytest
 
 from demcal.errors import InputError
-from demcal.simulate.clump import segment_from_parameters
 from demcal.simulate.engine import Simulation
 from demcal.simulate.extensions import engine_hooks, with_contact_effective_mass
 from demcal.simulate.integrate import matrix_from_quat
@@ -53,7 +52,7 @@ def _rotation(axis, angle):
 def end_impact_ratio(body, tilt_deg):
     """-v_z after / v_z before of one impact of the lower end sphere: (1 + e) m_eff / m - 1,
     m_eff = 1 / (1/m + a^2 / I), a the end sphere's horizontal lever, I the transverse moment."""
-    lever = 0.5 * (STIFF.segment_length_m - STIFF.segment_diameter_m) * math.cos(math.radians(tilt_deg))
+    lever = 0.5 * (STIFF.shape.length_m - STIFF.shape.diameter_m) * math.cos(math.radians(tilt_deg))
     m_eff = 1.0 / (1.0 / body.mass + lever ** 2 / max(body.principal_moments))
     return (1.0 + E) * m_eff / body.mass - 1.0
 
@@ -132,7 +131,7 @@ def engine_rebound(params, tilt_deg, height):
     """The engine's drop (the drop rig's plate, release orientation and time step), from first
     touch to the first apex of the centre of mass: -1 + (plate impulse) / (m v_in), i.e.
     (v_z + g t) / v_in, gravity during the contacts left out as the reference leaves it out."""
-    body = segment_from_parameters(params)
+    body = params.template()
     surface = make_surface(params, "steel")
     q, _ = release_orientation(tilt_deg, np.random.default_rng(0))
     arms = (body.centres - body.centre_of_mass) @ matrix_from_quat(q).T
@@ -160,7 +159,7 @@ def engine_rebound(params, tilt_deg, height):
 def test_rigid_body_references_agree():
     """The event-driven drop here, ``simulate.rigid_impact`` (planar) and the closed form of one
     end impact give the same rebounds; a flat landing and an end-on one rebound at e."""
-    body = segment_from_parameters(STIFF)
+    body = STIFF.template()
     for tilt in (0.5, 1.0, 3.0, 10.0, 30.0, 45.0, 60.0, 75.0):
         first, rebound, struck = rigid_body_drop(body, tilt, E, HEIGHT)
         lib = rigid_drop(body, tilt, E, HEIGHT)
@@ -213,7 +212,7 @@ def test_an_off_centre_impact_leaves_the_rigid_body_velocity_ratio(tilt_deg):
     normal moves only the effective mass there. The drop rig's first-impact velocity ratio
     follows the closed form within 2 % with the extension; with the dashpot set by the whole
     mass the contact realises a far lower restitution."""
-    body = segment_from_parameters(STIFF)
+    body = STIFF.template()
     expected = end_impact_ratio(body, tilt_deg)
 
     def ratio(p):
@@ -229,7 +228,7 @@ def test_the_rebound_follows_the_rigid_body_through_its_end_impacts(tilt_deg):
     """From 0.5 to 60 deg the segment's rebound, over its one or two end impacts, is the rigid
     body's within 2 % (the contacts here are short against the turn and the time between the
     end impacts, see the module docstring)."""
-    _, expected, _ = rigid_body_drop(segment_from_parameters(STIFF), tilt_deg, E, HEIGHT)
+    _, expected, _ = rigid_body_drop(STIFF.template(), tilt_deg, E, HEIGHT)
     assert engine_rebound(with_contact_effective_mass(STIFF), tilt_deg, HEIGHT) == pytest.approx(expected, rel=0.02)
 
 
@@ -239,7 +238,7 @@ def test_the_drop_rig_reads_the_rebound_to_the_first_apex_in_flight(tilt_deg):
     (``simulate.rigid_impact``) to the first apex of the centre of mass after the whole impact
     sequence: a tilted segment's centre of mass still descends between its end impacts, and
     that is not the end of the rebound. Within 2 % (0.005 where the rebound is nearly nil)."""
-    body = segment_from_parameters(STIFF)
+    body = STIFF.template()
     expected = rigid_drop(body, tilt_deg, E, HEIGHT).apparent_restitution
     rig = run_rig("drop", with_contact_effective_mass(STIFF), 0, height=HEIGHT, orientation_deg=tilt_deg)
     assert rig.observable["apparent_restitution"] == pytest.approx(expected, rel=0.02, abs=0.005)

@@ -9,7 +9,6 @@ import pytest
 
 from demcal.errors import InputError, SimulationError
 from demcal.simulate import DEMParameters, MaterialTable, Plane, Simulation, rayleigh_time
-from demcal.simulate.clump import segment_from_parameters
 from demcal.simulate.integrate import axis_angle_quat
 from tests.simulate.helpers import R, floor, simulation, sphere_template
 
@@ -41,7 +40,7 @@ def test_body_leaving_the_domain_is_recorded_and_deactivated():
 
 def test_state_readers_agree_with_what_was_added():
     sim = simulation(DEMParameters(), dt=1e-5)
-    tpl = sim.add_template(segment_from_parameters(DEMParameters()))
+    tpl = sim.add_template(DEMParameters().template())
     q = axis_angle_quat((0.0, 0.0, 1.0), math.pi / 2)
     sim.add_clump(tpl, (0.01, 0.02, 0.03), q, velocity=(0.1, 0.0, 0.0), angular_velocity=(0.0, 0.0, 2.0))
     np.testing.assert_allclose(sim.orientations()[0], q, atol=1e-15)

@@ -26,6 +26,7 @@ from demcal.cli import main
 from demcal.simulate.export import (EXPORT_FILES, CalibratedWith, export_model, liggghts_seeds, render,
                                     rolling_conversion)
 from demcal.simulate.params import DEMParameters
+from demcal.simulate.shapes.segment import Segment
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -67,7 +68,7 @@ def test_rolling_friction_is_converted_exactly_for_a_sphere_and_said_to_be_an_av
     from the contact point to the centre of mass, R for one sphere: mu_r x 0.5 and x 1, exact.
     On the 5-sphere segment EDEM's lever runs from R (the middle sphere's side) to the half
     length (a tip), so the converted mu_r keeps the torque only on average."""
-    sphere = DEMParameters(spheres_per_clump=1, segment_length_m=0.011)
+    sphere = DEMParameters(shape=Segment(0.011, 0.011, 1))
     pp, pw = rolling_conversion(sphere, export_model(sphere).template, "edem")
     assert (pp.factor, pp.exact, pw.factor, pw.exact) == (pytest.approx(0.5), True, pytest.approx(1.0), True)
     segment = DEMParameters()
@@ -368,7 +369,7 @@ def test_liggghts_run_from_the_exported_fragment_rebounds_like_demcals_drop_twin
     proc = subprocess.run([LIGGGHTS, "-in", "in.drop", "-log", "log.liggghts", "-screen", "screen.liggghts"],
                           cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, (tmp_path / "log.liggghts").read_text()[-2000:]
-    liggghts = _rebound_ratios(tmp_path / "dump.drop", params.segment_diameter_m / 2)
+    liggghts = _rebound_ratios(tmp_path / "dump.drop", params.shape.diameter_m / 2)
     demcal = run_rig("drop", params, 0, height=height, orientation_deg=90.0).observable["velocity_ratio"]
     assert len(liggghts) == 3
     assert np.array(liggghts) == pytest.approx(demcal, rel=0.05)
@@ -403,7 +404,7 @@ def test_yade_run_from_the_exported_snippet_rebounds_like_demcals_drop_twin(tmp_
     model = export_model(params, material="Soy\nimport os\r\nopen('PWNED', 'w').close()  #")
     (tmp_path / "yade_materials.py").write_text(render(model, "yade"), encoding="utf-8")
     height = 0.4
-    half_length = params.segment_length_m / 2
+    half_length = params.shape.length_m / 2
     (tmp_path / "drop.py").write_text(YADE_DROP.format(z0=half_length + 1e-4, vz=-math.sqrt(2 * 9.81 * height)))
     proc = subprocess.run([YADE, "-n", "-x", "drop.py"], cwd=tmp_path, capture_output=True, text=True,
                           timeout=300)

@@ -19,6 +19,7 @@ from demcal.simulate.extensions import (EXTENSIONS, SizeDistribution, describe, 
                                  epsd_stiffness, fit_velocity_restitution, impact_speed, invert_drop_twin,
                                  parameters_for_impact, segment_of_size, surface_ripple, with_more_spheres)
 from demcal.simulate.params import DEMParameters
+from demcal.simulate.shapes.segment import Segment
 
 EXTERNAL = Path(os.environ.get("DEMCAL_EXTERNAL", "/work/shared/external"))
 
@@ -62,7 +63,7 @@ def test_velocity_law_changes_the_drop_twin_as_intended():
 
     h, e = pingpong_method2()
     law = fit_velocity_restitution(h, e)
-    params = DEMParameters(segment_length_m=0.011, segment_diameter_m=0.011, spheres_per_clump=1)
+    params = DEMParameters(shape=Segment(0.011, 0.011, 1))
     sphere = segment_template(0.011, 0.011, 1, params.particle_density_kg_m3)
     got = []
     for height in (h[0], h[-1]):
@@ -155,17 +156,16 @@ def test_surface_ripple_hand_calculation():
 
 
 def test_more_spheres_bring_the_clump_to_the_spherocylinder():
-    from demcal.simulate.clump import segment_from_parameters
 
     params = DEMParameters()
     r, L = 0.0055, 0.025
     capsule = math.pi * r ** 2 * (L - 2 * r) + 4 / 3 * math.pi * r ** 3      # volume of the envelope
     rho = params.particle_density_kg_m3
-    coarse = segment_from_parameters(params).mass / rho
+    coarse = params.template().mass / rho
     fine_params = with_more_spheres(params, max_ripple=1e-5)
-    fine = segment_from_parameters(fine_params).mass / rho
-    assert fine_params.spheres_per_clump > 5
-    assert surface_ripple(L, 2 * r, fine_params.spheres_per_clump) <= 1e-5
+    fine = fine_params.template().mass / rho
+    assert fine_params.shape.n_spheres > 5
+    assert surface_ripple(L, 2 * r, fine_params.shape.n_spheres) <= 1e-5
     assert abs(fine - capsule) < 0.2 * abs(coarse - capsule)
     assert fine == pytest.approx(capsule, rel=0.01)
 
@@ -255,7 +255,7 @@ def test_engine_velocity_law_equals_the_per_impact_twin():
 
     h, e = pingpong_method2()
     law = fit_velocity_restitution(h, e)
-    params = DEMParameters(segment_length_m=0.011, segment_diameter_m=0.011, spheres_per_clump=1)
+    params = DEMParameters(shape=Segment(0.011, 0.011, 1))
     sphere = segment_template(0.011, 0.011, 1, params.particle_density_kg_m3)
     engine = with_velocity_restitution(params, "particle-steel", law)
     for height in (h[0], h[-1]):
@@ -271,7 +271,7 @@ def test_repose_rig_records_the_hooks_it_runs():
     from demcal.simulate.rigs import run_rig
     from demcal.simulate.rigs.repose import PROFILES, ReposeGeometry, ReposeProfile
 
-    tiny = ReposeProfile(name="tiny", scale=1.0, dt=PROFILES["quick"].dt, fill_time=0.1, fill_bottom=0.1,
+    tiny = ReposeProfile(name="tiny", scale=1.0, fill_time=0.1, fill_bottom=0.1,
                          fill_top=0.9, lift_time=None, duration=0.4, early_end=True)
     geo = ReposeGeometry(box_length=0.08, box_width=0.06, box_height=0.08, fill_count=20)
     dist = SizeDistribution((0.022, 0.025, 0.028), (0.010, 0.011, 0.012))

@@ -7,7 +7,6 @@ import pytest
 
 from demcal.errors import InputError
 from demcal.simulate import DEMParameters, ParticleFactory
-from demcal.simulate.clump import segment_from_parameters
 from demcal.simulate.walls import box_rectangles
 from tests.simulate.helpers import floor, simulation
 
@@ -17,7 +16,7 @@ LO, HI = np.array([0.01, 0.01, 0.10]), np.array([0.19, 0.09, 0.24])
 def _sim(n, seed, start=0.0, end=1.0, gravity=(0.0, 0.0, -9.81)):
     sim = simulation(DEMParameters(), dt=7.43678e-5, gravity=gravity, lo=(-0.05, -0.05, -0.02),
                      hi=(0.25, 0.15, 0.3))
-    tpl = sim.add_template(segment_from_parameters(DEMParameters()))
+    tpl = sim.add_template(DEMParameters().template())
     floor(sim)
     sim.add_walls(box_rectangles((0.0, 0.0, 0.0), (0.2, 0.1, 0.25), faces=("x-", "x+", "y-", "y+")))
     factory = ParticleFactory(tpl, n, LO, HI, seed=seed, start_time=start, end_time=end)
@@ -61,7 +60,7 @@ def test_insertion_follows_the_rate():
 
 def test_full_region_does_not_hang():
     sim = simulation(DEMParameters(), dt=7.43678e-5)
-    tpl = sim.add_template(segment_from_parameters(DEMParameters()))
+    tpl = sim.add_template(DEMParameters().template())
     factory = ParticleFactory(tpl, 10, (0.0, 0.0, 0.0), (0.03, 0.03, 0.03), seed=0, end_time=0.0,
                               max_attempts=500)
     sim.add_factory(factory)
@@ -147,7 +146,7 @@ def test_single_template_in_a_list_is_the_single_template_factory():
     runs = []
     for template, weights in ((0, None), ([0], None), ((0,), [2.0])):
         sim = simulation(DEMParameters(), dt=7.43678e-5, lo=(-0.05, -0.05, -0.02), hi=(0.25, 0.15, 0.3))
-        sim.add_template(segment_from_parameters(DEMParameters()))
+        sim.add_template(DEMParameters().template())
         sim.add_factory(ParticleFactory(template, 50, LO, HI, seed=8, end_time=0.0, weights=weights))
         sim.run(n_steps=0)
         runs.append((sim.positions(), sim.orientations()))

@@ -45,3 +45,46 @@ def test_slide_onset_coulomb_flat_clump_on_tilting_plate(mu_s):
         assert tilt < expected + 2.0, "never slid"
     assert tilt == pytest.approx(expected, abs=0.5)
     assert abs(sim.angular_velocities()[0]).max() < 1e-6  # it slides, it does not roll
+
+
+# ---------------------------------------------------------------------------------------------
+# round particles: the sliding twin rolls first, the sled of glued particles slides at mu_s
+
+def test_a_single_sphere_on_the_sliding_incline_rolls_first_whatever_its_friction():
+    from demcal.simulate.rigs.incline import run_incline
+    from demcal.simulate.shapes.sphere import Sphere
+
+    params = DEMParameters(shape=Sphere(0.0066), particle_density_kg_m3=1200.0, dt=None, mu_r_pw=0.05)
+    angles = [run_incline(params.with_(mu_s_pw=mu), mode="slide").observable["roll_angle_deg"]
+              for mu in (0.3, 0.6)]
+    assert angles[0] == pytest.approx(angles[1], abs=0.05)                 # no response to mu_s
+    assert math.tan(math.radians(angles[0])) == pytest.approx(0.05, rel=0.1)   # it rolls at mu_r
+
+
+def test_a_sled_of_glued_spheres_slides_at_tan_angle_equal_to_mu_s():
+    """tan(onset) against mu_s over 0.2-0.6: slope 1 within 5 % (Coulomb), and each reading
+    within 2 % of mu_s."""
+    import numpy as np
+
+    from demcal.simulate.rigs.incline import run_incline
+    from demcal.simulate.shapes.sphere import Sphere
+
+    params = DEMParameters(shape=Sphere(0.0066), particle_density_kg_m3=1200.0, dt=None)
+    mus = np.array([0.2, 0.4, 0.6])
+    readings = np.array([run_incline(params.with_(mu_s_pw=float(mu)), mode="sled").observable[
+        "static_friction_apparent"] for mu in mus])
+    assert readings == pytest.approx(mus, rel=0.02)
+    assert np.polyfit(mus, readings, 1)[0] == pytest.approx(1.0, rel=0.05)
+
+
+def test_a_sled_is_nine_particles_with_their_summed_mass_and_parallel_axis_inertia():
+    from demcal.simulate.rigs.incline import SLED_GAP, sled_template
+    from demcal.simulate.shapes.sphere import Sphere
+
+    one = Sphere(0.006).template(1000.0)
+    sled = sled_template(one)
+    m, r = one.mass, 0.003
+    step = 0.006 * (1 + SLED_GAP)
+    assert sled.n_spheres == 9 and sled.mass == pytest.approx(9 * m)
+    # about z: 9 (2/5 m r^2) + m step^2 (4 corners x 2 + 4 edges x 1) = 9 (0.4 m r^2) + 12 m step^2
+    assert max(sled.principal_moments) == pytest.approx(9 * 0.4 * m * r * r + 12 * m * step ** 2, rel=1e-9)

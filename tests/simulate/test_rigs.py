@@ -183,7 +183,7 @@ def test_incline_segment_rolls_at_lever_weighted_mu_r(lever):
     the axis). Lever of each contact: sqrt(a^2 + y_i^2) (edem_com) or a (edem_sphere), so
     tan(theta) = mu_r mean(lever) / a: 1.32 mu_r and mu_r."""
     params = PARAMS.with_(mu_s_pw=0.5, rolling_lever=lever)
-    y = np.linspace(-1, 1, 5) * (params.segment_length_m - params.segment_diameter_m) / 2
+    y = np.linspace(-1, 1, 5) * (params.shape.length_m - params.shape.diameter_m) / 2
     factor = np.mean(np.hypot(R, y)) / R if lever == "edem_com" else 1.0
     obs = run_rig("incline", params, mode="roll").observable
     assert obs["roll_angle_deg"] == pytest.approx(math.degrees(math.atan(params.mu_r_pw * factor)), abs=0.5)
@@ -251,7 +251,7 @@ def test_top_profile_is_the_upper_envelope_of_the_discs():
 def test_tiny_repose_run_makes_a_heap_measured_both_ways():
     """A few segments in a small carton, short times: the plate is lifted, segments flow out,
     and both angle methods give a finite slope."""
-    tiny = ReposeProfile(name="tiny", scale=1.0, dt=PROFILES["quick"].dt, fill_time=0.2, fill_bottom=0.1,
+    tiny = ReposeProfile(name="tiny", scale=1.0, fill_time=0.2, fill_bottom=0.1,
                          fill_top=0.9, lift_time=None, duration=1.5, early_end=True)
     geo = ReposeGeometry(box_length=0.08, box_width=0.06, box_height=0.08, fill_count=40)
     params = PARAMS.with_(rolling_lever="liggghts_reff")

@@ -117,7 +117,8 @@ def test_the_registry_names_the_valid_shapes_and_reads_back_what_it_stores():
     assert set(SHAPES) == {"segment", "sphere", "kernel", "clump"}
     with pytest.raises(InputError, match="unknown shape 'cube'; valid shapes: segment, sphere, kernel, clump"):
         shape_class("cube")
-    for shape in (Segment(), Sphere(), Kernel(), ClumpTable()):
+    for shape in (Segment(0.025, 0.011), Sphere(0.006), Kernel(0.007, 0.003, 0.002),
+                  ClumpTable(0.01, ((0, 0, 0, 0.002), (0.003, 0, 0, 0.002)))):
         assert shape_from_dict(shape.to_dict()) == shape
     with pytest.raises(InputError, match="shape sphere: unknown field"):
         shape_from_dict({"shape": "sphere", "diameter_m": 0.006, "colour": "red"})

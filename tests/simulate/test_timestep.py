@@ -8,7 +8,6 @@ import pytest
 
 from demcal.errors import UnsafeTimeStepError
 from demcal.simulate import DEMParameters, rayleigh_time
-from demcal.simulate.clump import segment_from_parameters
 from tests.simulate.helpers import simulation
 
 
@@ -21,7 +20,7 @@ def test_rayleigh_time_by_hand_and_paper_fraction():
 
 def _segment_sim(dt, **kwargs):
     sim = simulation(DEMParameters(), dt=dt, **kwargs)
-    tpl = sim.add_template(segment_from_parameters(DEMParameters()))
+    tpl = sim.add_template(DEMParameters().template())
     sim.add_clump(tpl, (0.0, 0.0, 0.1))
     return sim
 

@@ -106,10 +106,10 @@ def test_params_are_checked_together_not_one_by_one():
     # each alone breaks a check between fields against the defaults (diameter 11 mm > length
     # 10 mm; a scaled mass model without a mass); together they are valid
     p = parse_params({"segment_length_m": 0.01, "segment_diameter_m": 0.008})
-    assert (p.segment_length_m, p.segment_diameter_m) == (0.01, 0.008)
+    assert (p.shape.length_m, p.shape.diameter_m) == (0.01, 0.008)
     p = parse_params({"mass_model": "scaled", "mean_mass_kg": 0.002})
     assert (p.mass_model, p.mean_mass_kg) == ("scaled", 0.002)
-    with pytest.raises(InputError, match=r"^params: segment_diameter_m \(0.02\) must not exceed"):
+    with pytest.raises(InputError, match=r"^params: segment shape: the diameter \(20 mm\) exceeds the length \(15 mm\)"):
         parse_params({"segment_length_m": 0.015, "segment_diameter_m": 0.02})
 
 

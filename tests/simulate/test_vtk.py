@@ -14,7 +14,6 @@ import pytest
 from demcal.cli import main
 from demcal.errors import InputError
 from demcal.simulate import DEMParameters
-from demcal.simulate.clump import segment_from_parameters
 from demcal.simulate.vtk import FrameSeries, read_pvd, read_vtp, write_pvd, write_vtp
 from demcal.simulate.walls import PLANE, RECTANGLE, Rectangle, box_rectangles
 from tests.simulate.helpers import floor, simulation, sphere_template
@@ -24,7 +23,7 @@ SPHERE_FIELDS = {"clump_id", "radius", "velocity", "speed", "active"}
 
 def test_vtp_round_trip(tmp_path):
     sim = simulation(DEMParameters(), dt=1e-5)
-    tpl = sim.add_template(segment_from_parameters(DEMParameters()))
+    tpl = sim.add_template(DEMParameters().template())
     sim.add_clump(tpl, (0.0, 0.0, 0.05), (0.9, 0.1, 0.3, 0.2), velocity=(0.1, 0.0, 0.0),
                   angular_velocity=(0.0, 0.0, 4.0))
     sim.add_clump(tpl, (0.05, 0.0, 0.05))
