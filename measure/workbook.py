@@ -861,7 +861,9 @@ def _check_unique(name: str, frame: pd.DataFrame, file: Path) -> None:
     """Refuse an id given twice, naming both rows (compression: a specimen once per axis)."""
     keys = {"specimens": ("specimen_id",), "density": ("sample_id",), "drop": ("trial_id",),
             "incline": ("trial_id",), "compression": ("specimen_id", "axis"),
-            "repose": ("photo_id",)}[name]
+            "repose": ("photo_id",), "clump": ("sphere_id",)}[name]
+    if not set(keys) <= set(frame.columns):      # an optional id (a clump's sphere_id) not given
+        return
     seen: dict = {}
     for row in frame.index:
         key = tuple(frame.at[row, k] for k in keys)

@@ -120,8 +120,9 @@ def true_quantities(truth, design: dict, effects=()) -> dict:
 
 def _mean_volume(shape, sd_rel: float, nodes: int = 7) -> float:
     """E[V] of a shape whose sizes are independent normals of relative sd ``sd_rel`` about its
-    own (Gauss-Hermite quadrature over each size, exact for volumes of degree up to 13; the
-    virtual lab's clipping at +-40 %, 6.7 sd at its default, is neglected)."""
+    own, each at most the one before as the virtual lab draws them (Gauss-Hermite quadrature
+    over each size, exact for volumes of degree up to 13; the clipping at +-40 %, 6.7 sd at the
+    default spread, is neglected)."""
     import itertools
     from dataclasses import replace
 
@@ -129,7 +130,9 @@ def _mean_volume(shape, sd_rel: float, nodes: int = 7) -> float:
     w = w / w.sum()
     total = 0.0
     for idx in itertools.product(range(nodes), repeat=len(shape.sizes)):
-        sizes = {n: getattr(shape, n) * (1.0 + sd_rel * x[i]) for n, i in zip(shape.sizes, idx)}
+        sizes = {}
+        for n, i in zip(shape.sizes, idx):           # each axis at most the one before, as drawn
+            sizes[n] = min([getattr(shape, n) * (1.0 + sd_rel * x[i])] + list(sizes.values()))
         total += float(np.prod([w[i] for i in idx])) * replace(shape, **sizes).volume()
     return total
 

@@ -102,3 +102,18 @@ def test_design_point_response_is_the_median_of_its_replicates():
                for i, a in enumerate([30.0, 47.5, 31.0, 20.0, 22.0, 21.0])]
     y, y_all = _point_responses(records, 3, [])
     assert y.tolist() == [31.0, 21.0] and y_all.shape == (2, 3)
+
+
+def test_a_time_step_above_the_safe_limit_is_refused_before_any_run(measurement, tmp_path):
+    from demcal.errors import UnsafeTimeStepError
+
+    calls = []
+
+    def runner(task):
+        calls.append(task)
+        return standin_runner(task)
+
+    config = CampaignConfig(workers=1, progress=False, model_extensions={"dt": 2e-4})
+    with pytest.raises(UnsafeTimeStepError, match="--set dt=SECONDS"):
+        calibrate(EXAMPLE, tmp_path / "out", config, runner=runner, measurement=measurement)
+    assert calls == [] and not list((tmp_path / "out").glob("runs/*.json"))

@@ -170,3 +170,16 @@ def test_calibrate_passes_its_options_and_prints_the_validation(tmp_path, capsys
     cfg = seen["config"]
     assert (cfg.profile, cfg.workflow, cfg.budget_runs, cfg.validation_cap, cfg.seed) == \
         ("quick", "plausible", 40, 20, 1)
+
+    # model settings the user chooses reach every run; measured and calibrated parameters do not
+    rc = main(["calibrate", str(root), "--out", str(tmp_path), "--no-report", "--set", "dt=5e-5",
+               "--set", "rolling_lever=edem_com", "--set", "spheres_per_clump=7",
+               "--set", "contact_effective_mass=true"])
+    assert rc == 0
+    assert seen["config"].model_extensions == {"dt": 5e-5, "rolling_lever": "edem_com", "spheres_per_clump": 7,
+                                               "contact_effective_mass": True}
+    capsys.readouterr()
+    for item in ("segment_length_m=0.02", "e_pw=0.5"):
+        assert main(["calibrate", str(root), "--out", str(tmp_path), "--no-report", "--set", item]) == 2
+        err = capsys.readouterr().err
+        assert "not a model setting; valid:" in err and "rolling_lever" in err and len(err.splitlines()) == 1

@@ -11,7 +11,7 @@ import pytest
 from demcal.errors import InputError, WorkbookError
 from demcal.provenance import sha256_file
 from demcal.measure.workbook import read_workbook, write_workbook
-from tests.measure.conftest import write_attachments
+from tests.measure.conftest import base_sheets, write_attachments
 
 
 def sheet_file(path, fmt, sheet):
@@ -448,3 +448,60 @@ def test_numbers_are_finite(tmp_path):
         read_workbook(root)
     assert (info.value.row, info.value.column) == (1, "length_mm")
     assert np.isinf(float(info.value.value))
+
+
+# ---------------------------------------------------------------------------------------------
+# the particle's shape: its own calliper columns, each reading checked as the shape reads it
+
+def _shape(name, **columns):
+    def edit(s):
+        s["meta"]["shape"] = name
+        for row in s["specimens"]:
+            row.update(columns)
+    return edit
+
+
+def test_a_shape_whose_columns_are_missing_is_refused_naming_the_column(campaign, fmt):
+    err = expect_error(campaign(_shape("kernel")), fmt, "specimens", None, "width_mm")
+    assert "shape kernel (meta shape) is measured by (length_mm, width_mm, thickness_mm)" in str(err)
+
+
+def test_a_kernel_wider_than_long_is_refused_naming_row_and_column(campaign, fmt):
+    def edit(s):
+        _shape("kernel", width_mm=8.0, thickness_mm=5.0)(s)
+        s["specimens"][1]["width_mm"] = 30.0
+    err = expect_error(campaign(edit), fmt, "specimens", 2, "width_mm", 30.0)
+    assert "width 30 mm exceeds the length 25 mm" in str(err)
+
+
+def test_a_segment_wider_than_long_is_refused_and_a_sphere_suggested(campaign, fmt):
+    def edit(s):
+        s["specimens"][2]["diameter_mm"] = 27.0
+    err = expect_error(campaign(edit), fmt, "specimens", 3, "diameter_mm", 27.0)
+    assert "meta key shape: sphere or kernel" in str(err)
+    wb = read_workbook(campaign(_shape("sphere")))              # the same rows read as spheres
+    assert wb.sheet("specimens").required[:2] == ["specimen_id", "diameter_mm"]
+
+
+def test_an_unknown_shape_is_refused_listing_the_valid_ones(campaign, fmt):
+    def edit(s):
+        s["meta"]["shape"] = "cube"
+    row = list(base_sheets()["meta"]).index("material") + 1 + len(base_sheets()["meta"])
+    with pytest.raises(WorkbookError) as info:
+        read_workbook(campaign(edit))
+    err = info.value
+    assert (err.sheet, err.row, err.column) == ("meta", row, "value")
+    assert "unknown shape 'cube'; valid shapes: segment, sphere, kernel, clump" in str(err)
+
+
+def test_a_clump_sheet_with_a_negative_radius_is_refused_naming_row_and_column(campaign, fmt):
+    def edit(s):
+        s["meta"]["shape"] = "clump"
+        s["clump"] = [{"x_mm": 0, "y_mm": 0, "z_mm": 0, "radius_mm": 2.0},
+                      {"x_mm": 3, "y_mm": 0, "z_mm": 0, "radius_mm": -1.5}]
+    expect_error(campaign(edit), fmt, "clump", 2, "radius_mm", -1.5)
+
+
+def test_a_clump_shape_needs_its_sheet(campaign, fmt):
+    with pytest.raises(WorkbookError, match="the meta shape clump needs the clump sheet"):
+        read_workbook(campaign(_shape("clump")))

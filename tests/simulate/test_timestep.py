@@ -44,3 +44,29 @@ def test_forced_and_stricter_limits():
     _segment_sim(7.43678e-5).run(n_steps=2)  # the paper's step passes the default limit
     with pytest.raises(UnsafeTimeStepError):
         _segment_sim(7.43678e-5, max_dt_fraction=0.3).run(n_steps=1)
+
+
+def test_the_time_step_follows_the_material_unless_stated():
+    """dt None: 0.2 of the Rayleigh time of the shape's smallest sphere, by hand: a 6.6 mm
+    sphere at rho 1200 kg/m3, G 1.04e6 Pa, nu 0.25 has T_R = pi 0.0033 sqrt(1200 / 1.04e6) /
+    (0.1631 x 0.25 + 0.8766) = 3.8388e-4 s."""
+    from demcal.simulate.shapes.sphere import Sphere
+    from demcal.simulate.timestep import material_time_step
+
+    params = DEMParameters(shape=Sphere(0.0066), particle_density_kg_m3=1200.0, shear_modulus_pa=1.04e6, dt=None)
+    t_r = math.pi * 0.0033 * math.sqrt(1200.0 / 1.04e6) / (0.1631 * 0.25 + 0.8766)
+    assert t_r == pytest.approx(3.8388e-4, rel=1e-4)
+    assert material_time_step(params) == pytest.approx(0.2 * t_r, rel=1e-12)
+    assert material_time_step(params.with_(dt=5e-5)) == 5e-5
+    # the paper's step is 0.41 of its segment's T_R, and what the paper's parameters state
+    assert material_time_step(DEMParameters()) == 7.43678e-5
+
+
+def test_a_time_step_above_the_safe_limit_is_refused_naming_the_option():
+    from demcal.errors import UnsafeTimeStepError
+    from demcal.simulate.shapes.sphere import Sphere
+    from demcal.simulate.timestep import material_time_step
+
+    small = DEMParameters(shape=Sphere(0.002), particle_density_kg_m3=1200.0)     # the paper's step
+    with pytest.raises(UnsafeTimeStepError, match=r"give a smaller time step: --set dt=SECONDS"):
+        material_time_step(small)
