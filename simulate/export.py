@@ -370,9 +370,10 @@ def _interactions(model: ExportModel, target: str) -> dict:
 def liggghts_fragment(model: ExportModel, seed: int = 0) -> str:
     """LIGGGHTS-PUBLIC 3.8 input lines for the materials, contact model and segment template.
 
-    Include after ``create_box 2 ...`` (type 1 = segment, type 2 = steel). The template is
+    Include after ``create_box 2 ...`` (type 1 = the particle, type 2 = steel). The template is
     ``fix pts``, its distribution ``fix pdd`` (for ``fix insert/...``), and ``fix ms`` the
-    multisphere integrator. Walls use the same model string: ``fix ID all wall/gran
+    multisphere integrator; a one-sphere particle gets LIGGGHTS' sphere template at the density
+    that gives demcal's mass, and ``fix integr`` (``nve/sphere``). Walls use the same model string: ``fix ID all wall/gran
     ${demcal_model} primitive type 2 zplane 0.0`` or ``... mesh n_meshes 1 meshes M``.
     """
     p = model.params
@@ -408,8 +409,19 @@ def liggghts_fragment(model: ExportModel, seed: int = 0) -> str:
         "pair_style      gran ${demcal_model}",
         "pair_coeff      * *",
         "",
-        f"# the segment: {len(model.template.radii)} spheres in its principal frame, with demcal's mass "
-        f"({model.template.mass_model}) and principal moments",
+    ]
+    if model.template.n_spheres == 1:
+        # one sphere: LIGGGHTS' own sphere template, at the density that gives demcal's mass
+        r = float(model.template.radii[0])
+        out += [f"# the particle: {_shape_words(model)}, with demcal's mass ({model.template.mass_model})",
+                f"fix pts all particletemplate/sphere {p_template} atom_type 1 density constant "
+                f"{_g(model.template.mass / (4.0 / 3.0 * math.pi * r ** 3))} radius constant {_g(r)}",
+                f"fix pdd all particledistribution/discrete {p_distribution} 1 pts 1.0",
+                "fix integr all nve/sphere", ""]
+        return "\n".join(out)
+    out += [
+        f"# the particle: {_shape_words(model)}; {len(model.template.radii)} spheres in its principal frame, "
+        f"with demcal's mass ({model.template.mass_model}) and principal moments",
         f"fix pts all particletemplate/multisphere {p_template} atom_type 1 density constant "
         f"{_g(p.particle_density_kg_m3)} nspheres {len(model.template.radii)} ntry 1000000 spheres {spheres} "
         f"type 1 mass {_g(model.template.mass)} inertia_tensor {_g(i1)} 0 0 {_g(i2)} 0 {_g(i3)} use_volume",
@@ -418,6 +430,11 @@ def liggghts_fragment(model: ExportModel, seed: int = 0) -> str:
         "",
     ]
     return "\n".join(out)
+
+
+def _shape_words(model: ExportModel) -> str:
+    """The DEM particle in words, as one comment-safe line."""
+    return one_line(model.params.shape.describe())
 
 
 def yade_snippet(model: ExportModel) -> str:
