@@ -112,9 +112,9 @@ PHOTO_MODES = ("analytic", "dem", "none")
 #: Shapes whose static friction the lab measures with a sled of glued particles (they roll first).
 SLED_SHAPES = ("sphere",)
 
-#: Shapes whose radial compression the measure stage reads (a contact strip of the specimen's
-#: width and length); a sphere or clump is written without a compression sheet, and its shear
-#: modulus is the meta's.
+#: Shapes whose radial compression curve the measure stage reads as an elastic modulus (a
+#: contact strip of the specimen's width and length); a sphere or clump is compressed for its
+#: Poisson's ratio only (the widths and thicknesses, no curve), and its shear modulus is the meta's.
 COMPRESSED_SHAPES = ("segment", "kernel")
 
 
@@ -698,13 +698,17 @@ def _compression(truth: Truth, rng, specimens, n: int, root: Path) -> pd.DataFra
         spec = specimens.iloc[i]
         nu = float(np.clip(rng.normal(p.poisson_ratio, truth.poisson_sd), 0.05, 0.45))
         E = youngs_modulus(p.shear_modulus_pa, p.poisson_ratio) * (1.0 + truth.modulus_sd_rel * rng.standard_normal())
-        # radial loading across the thickness (a segment's diameter), the width across
-        t0 = float(spec.get("thickness_mm", spec.get("diameter_mm"))) * (1.0 + 0.01 * rng.standard_normal())
-        w0 = float(spec.get("width_mm", spec.get("diameter_mm"))) * (1.0 + 0.01 * rng.standard_normal())
+        # radial loading across the thickness (a segment's diameter), the width across; a
+        # clump's from its table's extents at the specimen's length
+        extent = p.shape.extent / p.shape.extent[0] * float(spec.get("length_mm", spec.get("diameter_mm")))
+        t0 = float(spec.get("thickness_mm", spec.get("diameter_mm", extent[2]))) * (1.0 + 0.01 * rng.standard_normal())
+        w0 = float(spec.get("width_mm", spec.get("diameter_mm", extent[1]))) * (1.0 + 0.01 * rng.standard_normal())
         eps_t = 0.30 * (0.55 + 0.1 * rng.random())
-        k = E * (w0 * 1e-3) * (float(spec["length_mm"]) * 1e-3) / (t0 * 1e-3)
-        name = f"curves/C{i + 1:02d}.csv"
-        force_curve(rng, k, 0.30 * t0).to_csv(root / name, index=False)
+        length = float(spec.get("length_mm", spec.get("diameter_mm")))
+        k = E * (w0 * 1e-3) * (length * 1e-3) / (t0 * 1e-3)
+        name = f"curves/C{i + 1:02d}.csv" if p.shape.name in COMPRESSED_SHAPES else None
+        if name is not None:
+            force_curve(rng, k, 0.30 * t0).to_csv(root / name, index=False)
         rows.append({"specimen_id": spec["specimen_id"], "axis": "radial",
                      "width_before_mm": round(w0, 3), "width_after_mm": round(w0 * (1.0 + nu * eps_t), 3),
                      "thickness_before_mm": round(t0, 3), "thickness_after_mm": round(t0 * (1.0 - eps_t), 3),
@@ -954,8 +958,6 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
         sheets["incline"], exp = _inclines(truth, rng, effects, specimens, surfaces=tuple(surfaces),
                                            n_incline=n_incline, trials_per_specimen=trials_per_specimen)
         expected += exp
-    if truth.params.shape.name not in COMPRESSED_SHAPES:
-        n_compression = 0             # recorded as written: none
     if n_compression:
         sheets["compression"] = _compression(truth, rng, specimens, n_compression, root)
     discarded_heaps: list = []

@@ -109,11 +109,12 @@ def true_quantities(truth, design: dict, effects=()) -> dict:
         out[f"static_friction.{surface}"] = (truth.friction(surface, "slide"), "1")
     for surface in design["surfaces"]:
         out[f"rolling_friction.{surface}"] = (truth.friction(surface, "roll"), "1")
-    if design["n_compression"] and shape.name in COMPRESSED_SHAPES:
+    if design["n_compression"]:
         out["poisson_ratio"] = (p.poisson_ratio, "1")
+    if design["n_compression"] and shape.name in COMPRESSED_SHAPES:
         out["elastic_modulus_pa"] = (youngs_modulus(p.shear_modulus_pa, p.poisson_ratio), "Pa")
         out["shear_modulus_pa"] = (p.shear_modulus_pa, "Pa")
-    if design["photos"] != "none" and design["n_photos"]:
+    if design["photos"] == "analytic" and design["n_photos"]:
         out["repose_angle_deg"] = (truth.repose_angle_deg, "deg")
     return out
 
@@ -218,6 +219,8 @@ def run(args) -> int:
     print(f"{'quantity':<34} {'truth':>11}  unit")
     for name, (value, unit) in true_quantities(spec.truth, design, effects).items():
         print(f"{name:<34} {_fmt(value):>11}  {unit}")
+    if design["photos"] == "dem" and design["n_photos"]:
+        print("repose_angle_deg: the repose twin's at the truth (the photos show its heaps; no other truth)")
     if any(e.kind == "block_effect" for e in effects):
         print("(a block effect raises the quantities it acts on by up to its size; the values above are "
               "without it)")
