@@ -11,11 +11,9 @@ from __future__ import annotations
 
 import math
 
+from demcal.measure.workbook import SIZE_COLUMNS
 from demcal.simulate.shapes import DEFAULT_SHAPE, Shape, shape_class
 from demcal.simulate.shapes.clump import table_from_rows
-
-#: Calliper columns a specimen's shape may be measured by (``measure.workbook.SIZE_COLUMNS``).
-SIZE_COLUMNS = ("length_mm", "diameter_mm", "width_mm", "thickness_mm")
 
 
 def shape_name(meta: dict) -> str:

@@ -70,7 +70,7 @@ from demcal.errors import InputError, WorkbookError
 from demcal.measure import rawsheets
 from demcal.measure.rawsheets import RawSheet, is_missing_marker, row_ranges
 from demcal.provenance import sha256_file
-from demcal.simulate.shapes import DEFAULT_SHAPE, shape_class
+from demcal.simulate.shapes import DEFAULT_SHAPE, shape_class, size_columns
 from demcal.simulate.shapes.base import SpecimenError
 from demcal.text import control_characters, one_line
 
@@ -82,8 +82,9 @@ SIDES = ("left", "right", "both")
 #: What carries the particle down an incline: the particle itself, or a sled of glued particles.
 CARRIERS = ("particle", "sled")
 ROLLOUT_COLUMNS = ("slope_deg", "release_height_mm", "runout_mm")
-#: Calliper columns of the ``specimens`` sheet; the meta ``shape`` says which it needs.
-SIZE_COLUMNS = ("length_mm", "diameter_mm", "width_mm", "thickness_mm")
+#: Calliper columns of the ``specimens`` sheet, those of every shape; the meta ``shape`` says
+#: which it needs.
+SIZE_COLUMNS = size_columns()
 
 
 @dataclass(frozen=True)
@@ -671,7 +672,7 @@ def _row_rules(name: str, frame: pd.DataFrame, file: Path, required, meta: dict)
         sizes = [c for c in required if c in SIZE_COLUMNS]
         for row in frame.index:
             try:
-                shape.from_specimen({c: frame.at[row, c] for c in sizes}, table=((0.0, 0.0, 0.0, 1.0),))
+                shape.check_specimen({c: frame.at[row, c] for c in sizes})
             except SpecimenError as exc:
                 raise err(exc.reason, row, exc.column, frame.at[row, exc.column]) from None
     if name == "density":

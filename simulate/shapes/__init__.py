@@ -39,6 +39,15 @@ def shape_class(name: str) -> type[Shape]:
     return getattr(importlib.import_module(module), cls)
 
 
+def size_columns() -> tuple:
+    """Every calliper column any shape is measured by, in the order the shapes name them."""
+    out = []
+    for name in SHAPES:
+        for option in shape_class(name).specimen_columns:
+            out += [c for c in option if c not in out]
+    return tuple(out)
+
+
 def shape_from_dict(d: dict) -> Shape:
     """A shape from :meth:`Shape.to_dict`'s layout (``{"shape": name, field: value, ...}``)."""
     if not isinstance(d, dict) or "shape" not in d:
@@ -51,4 +60,4 @@ def shape_from_dict(d: dict) -> Shape:
     return cls(**{k: v for k, v in d.items() if k != "shape"})
 
 
-__all__ = ["DEFAULT_SHAPE", "SHAPES", "Shape", "shape_class", "shape_from_dict"]
+__all__ = ["DEFAULT_SHAPE", "SHAPES", "Shape", "shape_class", "shape_from_dict", "size_columns"]

@@ -74,6 +74,13 @@ class Shape:
                          f"missing {', '.join(c for c in cls.specimen_columns[0] if c not in have)}")
 
     @classmethod
+    def check_specimen(cls, row: dict) -> None:
+        """Refuse (:class:`SpecimenError`, naming the column) calliper readings ``row`` (column
+        -> mm) the shape cannot take; each must be a length > 0. Shapes add their own rules."""
+        for column, _ in row.items():
+            specimen_value(row, column, cls.name)
+
+    @classmethod
     def from_specimen(cls, row: dict, **settings) -> "Shape":
         """The shape of one specimen from its calliper readings ``row`` (column -> mm).
 

@@ -57,10 +57,17 @@ class Kernel(Shape):
         _check_axes(self.length_m, self.width_m, self.thickness_m)
 
     @classmethod
+    def check_specimen(cls, row: dict) -> None:
+        _check_axes(*cls._axes(row), columns=True)
+
+    @classmethod
     def from_specimen(cls, row: dict, n_spheres: int = 9, **_) -> "Kernel":
-        axes = [specimen_value(row, c, cls.name) for c in ("length_mm", "width_mm", "thickness_mm")]
-        _check_axes(*axes, columns=True)
-        return cls(*axes, n_spheres=n_spheres)
+        cls.check_specimen(row)
+        return cls(*cls._axes(row), n_spheres=n_spheres)
+
+    @classmethod
+    def _axes(cls, row: dict) -> list:
+        return [specimen_value(row, c, cls.name) for c in ("length_mm", "width_mm", "thickness_mm")]
 
     @property
     def semi_axes(self) -> np.ndarray:

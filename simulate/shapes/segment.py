@@ -43,13 +43,18 @@ class Segment(Shape):
                              "or a kernel (meta key shape)")
 
     @classmethod
-    def from_specimen(cls, row: dict, n_spheres: int = 5, **_) -> "Segment":
+    def check_specimen(cls, row: dict) -> None:
         length = specimen_value(row, "length_mm", cls.name)
         diameter = specimen_value(row, "diameter_mm", cls.name)
         if diameter > length:
             raise SpecimenError("diameter_mm", f"{diameter / MM:.4g} mm exceeds the length_mm {length / MM:.4g} mm, "
                                 "which a segment cannot (meta key shape: sphere or kernel)")
-        return cls(length, diameter, n_spheres)
+
+    @classmethod
+    def from_specimen(cls, row: dict, n_spheres: int = 5, **_) -> "Segment":
+        cls.check_specimen(row)
+        return cls(specimen_value(row, "length_mm", cls.name), specimen_value(row, "diameter_mm", cls.name),
+                   n_spheres)
 
     def spheres(self):
         centres = segment_centres(self.length_m, self.diameter_m, self.n_spheres)
