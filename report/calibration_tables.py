@@ -8,11 +8,16 @@ Like every table of the report they are pure functions of the stored results (``
 from __future__ import annotations
 
 from demcal.analyse.results import CampaignResult
-from demcal.report.tables import Campaign, Table, _results_source, _wall, parameter_label
+from demcal.report.tables import Campaign, Table, _results_source, _wall, parameter_label, particle_noun
 
 
 def _names(r: CampaignResult) -> list[str]:
     return list(r.prior)
+
+
+def _label(c: Campaign, name: str) -> tuple[str, str]:
+    """Readable name and symbol of a contact parameter, in the words of the workbook's particle."""
+    return parameter_label(name, _wall(c.measurement), particle_noun(c.measurement))
 
 
 def _symbols(c: Campaign) -> dict:
@@ -23,10 +28,9 @@ def _symbols(c: Campaign) -> dict:
 def table_prior(c: Campaign) -> Table:
     """Table P1: the prior, each contact parameter's measured mean and sd."""
     r = c.results
-    wall = _wall(c.measurement)
     rows = []
     for name, p in r.prior.items():
-        label, symbol = parameter_label(name, wall)
+        label, symbol = _label(c, name)
         rows.append((label, symbol, p.source, p.mean, p.sd, p.low, p.high))
     return Table("P1", "Prior of the contact parameters: the lab's measured mean and sd of each",
                  ("Parameter", "Symbol", "Measured quantity", "Mean", "SD", "Lowest", "Highest"),
@@ -45,16 +49,15 @@ def table_twins(c: Campaign) -> Table | None:
     twins = r.calibration.twins
     if not twins:
         return None
-    wall = _wall(c.measurement)
     rows = []
     for name, t in twins.items():
-        label, symbol = parameter_label(name, wall)
+        label, symbol = _label(c, name)
         used = t.get("informative", True)
         rows.append((label, symbol, t["quantity"], t["rig"], t["trials"], t["measured_mean"], t["measured_sd"],
                      t["mean"] if used else None, t["sd"] if used else None, [t["grid"][0], t["grid"][-1]],
                      "yes" if t["at_edge"] else "no", "yes" if used else "no"))
     keys = [run["key"] for t in twins.values() for run in t["runs"]]
-    deaf = tuple(f"{parameter_label(n, wall)[0]}: {t['note']}." for n, t in twins.items()
+    deaf = tuple(f"{_label(c, n)[0]}: {t['note']}." for n, t in twins.items()
                  if not t.get("informative", True))
     return Table("P1a", "Every lab test's twin: the DEM parameter that reproduces each reading",
                  ("Parameter", "Symbol", "Measured quantity", "Twin", "Trials", "Lab reading", "SD",
@@ -78,11 +81,10 @@ def table_joint_vs_heap(c: Campaign) -> Table | None:
     heap = cal.heap_only
     if not heap:
         return None
-    wall = _wall(c.measurement)
     rows = []
     for name, p in cal.parameters.items():
         h = heap.parameters[name]
-        rows.append((parameter_label(name, wall)[0], p.value, p.ci95, p.sd_ratio, h.value, h.ci95, h.sd_ratio))
+        rows.append((_label(c, name)[0], p.value, p.ci95, p.sd_ratio, h.value, h.ci95, h.sd_ratio))
     return Table("P5a", "Joint calibration (every lab test's twin) beside the heap alone",
                  ("Parameter", "Joint: recommended", "Joint: 95 % interval", "Joint: posterior/prior SD",
                   "Heap only: recommended", "Heap only: 95 % interval", "Heap only: posterior/prior SD"),
@@ -168,10 +170,9 @@ def table_identifiability(c: Campaign) -> Table:
     posterior to prior SD and the recommended value."""
     r = c.results
     cal = r.calibration
-    wall = _wall(c.measurement)
     rows = []
     for name, p in cal.parameters.items():
-        label, symbol = parameter_label(name, wall)
+        label, symbol = _label(c, name)
         rows.append((label, symbol, p.prior_mean, p.prior_sd, p.posterior_mean, p.ci95, p.sd_ratio,
                      p.identifiability, p.value))
     rec = cal.recommended

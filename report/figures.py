@@ -19,7 +19,7 @@ from matplotlib.figure import Figure as _MplFigure
 from matplotlib.image import imread
 
 from demcal.analyse.results import CampaignResult, NoiseStudy
-from demcal.report.tables import parameter_label
+from demcal.report.tables import paper_material, parameter_label
 from demcal.text import one_line
 
 #: Resolution of every PNG [dots per inch].
@@ -474,7 +474,9 @@ def make_figures(campaign, fig_dir, *, dpi: int = DPI) -> list[Figure]:
             "Response surfaces of the fitted quadratic model for each factor pair, the remaining "
             "factor held at the preferred solution (dashed red: the measured angle; star: the "
             "preferred solution; circles: Box-Behnken runs of the plane through the centre).")
-        add("validation", validation_heaps(r, campaign.runs, m, fig_dir / "validation.png", campaign.paper,
+        # the paper's validation heaps are of its own material only
+        paper = campaign.paper if paper_material(campaign) else None
+        add("validation", validation_heaps(r, campaign.runs, m, fig_dir / "validation.png", paper,
                                            campaign.folder, dpi=dpi),
             "Validation: the photographed heap, the simulated heap profiles of the validation runs "
             "with the photos' mean angle (± SD, dotted) drawn through their flank (grey dotted: the "

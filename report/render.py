@@ -29,8 +29,8 @@ from demcal.jsonio import read_json, write_json
 from demcal.provenance import sha256_file
 from demcal.report.figures import DPI, make_figures
 from demcal.report.runs_csv import RUNS_CSV, write_runs_csv
-from demcal.report.tables import (Campaign, build_tables, load_campaign, load_paper, parameter_label,
-                                  tables_document)
+from demcal.report.tables import (SIZES, Campaign, build_tables, load_campaign, load_paper, paper_material,
+                                  parameter_label, particle_noun, quantity_label, tables_document)
 from demcal.text import one_line
 
 HERE = Path(__file__).resolve().parent
@@ -229,6 +229,20 @@ def particle_model(base: dict) -> str:
     return DEMParameters.from_names(base).shape.describe()
 
 
+def _specimens(quantities: dict) -> int:
+    """How many specimens were measured with callipers."""
+    return next((quantities[n].get("n", 0) for n in SIZES if n in quantities), 0)
+
+
+def calliper_text(measurement: dict) -> str:
+    """The calliper quantities the specimens sheet gives, in words ("length and diameter")."""
+    q = measurement.get("quantities", {})
+    words = [quantity_label(n).lower() for n in SIZES if n in q]
+    if len(words) < 2:
+        return "".join(words) or "the sizes"
+    return ", ".join(words[:-1]) + " and " + words[-1]
+
+
 def differences(c: Campaign) -> list[str]:
     """Where this campaign's procedure differs from the paper's, from the stored settings."""
     if c.results.workflow == "plausible":
@@ -236,16 +250,17 @@ def differences(c: Campaign) -> list[str]:
     r, m, p = c.results, c.measurement, c.paper
     cfg = r.config
     q = m["quantities"]
+    own, noun, nouns = paper_material(c), particle_noun(m), particle_noun(m, plural=True)
     out = [_runner_text(r)[0]]
     sim = p.get("simulation", {})
     if cfg.get("profile") != "paper":
         out.append(f"Repose rig profile '{cfg.get('profile')}', not the paper-fidelity case "
-                   f"(profile 'paper': {sim.get('segments', 500)} segments generated in the first "
+                   f"(profile 'paper': {sim.get('segments', 500)} {nouns} generated in the first "
                    f"{sim.get('generation_time_s', 1):g} s, plate withdrawn at "
                    f"{sim.get('plate_withdrawn_at_s', 4):g} s, {sim.get('total_time_s', 10):g} s in all).")
     base = r.base_parameters
     if base:
-        seg = p.get("segment", {})
+        seg = p.get("segment", {}) if own else {}
         paper = (f"; the paper: {seg['spheres_per_clump']} spheres of {seg['sphere_radius_mm']:g} mm radius"
                  if {"spheres_per_clump", "sphere_radius_mm"} <= set(seg) else "")
         out.append(f"Particle model: {particle_model(base)} (from the measured means), mass model "
@@ -255,10 +270,11 @@ def differences(c: Campaign) -> list[str]:
         out.append(f"Target angle {rep['value']:.4g}° from the workbook's meta target_repose_deg "
                    "(overrides the photos).")
     else:
+        paper_angle = (f"{(p.get('measured', {}).get('repose_angle_deg') or {}).get('value', 35.79)}°"
+                       if own else "angles")
         out.append(f"Target angle {rep.get('value', float('nan')):.4g}° from {rep.get('n')} heap photo(s) "
                    f"by demcal's photo estimator ({rep.get('method')}); the paper's "
-                   f"{(p.get('measured', {}).get('repose_angle_deg') or {}).get('value', 35.79)}° came from "
-                   "Matlab binarisation and Origin 2018 digitising.")
+                   f"{paper_angle} came from Matlab binarisation and Origin 2018 digitising.")
     pr = q.get("poisson_ratio", {})
     if pr:
         out.append(f"Poisson's ratio: {pr.get('extra', {}).get('used', 'normalised strains')} is used; the "
@@ -294,8 +310,8 @@ def differences(c: Campaign) -> list[str]:
                "(the paper repeated its validation three times).")
     meta = m.get("meta", {})
     if meta.get("particle_shear_modulus_pa") not in (None, ""):
-        out.append(f"Segment shear modulus {float(meta['particle_shear_modulus_pa']):.3g} Pa from the workbook "
-                   "meta (not stated in the paper).")
+        out.append(f"{noun.capitalize()} shear modulus {float(meta['particle_shear_modulus_pa']):.3g} Pa from the "
+                   "workbook meta (not stated in the paper).")
     return out
 
 
@@ -311,13 +327,14 @@ def abstract(c: Campaign) -> dict:
     val = r.validation.result
     settings = r.validation.settings
     chosen = r.box_behnken.factors
-    cal = ", ".join(f"{parameter_label(r.factors[f]['parameter'], wall)[0].lower()} "
+    noun = particle_noun(m)
+    cal = ", ".join(f"{parameter_label(r.factors[f]['parameter'], wall, noun)[0].lower()} "
                     f"{settings[r.factors[f]['parameter']]:.3g}" for f in chosen)
-    pv = p.get("validation", {})
+    pv = p.get("validation", {}) if paper_material(c) else {}
     pf = (p.get("regression") or {}).get("fit", {})
+    sizes = " × ".join(f"{_f(q[n].get('value'))} mm" for n in SIZES if n in q)
     text = (f"The physical and contact parameters of {m.get('material')} were measured "
-            f"({q.get('length_mm', {}).get('n', 0)} segments measured with callipers: "
-            f"{_f(q.get('length_mm', {}).get('value'))} mm × {_f(q.get('diameter_mm', {}).get('value'))} mm). "
+            f"({_specimens(q)} {particle_noun(m, plural=True)} measured with callipers: {sizes}). "
             f"The angle of repose of the heap, {_f(rep.get('value'), '.4g')}° "
             f"(n = {rep.get('n')}), is the calibration target. A Plackett-Burman test of the seven "
             f"contact parameters found {', '.join(r.significant.flagged) or 'no factor'} significant; "
@@ -343,26 +360,26 @@ def abstract_plausible(c: Campaign) -> dict:
     wall = str(m.get("meta", {}).get("contact_material", "steel")).lower()
     rep = q.get("repose_angle_deg", {})
     cal, v, noise = r.calibration, r.validation, r.noise
+    noun = particle_noun(m)
 
     def names(kind):
-        return [parameter_label(n, wall)[0].lower() for n, p in cal.parameters.items()
+        return [parameter_label(n, wall, noun)[0].lower() for n, p in cal.parameters.items()
                 if p.identifiability == kind]
 
     ident, partly, not_ident = names("identified"), names("partly identified"), names("not identified")
     runs = sum(len(p.runs) for p in r.design.points)
     # the lab readings the twins translate into other DEM values (beyond a reading's spread)
-    moved = [f"{parameter_label(n, wall)[0].lower()} {t['mean']:.3g} where the lab reads {t['measured_mean']:.3g}"
+    moved = [f"{parameter_label(n, wall, noun)[0].lower()} {t['mean']:.3g} where the lab reads {t['measured_mean']:.3g}"
              for n, t in cal.twins.items()
              if t.get("informative", True) and abs(t["mean"] - t["measured_mean"]) > t["measured_sd"]]
     twins = (" The twins of the drop and incline tests put " + "; ".join(moved)
              + ": the lab's reading is not the DEM's parameter there." if moved else "")
-    deaf = [f"{parameter_label(n, wall)[0].lower()} ({t['note']})" for n, t in cal.twins.items()
+    deaf = [f"{parameter_label(n, wall, noun)[0].lower()} ({t['note']})" for n, t in cal.twins.items()
             if not t.get("informative", True)]
     if deaf:
         twins += " Uninformative twins, not used: " + "; ".join(deaf) + "."
-    specimens = next((e.get("n", 0) for k, e in q.items() if k.endswith("_mm") and isinstance(e, dict)), 0)
     text = (f"The physical and contact parameters of {m.get('material')} were measured "
-            f"({specimens} particles measured with callipers; the DEM particle: "
+            f"({_specimens(q)} {particle_noun(m, plural=True)} measured with callipers; the DEM particle: "
             f"{particle_model(r.base_parameters)}). "
             f"The angle of repose of the heap, {_f(rep.get('value'), '.4g')}° (n = {rep.get('n')}), is the "
             f"calibration target. One simulated heap scatters by {noise.all_points.sd:.2g}° (SD) from "
@@ -408,7 +425,8 @@ def rig_text(c: Campaign) -> str:
     if all(d not in (None, "") for d in dims):
         parts.append("the carton is " + " mm × ".join(f"{float(d):g}" for d in dims) + " mm inside")
     if meta.get("fill_count") not in (None, ""):
-        parts.append(f"{int(float(meta['fill_count']))} segments are poured in")
+        nouns = particle_noun(c.measurement, plural=True)
+        parts.append(f"{int(float(meta['fill_count']))} {nouns} are poured in")
     if meta.get("plate_lift_speed_mm_s") not in (None, ""):
         parts.append(f"the side plate is lifted at {float(meta['plate_lift_speed_mm_s']):g} mm/s")
     profile = c.results.config.get("profile") if c.results else None
@@ -565,6 +583,8 @@ def render_html(c: Campaign, tables: list[dict], figures: list) -> str:
         "references": REFERENCES, "results": r,
         "critique_ids": [t["id"] for t in tables if t["id"].startswith("C")],
         "particle_model": particle_model(r.base_parameters) if r is not None and r.base_parameters else "",
+        "particle": particle_noun(c.measurement), "particles": particle_noun(c.measurement, plural=True),
+        "callipers": calliper_text(c.measurement), "paper_material": paper_material(c),
     }
     if r is not None:
         runner_text, runner_warn = _runner_text(r)

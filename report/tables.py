@@ -57,14 +57,17 @@ INSTRUMENTS = {
 }
 
 _PARAMETERS = {
-    "poisson_ratio": ("Poisson's ratio of the segment", "ν"),
-    "e_pp": ("Restitution coefficient, segment-segment", "e_pp"),
-    "e_pw": ("Restitution coefficient, segment-{wall}", "e_pw"),
-    "mu_s_pp": ("Static friction coefficient, segment-segment", "μs_pp"),
-    "mu_s_pw": ("Static friction coefficient, segment-{wall}", "μs_pw"),
-    "mu_r_pp": ("Rolling friction coefficient, segment-segment", "μr_pp"),
-    "mu_r_pw": ("Rolling friction coefficient, segment-{wall}", "μr_pw"),
+    "poisson_ratio": ("Poisson's ratio of the {particle}", "ν"),
+    "e_pp": ("Restitution coefficient, {particle}-{particle}", "e_pp"),
+    "e_pw": ("Restitution coefficient, {particle}-{wall}", "e_pw"),
+    "mu_s_pp": ("Static friction coefficient, {particle}-{particle}", "μs_pp"),
+    "mu_s_pw": ("Static friction coefficient, {particle}-{wall}", "μs_pw"),
+    "mu_r_pp": ("Rolling friction coefficient, {particle}-{particle}", "μr_pp"),
+    "mu_r_pw": ("Rolling friction coefficient, {particle}-{wall}", "μr_pw"),
 }
+
+#: The calliper quantities of the specimens sheet (whichever the shape uses), in table order.
+SIZES = ("length_mm", "diameter_mm", "width_mm", "thickness_mm")
 
 _RUN_STAGES = (("Plackett-Burman", "plackett_burman"), ("noise", "noise"),
                ("steepest climb", "steepest_climb"), ("Box-Behnken", "box_behnken"),
@@ -230,6 +233,42 @@ def _wall(measurement: dict) -> str:
     return str(measurement.get("meta", {}).get("contact_material", "steel")).strip().lower() or "steel"
 
 
+def shape_name(measurement: dict) -> str:
+    """The workbook's particle shape (``simulate.shapes`` name): the measurement's ``shape``,
+    else its meta ``shape``; ``segment`` for a measurement stored before shapes existed."""
+    name = (measurement.get("shape") or {}).get("shape") or measurement.get("meta", {}).get("shape")
+    return str(name or "segment").strip().lower() or "segment"
+
+
+def particle_noun(measurement: dict, plural: bool = False) -> str:
+    """The word the report uses for one particle of the workbook: "segment" (the paper's root
+    segments), "kernel", or "particle" (spheres, clumps)."""
+    noun = {"segment": "segment", "kernel": "kernel"}.get(shape_name(measurement), "particle")
+    return noun + "s" if plural else noun
+
+
+def paper_material(c: "Campaign") -> bool:
+    """Whether the workbook's particles are the paper's: segments of the material named in
+    ``paper_defaults.json`` (its ``material``, found case-insensitively in the workbook's).
+    The paper's measured, calibrated and validation figures are shown only then."""
+    name = str(c.paper.get("material", "")).strip().lower()
+    return (bool(name) and name in str(c.measurement.get("material", "")).lower()
+            and shape_name(c.measurement) == "segment")
+
+
+def _paper_own(c: "Campaign", *path, default=None):
+    """A figure the paper gives for its own material, or ``default`` when the workbook's
+    particles are not the paper's (:func:`paper_material`)."""
+    return _get(c.paper, *path, default=default) if paper_material(c) else default
+
+
+def _not_paper_note(c: "Campaign") -> str:
+    """Why a Paper column is empty: the paper's figures belong to its material."""
+    name = c.paper.get("material")
+    return ("Paper: not shown; the paper's figures belong to its own material"
+            + (f", {name}," if name else "") + " only.")
+
+
 def _get(d, *path, default=None):
     for p in path:
         if not isinstance(d, dict) or p not in d:
@@ -317,8 +356,9 @@ def _replicate_note(k: int) -> str:
 
 
 def _paper_measured(campaign: Campaign, name: str):
-    """(value, spread) the paper printed for a measured quantity, or (None, None)."""
-    paper = campaign.paper
+    """(value, spread) the paper printed for a measured quantity, or (None, None) (also when the
+    workbook's particles are not the paper's)."""
+    paper = campaign.paper if paper_material(campaign) else {}
     entry = _get(paper, "measured", name.replace(f"-{_wall(campaign.measurement)}", "-steel")
                  if _wall(campaign.measurement) != "steel" else name)
     if isinstance(entry, dict):
@@ -326,15 +366,17 @@ def _paper_measured(campaign: Campaign, name: str):
     return None, None
 
 
-def parameter_label(parameter: str, wall: str) -> tuple[str, str]:
-    """Readable name and symbol of a DEM contact parameter."""
+def parameter_label(parameter: str, wall: str, particle: str = "segment") -> tuple[str, str]:
+    """Readable name and symbol of a DEM contact parameter (``particle``: :func:`particle_noun`)."""
     name, symbol = _PARAMETERS.get(parameter, (parameter, parameter))
-    return name.format(wall=wall), symbol
+    return name.format(wall=wall, particle=particle), symbol
 
 
-def quantity_label(name: str) -> str:
-    """Readable name of a measured quantity (docs/workbook.md names)."""
-    fixed = {"length_mm": "Length", "diameter_mm": "Diameter", "mass_g": "Mass of one segment",
+def quantity_label(name: str, particle: str = "segment") -> str:
+    """Readable name of a measured quantity (docs/workbook.md names; ``particle``:
+    :func:`particle_noun`)."""
+    fixed = {"length_mm": "Length", "diameter_mm": "Diameter", "width_mm": "Width",
+             "thickness_mm": "Thickness", "mass_g": f"Mass of one {particle}",
              "particle_density_kg_m3": "Particle density (liquid displacement)",
              "envelope_density_kg_m3": "Envelope density (callipers and balance)",
              "poisson_ratio": "Poisson's ratio", "elastic_modulus_pa": "Elastic modulus",
@@ -345,13 +387,13 @@ def quantity_label(name: str) -> str:
     words = {"restitution": "Restitution coefficient", "static_friction": "Static friction coefficient",
              "rolling_friction": "Rolling friction coefficient"}.get(family, family)
     if family == "restitution":
-        return f"{words}, {what.replace('particle', 'segment')}"
-    return f"{words}, segment-{'segment' if what == 'particle' else what}"
+        return f"{words}, {what.replace('particle', particle)}"
+    return f"{words}, {particle}-{particle if what == 'particle' else what}"
 
 
-_SYMBOLS = {"length_mm": "L", "diameter_mm": "D", "mass_g": "m", "particle_density_kg_m3": "ρ",
-            "envelope_density_kg_m3": "ρe", "poisson_ratio": "ν", "elastic_modulus_pa": "E",
-            "shear_modulus_pa": "G", "repose_angle_deg": "θ", "restitution": "e",
+_SYMBOLS = {"length_mm": "L", "diameter_mm": "D", "width_mm": "W", "thickness_mm": "T", "mass_g": "m",
+            "particle_density_kg_m3": "ρ", "envelope_density_kg_m3": "ρe", "poisson_ratio": "ν",
+            "elastic_modulus_pa": "E", "shear_modulus_pa": "G", "repose_angle_deg": "θ", "restitution": "e",
             "static_friction": "μs", "rolling_friction": "μr"}
 
 
@@ -368,26 +410,27 @@ def _unit(est: dict) -> str:
 # Tables 1, 2, 2a: the measurement
 
 def table_dimensions(c: Campaign) -> Table:
-    """Table 1: outer dimensions of the segments (callipers)."""
+    """Table 1: outer dimensions of the particles (callipers), one row per calliper quantity
+    the shape uses; the paper's segment size beside them for the paper's material only."""
     q = c.measurement["quantities"]
-    paper = {"length_mm": _get(c.paper, "segment", "length_mm"),
-             "diameter_mm": _get(c.paper, "segment", "diameter_mm")}
+    own = paper_material(c)
     rows, sources = [], []
-    for name in ("length_mm", "diameter_mm"):
+    for name in SIZES:
         if name not in q:
             continue
         e = q[name]
         rows.append((quantity_label(name), _symbol(name), e["n"], e["value"], e["sd"],
                      _get(e, "extra", "min"), _get(e, "extra", "max"), e["ci95"][0], e["ci95"][1],
-                     paper[name]))
+                     _paper_own(c, "segment", name)))
         sources += _workbook_source(c.measurement, name)
-    return Table("1", "External dimensions of the segments",
+    paper_note = ("Paper: the mean segment size printed in its text (Table 1 of the paper is not "
+                  "available)." if own else _not_paper_note(c))
+    return Table("1", f"External dimensions of the {particle_noun(c.measurement, plural=True)}",
                  ("Dimension", "Symbol", "n", "Mean", "SD", "Min", "Max", "95 % CI low",
                   "95 % CI high", "Paper"),
                  ("", "", "", "mm", "mm", "mm", "mm", "mm", "mm", "mm"), tuple(rows),
-                 notes=("SD with n - 1; 95 % CI of the mean from Student's t. Paper: the mean "
-                        "segment size printed in its text (Table 1 of the paper is not available).",),
-                 sources=tuple(sources + _reference_source(c, "segment")),
+                 notes=("SD with n - 1; 95 % CI of the mean from Student's t. " + paper_note,),
+                 sources=tuple(sources + (_reference_source(c, "segment") if own else [])),
                  formats=("", "", "d", ".4g", ".3g", ".4g", ".4g", ".4g", ".4g", ".4g"))
 
 
@@ -396,7 +439,7 @@ _META_ROWS = (
     ("contact_density_kg_m3", "Density of the {wall} plate", "ρw", "kg/m^3", ("steel", "density_kg_m3")),
     ("contact_poisson", "Poisson's ratio of the {wall} plate", "νw", "", ("steel", "poisson_ratio")),
     ("contact_shear_modulus_pa", "Shear modulus of the {wall} plate", "Gw", "Pa", ("steel", "shear_modulus_pa")),
-    ("particle_shear_modulus_pa", "Shear modulus of the segment used by the DEM", "G", "Pa", None))
+    ("particle_shear_modulus_pa", "Shear modulus of the {particle} used by the DEM", "G", "Pa", None))
 
 
 def table_physical(c: Campaign) -> Table:
@@ -404,16 +447,15 @@ def table_physical(c: Campaign) -> Table:
     m = c.measurement
     q = m["quantities"]
     wall = _wall(m)
+    noun = particle_noun(m)
     rows, sources, notes = [], [], []
     for name, e in q.items():
-        if name in ("length_mm", "diameter_mm"):
+        if name in SIZES:
             continue
         pv, ps = _paper_measured(c, name)
-        if name == "particle_density_kg_m3":
-            pv = _get(c.paper, "segment", "particle_density_kg_m3")
-        if name == "poisson_ratio":
-            pv = _get(c.paper, "segment", "poisson_ratio")
-        label = quantity_label(name)
+        if name in ("particle_density_kg_m3", "poisson_ratio"):
+            pv = _paper_own(c, "segment", name)
+        label = quantity_label(name, noun)
         if _get(e, "extra", "override"):
             label += " (meta target_repose_deg)"
         rows.append((label, _symbol(name), _unit(e), e["n"], e["value"], e["sd"], e["ci95"][0],
@@ -434,19 +476,25 @@ def table_physical(c: Campaign) -> Table:
         used_keys.append(key)
         pv = _get(c.paper, *paper_path) if paper_path and wall == "steel" else None  # paper: steel
         if key == "particle_shear_modulus_pa":
-            notes.append("The segment's shear modulus is not in the paper's text; the DEM uses "
+            notes.append(f"The {noun}'s shear modulus is not in the paper's text; the DEM uses "
                          "the workbook's meta value.")
-        rows.append((label.format(wall=wall), symbol, unit, None, float(meta[key]), None, None,
-                     None, pv, None))
+        rows.append((label.format(wall=wall, particle=noun), symbol, unit, None, float(meta[key]), None,
+                     None, None, pv, None))
     if used_keys:
         sources.append(_meta_source(m, used_keys))
-    notes.append("Paper: values printed in the paper's text as mean ± spread (its Table 2 is "
-                 "not available); the paper does not say whether the spread is an SD or a range.")
-    return Table("2", "Basic physical and contact parameters of the segments (measured)",
+    own = paper_material(c)
+    if own:
+        notes.append("Paper: values printed in the paper's text as mean ± spread (its Table 2 is "
+                     "not available); the paper does not say whether the spread is an SD or a range.")
+    else:
+        notes.append(_not_paper_note(c) + (" Its steel plate's figures are shown." if wall == "steel" else ""))
+    reference = "measured" if own else "steel" if wall == "steel" else None
+    return Table("2", f"Basic physical and contact parameters of the {particle_noun(m, plural=True)} (measured)",
                  ("Parameter", "Symbol", "Unit", "n", "Mean", "SD", "95 % CI low",
                   "95 % CI high", "Paper", "Paper ±"),
                  ("", "", "", "", "row", "row", "row", "row", "row", "row"), tuple(rows),
-                 notes=tuple(notes), sources=tuple(sources + _reference_source(c, "measured")),
+                 notes=tuple(notes),
+                 sources=tuple(sources + (_reference_source(c, reference) if reference else [])),
                  formats=("", "", "", "d", ".4g", ".3g", ".4g", ".4g", ".4g", ".3g"))
 
 
@@ -454,11 +502,12 @@ def table_methods(c: Campaign) -> Table:
     """Table 2a: instrument, formula and rows of every measured quantity (the estimates' own
     ``method`` text)."""
     m = c.measurement
+    noun = particle_noun(m)
     rows, sources = [], []
     for name, e in m["quantities"].items():
         sheet = _get(e, "source", "sheet", default="")
         rejected = [f"{r['row']}: {r['reason']}" for r in e.get("rows_rejected", [])]
-        rows.append((quantity_label(name), sheet, INSTRUMENTS.get(sheet, ""), e.get("method", ""),
+        rows.append((quantity_label(name, noun), sheet, INSTRUMENTS.get(sheet, ""), e.get("method", ""),
                      row_ranges(e.get("rows_used", [])), "; ".join(rejected) or "none",
                      _get(e, "extra", "outlier_rule", default="")))
         src = _get(e, "source", default={})
@@ -483,10 +532,10 @@ def table_pb_levels(c: Campaign) -> Table:
     wall = _wall(m)
     rows, sources = [], []
     for letter, f in r.factors.items():
-        name, symbol = parameter_label(f["parameter"], wall)
+        name, symbol = parameter_label(f["parameter"], wall, particle_noun(m))
         pv, ps = _paper_measured(c, f["quantity"])
         if f["quantity"] == "poisson_ratio":
-            pv = _get(c.paper, "segment", "poisson_ratio")
+            pv = _paper_own(c, "segment", "poisson_ratio")
         rows.append((letter, name, symbol, f["low"], f["mean"], f["high"], f["how"], pv, ps))
         if f["quantity"] in m["quantities"]:
             sources += _workbook_source(m, f["quantity"])[:1]
@@ -496,8 +545,11 @@ def table_pb_levels(c: Campaign) -> Table:
                  ("",) * 9, tuple(rows),
                  notes=("-1/+1 are the measured minimum and maximum of the rows used (as the "
                         "paper) or the mean -+ one SD (levels 'sd'), clipped to the admissible "
-                        "range of the parameter. Paper: measured mean ± spread from its text.",),
-                 sources=tuple(sources + [_results_source("factors")] + _reference_source(c, "measured")),
+                        "range of the parameter. "
+                        + ("Paper: measured mean ± spread from its text." if paper_material(c)
+                           else _not_paper_note(c)),),
+                 sources=tuple(sources + [_results_source("factors")]
+                               + (_reference_source(c, "measured") if paper_material(c) else [])),
                  formats=("", "", "", ".4g", ".4g", ".4g", "", ".4g", ".3g"))
 
 
@@ -667,7 +719,7 @@ def table_bbd_levels(c: Campaign) -> Table:
     wall = _wall(c.measurement)
     rows = []
     for j, (code, letter) in enumerate(_bbd_letters(r)):
-        name, symbol = parameter_label(r.factors[letter]["parameter"], wall)
+        name, symbol = parameter_label(r.factors[letter]["parameter"], wall, particle_noun(c.measurement))
         rows.append((code, letter, name, symbol, b.low[j], b.centre[j], b.high[j]))
     fixed = ", ".join(f"{f} = {v:.4g}" for f, v in b.fixed.items())
     return Table("7", "Box-Behnken test: factors and level codes",
@@ -831,14 +883,14 @@ def table_calibrated(c: Campaign) -> Table:
     wall = _wall(c.measurement)
     settings = r.validation.settings
     chosen = set(r.box_behnken.factors)
-    paper_cal = _get(c.paper, "calibrated", default={})
+    paper_cal = _paper_own(c, "calibrated", default={})
     rows = []
     for letter, f in r.factors.items():
-        name, symbol = parameter_label(f["parameter"], wall)
+        name, symbol = parameter_label(f["parameter"], wall, particle_noun(c.measurement))
         pq = f["quantity"].replace(f"-{wall}", "-steel").replace(f".{wall}", ".steel")
         pm, _ = _paper_measured(c, f["quantity"])
         if f["quantity"] == "poisson_ratio":
-            pm = _get(c.paper, "segment", "poisson_ratio")
+            pm = _paper_own(c, "segment", "poisson_ratio")
         rows.append((letter, name, symbol, f["mean"], settings.get(f["parameter"]),
                      "optimised" if letter in chosen else "measured mean", paper_cal.get(pq), pm))
     return Table("11", "Calibrated DEM contact parameters",
@@ -847,9 +899,9 @@ def table_calibrated(c: Campaign) -> Table:
                  ("",) * 8, tuple(rows),
                  notes=("Paper: its calibrated values (0.32, 0.36, 0.22 for e_pp, e_pw, μs_pw) and "
                         "measured means from its text; the non-significant factors kept their "
-                        "measured means there too.",),
+                        "measured means there too." if paper_material(c) else _not_paper_note(c),),
                  sources=(_results_source("validation.settings, factors"), _runs_source(r, "box_behnken"))
-                 + tuple(_reference_source(c, "calibrated")),
+                 + tuple(_reference_source(c, "calibrated") if paper_material(c) else ()),
                  formats=("", "", "", ".4g", ".4g", "", ".4g", ".4g"))
 
 
@@ -869,7 +921,7 @@ def table_validation(c: Campaign) -> Table:
     res = v.result
     records = [c.runs.get(run["key"], {}) for run in v.runs]
     extra = [k for k in _observable_columns(records) if k != "angle_deg"]
-    paper = _get(c.paper, "validation", default={})
+    paper = _paper_own(c, "validation", default={})
     paper_runs = list(paper.get("runs_deg", []))
     k, point_runs, angles = _replicates(r, "validation")
     rows = []
@@ -903,12 +955,14 @@ def table_validation(c: Campaign) -> Table:
                      + ("lies inside it: these runs cannot tell the calibrated heap from the measured one."
                         if res.get("target_in_ci") else "lies outside it: the calibrated heap differs "
                         "from the measured one by more than the DEM's seed noise."))
+    if not paper_material(c):
+        notes.append(_not_paper_note(c))
     return Table("12", "Validation: angle of repose simulated with the calibrated parameters",
                  ("Run", "Seeds", "Angle compared (angle_deg)", "Replicates", *extra, "Paper"),
                  ("", "", "deg", "deg", *["deg"] * len(extra), "deg"), tuple(rows),
                  notes=tuple(notes),
                  sources=(_runs_source(r, "validation"), _results_source("validation"))
-                 + tuple(_reference_source(c, "validation")),
+                 + tuple(_reference_source(c, "validation") if paper_material(c) else ()),
                  formats=("", "", ".4g", "", *[".4g"] * len(extra), ".4g"))
 
 
@@ -1048,8 +1102,8 @@ def table_heap_observables(c: Campaign) -> Table:
                   {True: "beyond the noise", False: "within the noise"}.get(o.beyond_noise, "too few runs"))
                  for h in gains for o in h.observables)
     notes = ["Over the validation runs at each campaign's calibrated point, every run an independent draw; "
-             "difference after - before with Welch's 95 % interval. Outflow fraction: share of the segments "
-             "whose centre ends beyond the end plate; outside pile angle: the pile beyond the carton; crest "
+             "difference after - before with Welch's 95 % interval. Outflow fraction: share of the "
+             f"{particle_noun(c.measurement, plural=True)} whose centre ends beyond the end plate; outside pile angle: the pile beyond the carton; crest "
              "height: the top of the heap's profile."]
     if not gains:
         notes.append("None: no extension was recalibrated.")

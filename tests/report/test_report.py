@@ -5,11 +5,13 @@ records; ``demcal audit`` passes on a fresh report and names the table and cell,
 that was changed; the HTML needs no network; workbook text of any kind is printed as typed, and
 text the report could not render stops ``demcal calibrate`` before its first DEM run."""
 
+import copy
 import csv
 import hashlib
 import json
 import re
 import shutil
+from dataclasses import replace
 from html import unescape
 from html.parser import HTMLParser
 from pathlib import Path
@@ -21,8 +23,8 @@ import pytest
 from demcal.analyse.campaign import CampaignConfig, calibrate
 from demcal.cli import main
 from demcal.provenance import sha256_file
-from demcal.report.render import build_report, write_tables
-from demcal.report.tables import PAPER_FILE, PAPER_NAME
+from demcal.report.render import abstract, build_report, render_html, write_tables
+from demcal.report.tables import PAPER_FILE, PAPER_NAME, build_tables, load_campaign
 from tests.analyse.standin import heap_standin_runner, standin_runner
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -56,8 +58,6 @@ def _memoised_audit_inputs():
     measurement keyed by the workbook's path, options and every file beside it (photos
     included), the PDF's words by its SHA-256. A changed workbook, photo or PDF is computed
     afresh. Measurements that write annotated photos (``calibrate``) are never cached."""
-    import copy
-
     import demcal.measure.pipeline as pipeline
     import demcal.report.audit as audit_module
 
@@ -270,6 +270,45 @@ def test_dimensions_and_mass_match_the_workbook(campaign):
     # the paper's printed means stand beside ours
     assert _row(t1, "Length")["Paper"] == 25.0
     assert _row(t2, "Restitution coefficient, segment-segment")["Paper"] == 0.3
+
+
+def _soybean(measurement: dict) -> dict:
+    """The example's measurement as a workbook of soybean seeds modelled as spheres would give
+    it: callipers read the diameter only."""
+    m = copy.deepcopy(measurement)
+    m["material"] = "Soybean seeds"
+    m["shape"] = {"shape": "sphere", "diameter_m": 0.0066}
+    del m["quantities"]["length_mm"]
+    return m
+
+
+def test_tables_speak_of_the_workbooks_particle_and_show_the_paper_for_its_material_only(campaign):
+    c = load_campaign(campaign["out"])
+    soy = replace(c, measurement=_soybean(c.measurement))
+    t = {tb.id: tb.to_dict() for tb in build_tables(soy)}
+    t1, t2 = t["1"], t["2"]
+    for tb in (t1, t2):
+        words = [tb["title"], *tb["notes"], *(row[0] for row in tb["rows"])]
+        assert not [w for w in words if "segment" in w.lower()], tb["id"]
+    assert t1["title"] == "External dimensions of the particles"
+    assert [(row[0], row[1]) for row in t1["rows"]] == [("Diameter", "D")]
+    assert _column(t1, "Paper") == [None]
+    assert "Restitution coefficient, particle-particle" in [row[0] for row in t2["rows"]]
+    assert not {"Length", "Diameter"} & {row[0] for row in t2["rows"]}
+    # the paper's figures of Astragalus stand beside no other material; its steel plate's do
+    own = [r for r in t2["rows"] if "steel plate" not in r[0]]
+    assert {r[t2["columns"].index("Paper")] for r in own} == {None}
+    assert any("belong to its own material" in n for n in t1["notes"] + t2["notes"])
+    assert set(_column(t["3"], "Paper mean")) == {None}
+    assert set(_column(t["11"], "Paper calibrated")) | set(_column(t["11"], "Paper measured")) == {None}
+    assert set(_column(t["12"], "Paper")) == {None}
+    html = unescape(re.sub(r"<[^>]+>", " ", render_html(soy, list(t.values()), [])))
+    assert "The particles were measured one by one: diameter with callipers" in html
+    assert "paper's values beside ours" not in html
+    assert "particles measured with callipers" in abstract(soy)["text"] and abstract(soy)["paper"] == ""
+    # the example itself is the paper's material: its figures stand beside ours
+    assert _column(campaign["tables"]["1"], "Paper") == [25.0, 11.0]
+    assert campaign["tables"]["1"]["title"] == "External dimensions of the segments"
 
 
 def test_tables_name_their_sources_with_file_hashes(campaign):

@@ -179,3 +179,38 @@ def test_photo_labels_are_one_line_drawn_as_typed(tmp_path, monkeypatch):
     titles = [ax.title for ax in drawn[0].axes if ax.get_title()]
     assert [t.get_text() for t in titles] == [f"{label}: 33.00°\nleft 33.00°" for label in labels.values()]
     assert not any(t.get_parse_math() for t in titles)
+
+
+def test_particle_noun_and_labels_follow_the_workbooks_shape():
+    from demcal.report.tables import parameter_label, particle_noun, quantity_label
+
+    assert particle_noun({}) == particle_noun({"shape": {}}) == "segment"  # stored before shapes
+    assert particle_noun({"shape": {"shape": "segment", "length_m": 0.025}}, plural=True) == "segments"
+    assert particle_noun({"shape": {"shape": "kernel"}}, plural=True) == "kernels"
+    assert particle_noun({"shape": {"shape": "sphere"}}) == particle_noun({"shape": {"shape": "clump"}}) == "particle"
+    # the segment's wording is the one stored tables carry
+    assert parameter_label("e_pw", "steel") == ("Restitution coefficient, segment-steel", "e_pw")
+    assert quantity_label("static_friction.particle") == "Static friction coefficient, segment-segment"
+    assert parameter_label("mu_s_pp", "steel", "kernel")[0] == "Static friction coefficient, kernel-kernel"
+    assert quantity_label("restitution.particle-rubber", "particle") == "Restitution coefficient, particle-rubber"
+    assert quantity_label("mass_g", "kernel") == "Mass of one kernel"
+
+
+def test_table_1_has_a_row_per_calliper_quantity_of_the_shape():
+    from demcal.report.tables import Campaign, table_dimensions, table_physical
+
+    def size(value):
+        return {"n": 3, "value": value, "sd": 0.1, "ci95": [value - 0.2, value + 0.2], "unit": "mm",
+                "extra": {"min": value - 0.1, "max": value + 0.1}, "source": {"sheet": "specimens"},
+                "rows_used": [1, 2, 3]}
+
+    kernel = {"material": "Wheat kernels", "shape": {"shape": "kernel"},
+              "quantities": {"thickness_mm": size(2.8), "length_mm": size(6.2), "width_mm": size(3.3),
+                             "mass_g": {**size(0.04), "unit": "g"}}}
+    c = Campaign(measurement=kernel, results=None, paper={"material": "Astragalus membranaceus",
+                                                           "segment": {"length_mm": 25.0}})
+    t1 = table_dimensions(c)
+    assert t1.title == "External dimensions of the kernels"
+    assert [r[:2] for r in t1.rows] == [("Length", "L"), ("Width", "W"), ("Thickness", "T")]
+    assert [r[-1] for r in t1.rows] == [None, None, None]
+    assert [r[0] for r in table_physical(c).rows] == ["Mass of one kernel"]
