@@ -42,7 +42,7 @@ from demcal.errors import DemcalError, InputError
 from demcal.jsonio import read_json, to_jsonable
 from demcal.provenance import sha256_file
 from demcal.report.runs_csv import RUNS_CSV, read_runs_csv, run_list
-from demcal.report.tables import (PAPER_FILE, PAPER_NAME, RESULT_TABLE_IDS, Campaign, build_tables,
+from demcal.report.tables import (RESULT_TABLE_IDS, shipped_file, Campaign, build_tables,
                                   load_campaign, load_critique, load_paper, normalised, run_keys)
 
 #: Relative and absolute tolerance of a float cell.
@@ -260,7 +260,7 @@ def check_files(inputs: dict, out_dir: Path) -> list[FileCheck]:
     """Compare each recorded SHA-256 with the file's present one."""
     checks = []
     for name, stored in inputs.items():
-        p = PAPER_FILE if name == PAPER_NAME else Path(name)
+        p = shipped_file(name) or Path(name)
         if not p.is_absolute():
             p = out_dir / p
         if not p.is_file():

@@ -30,7 +30,8 @@ from demcal.provenance import sha256_file
 from demcal.report.figures import DPI, make_figures
 from demcal.report.runs_csv import RUNS_CSV, write_runs_csv
 from demcal.report.tables import (SIZES, Campaign, build_tables, load_campaign, load_paper, paper_material,
-                                  parameter_label, particle_noun, quantity_label, tables_document)
+                                  parameter_label, particle_noun, quantity_label, tables_document,
+                                  POWER_FILE, POWER_NAME)
 from demcal.text import one_line
 
 HERE = Path(__file__).resolve().parent
@@ -557,6 +558,7 @@ def input_hashes(c: Campaign, out_dir: Path) -> dict:
         inputs[c.paper_source["file"]] = c.paper_source["sha256"]
     if c.critique_source:
         inputs["critique.json"] = c.critique_source["sha256"]
+        inputs[POWER_NAME] = sha256_file(POWER_FILE)
     for key in c.runs:
         inputs[f"runs/{key}.json"] = sha256_file(out_dir / "runs" / f"{key}.json")
     return inputs

@@ -31,11 +31,21 @@ from demcal.errors import InputError
 from demcal.jsonio import read_json, to_jsonable
 from demcal.provenance import sha256_file
 
+#: Files that ship with demcal (``data/``), named in reports as ``demcal:data/<file>``: the same
+#: on every install, so that a report audits on another machine (:func:`shipped_file`).
+DATA_DIR = Path(__file__).resolve().parents[1] / "data"
+SHIPPED_PREFIX = "demcal:data/"
 #: The source paper's printed numbers (its text; its Tables 1-9 are not available).
-PAPER_FILE = Path(__file__).resolve().parents[1] / "data" / "paper_defaults.json"
-#: How reports name the paper's numbers: the same on every install, so that a report audits
-#: on another machine (``report.audit`` resolves it to PAPER_FILE).
-PAPER_NAME = "demcal:data/paper_defaults.json"
+PAPER_FILE = DATA_DIR / "paper_defaults.json"
+PAPER_NAME = SHIPPED_PREFIX + PAPER_FILE.name
+#: What the critique finds at a lab's sample size (benchmarks/critique_power.md, as numbers).
+POWER_FILE = DATA_DIR / "critique_power.json"
+POWER_NAME = SHIPPED_PREFIX + POWER_FILE.name
+
+
+def shipped_file(name: str) -> Path | None:
+    """The file a ``demcal:data/<file>`` name stands for on this install (None for another name)."""
+    return DATA_DIR / name[len(SHIPPED_PREFIX):] if name.startswith(SHIPPED_PREFIX) else None
 
 #: The paper's significance note, printed under both ANOVA tables.
 SIGNIFICANCE_NOTE = ("Note: 0.01<P<0.05, significant effect (*); P<0.01, highly significant "
@@ -1142,6 +1152,33 @@ def table_target_codes(c: Campaign) -> Table:
                  sources=({"kind": "critique", **c.critique_source, "path": "heap_gains"},))
 
 
+def table_critique_power(c: Campaign) -> Table:
+    """Table C8: how often the critique names each kind of planted effect, and a clean
+    workbook any cause, at a lab's usual sample size (``data/critique_power.json``, the numbers of
+    benchmarks/critique_power.md); the bounds are Clopper-Pearson, computed here."""
+    from scipy import stats
+
+    doc = read_json(POWER_FILE)
+    rows = []
+    for r in doc["power"]:
+        n, k = r["workbooks"], r["found"]
+        lower = float(stats.beta.ppf(0.05, k, n - k + 1)) if k else 0.0
+        rows.append((r["kind"], "planted", n, k, lower, None, r["inconclusive"], r["ruled_out"]))
+    for r in doc["false_alarms"]:
+        n, k = r["workbooks"], r["naming_any_cause"]
+        upper = float(stats.beta.ppf(0.95, k + 1, n - k)) if k < n else 1.0
+        rows.append((r["design"], "clean", n, k, None, upper, None, None))
+    return Table("C8", "What the critique finds at a lab's usual sample size (virtual-lab workbooks)",
+                 ("Effect or design", "Workbooks", "n", "Found / naming a cause", "Lower 95 % bound",
+                  "Upper 95 % bound", "Inconclusive", "Ruled out"), ("",) * 8, tuple(rows),
+                 notes=(doc["source"] + ".", f"Bounds: {doc['bound']}, from the counts. A planted effect "
+                        "should be found with at least 80 % power; a clean workbook should name a cause at "
+                        "most 5 % of the time."),
+                 sources=({"kind": "reference", "file": POWER_NAME, "sha256": sha256_file(POWER_FILE),
+                           "path": "power, false_alarms"},),
+                 formats=("", "", "d", "d", ".3f", ".3f", "d", "d"))
+
+
 def critique_tables(c: Campaign) -> list[Table]:
     """Tables C1-C7 of the critique: model discrepancies, data effects, the causes of the
     discrepancies, extensions, covariate tests, the extensions' heap-side gains and what the
@@ -1157,7 +1194,8 @@ def critique_tables(c: Campaign) -> list[Table]:
                           cr.model_findings, MODEL_FINDING_COLUMNS, ("evidence",), src, "model_findings"),
             _record_table("C3", "Model extensions and their gain on held-out trials", cr.extensions,
                           EXTENSION_COLUMNS, ("held_out", "fitted", "note"), src, "extension_records"),
-            table_covariate_tests(c), table_heap_parameters(c), table_heap_observables(c), table_target_codes(c)]
+            table_covariate_tests(c), table_heap_parameters(c), table_heap_observables(c), table_target_codes(c),
+            table_critique_power(c)]
 
 
 # ----------------------------------------------------------------------------------------------

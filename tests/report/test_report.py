@@ -839,7 +839,7 @@ def test_table_c7_says_which_target_codes_can_run_each_accepted_extension(critiq
 def test_audit_rederives_the_critique_tables(critique_report, capsys, tmp_path):
     code, text = _audit(capsys, critique_report["out"])
     assert code == 0, text
-    for tid in ("C1", "C2", "C3", "C4", "C7"):
+    for tid in ("C1", "C2", "C3", "C4", "C7", "C8"):
         assert re.search(rf"^Table {tid} \(.*\): OK$", text, re.M), tid
     # a changed C4 cell is named
     out = tmp_path / "copy"
@@ -986,3 +986,24 @@ def test_line_breaks_in_workbook_text_leave_the_report_one_line(campaign):
     parsed = _Text()
     parsed.feed(render_html(replace(c, measurement=measurement), list(campaign["tables"].values()), []))
     assert parsed.title == "Calibration of DEM parameters of Astragalus membranaceus <b> {{ x }}"
+
+
+def test_table_c8_states_the_benchmarked_power_and_false_alarms_with_their_bounds(critique_report):
+    """Table C8's counts are those of benchmarks/critique_power.md, and its Clopper-Pearson bounds,
+    computed from the counts, round to the bounds printed there."""
+    root = Path(__file__).resolve().parents[2]
+    printed = {}
+    for line in (root / "benchmarks" / "critique_power.md").read_text().splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) in (4, 6) and cells[1].isdigit():
+            printed[cells[0]] = (int(cells[1]), int(cells[2]), float(cells[3]))
+    c8 = critique_report["tables"]["C8"]
+    rows = {r[0]: r for r in c8["rows"]}
+    assert set(rows) == set(printed)
+    for name, (n, k, bound) in printed.items():
+        r = rows[name]
+        assert (r[2], r[3]) == (n, k)
+        assert round(r[4] if r[1] == "planted" else r[5], 3) == pytest.approx(bound, abs=1e-3), name
+    assert all(r[4] >= 0.8 for r in c8["rows"] if r[1] == "planted")
+    assert all(r[5] <= 0.05 for r in c8["rows"] if r[1] == "clean")
+    assert c8["sources"][0]["file"] == "demcal:data/critique_power.json"
