@@ -52,7 +52,7 @@ from demcal.analyse.noise import pooled_noise, replicates_for, seed_correlation
 from demcal.analyse.results import Calibration, HeapOnly, ParameterEstimate, Point, Validation
 from demcal.analyse.surrogate import (IMPLAUSIBILITY_CUT, U_STOP, NoisySurrogate, Prior, next_points,
                                posterior, recommend, recommend_among, space_filling)
-from demcal.errors import AnalysisError, InputError
+from demcal.errors import AnalysisError
 
 #: Stage numbers of the seed streams (never reorder: they define which seeds a campaign uses).
 SEED_STREAMS = {"noise": 1, "design": 2, "sequential": 3, "validation": 4, "surrogate": 5, "refine": 6}
@@ -291,7 +291,6 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
     # what is kept for plots and the audit
     keep = np.random.default_rng(np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 2]))
     draws = keep.choice(post.weights.size, size=KEPT_SAMPLES, p=post.weights)
-    groups = [p["responses"] for p in design]
     design_pooled = pooled_noise([p["responses"] for p in design if p["stage"] != "noise"]) \
         if sum(p["stage"] != "noise" for p in design) else None
     noise = {"centre": centre_noise.to_dict(), "design": design_pooled.to_dict() if design_pooled else None,

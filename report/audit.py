@@ -42,8 +42,8 @@ from demcal.errors import DemcalError, InputError
 from demcal.jsonio import read_json, to_jsonable
 from demcal.provenance import sha256_file
 from demcal.report.runs_csv import RUNS_CSV, read_runs_csv, run_list
-from demcal.report.tables import (RESULT_TABLE_IDS, shipped_file, Campaign, build_tables,
-                                  load_campaign, load_critique, load_paper, normalised, run_keys)
+from demcal.report.tables import (RESULT_TABLE_IDS, Campaign, build_tables, load_critique, load_paper,
+                                  normalised, run_keys, shipped_file)
 
 #: Relative and absolute tolerance of a float cell.
 REL_TOL = 1e-9
