@@ -109,14 +109,6 @@ ORIENTATION_STEP_DEG = 10.0
 
 PHOTO_MODES = ("analytic", "dem", "none")
 
-#: Shapes whose static friction the lab measures with a sled of glued particles (they roll first).
-SLED_SHAPES = ("sphere",)
-
-#: Shapes whose radial compression curve the measure stage reads as an elastic modulus (a
-#: contact strip of the specimen's width and length); a sphere or clump is compressed for its
-#: Poisson's ratio only (the widths and thicknesses, no curve), and its shear modulus is the meta's.
-COMPRESSED_SHAPES = ("segment", "kernel")
-
 
 @dataclass(frozen=True)
 class Truth:
@@ -664,7 +656,7 @@ def _inclines(truth: Truth, rng, effects, specimens, *, surfaces, n_incline, tri
                                          trials_per_specimen=trials_per_specimen))
             rows["surface"], rows["mode"] = surface, mode
             # a round particle rolls first: its lab slides a sled of glued particles
-            rows["carrier"] = "sled" if mode == "slide" and truth.params.shape.name in SLED_SHAPES else "particle"
+            rows["carrier"] = "sled" if mode == "slide" and truth.params.shape.rolls_first else "particle"
             rows = _join_specimens(rows, specimens, size)
             contrib = _contributions(effects, "incline", quantity, rows, truth, spec_mean)
             block = {k: c for k, c in contrib.items() if effects[k].kind == "block_effect"}
@@ -706,7 +698,8 @@ def _compression(truth: Truth, rng, specimens, n: int, root: Path) -> pd.DataFra
         eps_t = 0.30 * (0.55 + 0.1 * rng.random())
         length = float(spec.get("length_mm", spec.get("diameter_mm")))
         k = E * (w0 * 1e-3) * (length * 1e-3) / (t0 * 1e-3)
-        name = f"curves/C{i + 1:02d}.csv" if p.shape.name in COMPRESSED_SHAPES else None
+        # a curve (and so an elastic modulus) only where measure's strip contact applies
+        name = f"curves/C{i + 1:02d}.csv" if p.shape.strip_contact else None
         if name is not None:
             force_curve(rng, k, 0.30 * t0).to_csv(root / name, index=False)
         rows.append({"specimen_id": spec["specimen_id"], "axis": "radial",

@@ -87,7 +87,7 @@ def true_quantities(truth, design: dict, effects=()) -> dict:
         apparent one, sqrt(h2/h1), what the drops measure.
     """
     from demcal.simulate.shapes.segment import Segment
-    from demcal.simulate.virtual_lab import COMPRESSED_SHAPES, size_columns
+    from demcal.simulate.virtual_lab import size_columns
 
     p = truth.params
     shape = p.shape
@@ -111,7 +111,7 @@ def true_quantities(truth, design: dict, effects=()) -> dict:
         out[f"rolling_friction.{surface}"] = (truth.friction(surface, "roll"), "1")
     if design["n_compression"]:
         out["poisson_ratio"] = (p.poisson_ratio, "1")
-    if design["n_compression"] and shape.name in COMPRESSED_SHAPES:
+    if design["n_compression"] and shape.strip_contact:
         out["elastic_modulus_pa"] = (youngs_modulus(p.shear_modulus_pa, p.poisson_ratio), "Pa")
         out["shear_modulus_pa"] = (p.shear_modulus_pa, "Pa")
     if design["photos"] == "analytic" and design["n_photos"]:

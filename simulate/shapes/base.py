@@ -45,12 +45,20 @@ class Shape:
         :meth:`scaled_to` changes.
     body : str
         The body the spheres stand for, in words (the envelope density's method).
+    rolls_first : bool
+        On an incline it rolls before it slides whatever its friction (a sphere): labs measure
+        its sliding friction with a sled of glued particles.
+    strip_contact : bool
+        Compressed radially between plates it touches them along a strip of its width and
+        length, the contact the measure stage's elastic modulus assumes.
     """
 
     name: ClassVar[str] = ""
     specimen_columns: ClassVar[tuple] = ()
     sizes: ClassVar[tuple] = ()
     body: ClassVar[str] = ""
+    rolls_first: ClassVar[bool] = False
+    strip_contact: ClassVar[bool] = False
 
     def __post_init__(self):
         for name in self.sizes:

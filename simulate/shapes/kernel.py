@@ -43,6 +43,7 @@ class Kernel(Shape):
     specimen_columns: ClassVar[tuple] = (("length_mm", "width_mm", "thickness_mm"),)
     sizes: ClassVar[tuple] = ("length_m", "width_m", "thickness_m")
     body: ClassVar[str] = "an ellipsoid of the three calliper axes, pi L W T / 6"
+    strip_contact: ClassVar[bool] = True
 
     length_m: float
     width_m: float

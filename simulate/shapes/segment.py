@@ -27,6 +27,7 @@ class Segment(Shape):
     specimen_columns: ClassVar[tuple] = (("length_mm", "diameter_mm"),)
     sizes: ClassVar[tuple] = ("length_m", "diameter_m")
     body: ClassVar[str] = "a cylinder of the calliper length and diameter, pi d^2 L / 4"
+    strip_contact: ClassVar[bool] = True
 
     length_m: float
     diameter_m: float

@@ -26,6 +26,7 @@ class Sphere(Shape):
     specimen_columns: ClassVar[tuple] = (("diameter_mm",), ("length_mm", "width_mm", "thickness_mm"))
     sizes: ClassVar[tuple] = ("diameter_m",)
     body: ClassVar[str] = "a sphere of the diameter, pi d^3 / 6"
+    rolls_first: ClassVar[bool] = True
 
     diameter_m: float
 
