@@ -407,7 +407,7 @@ YADE_DROP = """\
 import json, math
 exec(open("yade_materials.py").read())
 O.bodies.append(box(center=(0, 0, -0.01), extents=(0.1, 0.1, 0.01), fixed=True, material=steel))
-segment_id = add_segment(Vector3(0, 0, {z0!r}), Quaternion((0, 1, 0), math.pi / 2))   # long axis vertical
+segment_id = add_particle(Vector3(0, 0, {z0!r}), Quaternion((0, 1, 0), math.pi / 2))   # long axis vertical
 O.bodies[segment_id].state.vel = Vector3(0, 0, {vz!r})
 O.dt = 1e-6
 rows = []
