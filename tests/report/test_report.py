@@ -418,7 +418,7 @@ def test_audit_finds_the_papers_numbers_on_any_install(campaign, capsys, tmp_pat
     moved = tmp_path / "elsewhere" / "paper_defaults.json"
     moved.parent.mkdir()
     moved.write_text(PAPER_FILE.read_text().replace("35.79", "35.80"))
-    monkeypatch.setattr("demcal.report.audit.PAPER_FILE", moved)
+    monkeypatch.setattr("demcal.report.tables.DATA_DIR", moved.parent)     # where the package's data are
     code, text = _audit(capsys, campaign["out"])
     assert code == 1
     assert f"CHANGED  {PAPER_NAME}: SHA-256 recorded {sha256_file(PAPER_FILE)}" in text
@@ -993,7 +993,7 @@ def test_table_c8_states_the_benchmarked_power_and_false_alarms_with_their_bound
     computed from the counts, round to the bounds printed there."""
     root = Path(__file__).resolve().parents[2]
     printed = {}
-    for line in (root / "benchmarks" / "critique_power.md").read_text().splitlines():
+    for line in (root / "benchmarks/critique_power.md").read_text().splitlines():
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
         if len(cells) in (4, 6) and cells[1].isdigit():
             printed[cells[0]] = (int(cells[1]), int(cells[2]), float(cells[3]))
