@@ -227,13 +227,18 @@ def _segment_of(quantities: dict) -> dict:
     return {}
 
 
+#: Grid lines of the union's mass in the particle note (relative error about 3e-5).
+NOTE_RESOLUTION = 200
+
+
 def shape_note(shape, quantities: dict) -> str | None:
     """The mass of the shape's sphere model (union) and of its body at the measured particle
     density against the balance's mean mass, as a sentence; None without both."""
     rho, mass = quantities.get("particle_density_kg_m3"), quantities.get("mass_g")
     if shape is None or rho is None or mass is None:
         return None
-    union = shape.template(rho.value).mass * 1e3
+    # a coarse grid: 4 digits in 0.02 s (the DEM's 600 lines take 0.3 s, on every workbook measured)
+    union = shape.template(rho.value, resolution=NOTE_RESOLUTION).mass * 1e3
     body = rho.value * shape.volume() * 1e3
     return (f"particle model: {shape.describe()}; at the measured particle density "
             f"({rho.value:.4g} kg/m^3) its spheres weigh {union:.4g} g and its body ({type(shape).body}) "

@@ -121,13 +121,13 @@ class Shape:
         return (c + r[:, None]).max(axis=0) - (c - r[:, None]).min(axis=0)
 
     def template(self, density: float, mass_model: str = "union", mean_mass: float | None = None,
-                 name: str | None = None) -> ClumpTemplate:
-        """The DEM's clump of this shape (``simulate.clump.make_template``'s mass models; the
-        ``body`` model takes :meth:`body_mass_properties`)."""
+                 name: str | None = None, resolution: int = 600) -> ClumpTemplate:
+        """The DEM's clump of this shape (``simulate.clump.make_template``'s mass models and
+        grid ``resolution``; the ``body`` model takes :meth:`body_mass_properties`)."""
         centres, radii = self.spheres()
         body = self.body_mass_properties(density) if mass_model == "body" else None
         return make_template(centres, radii, density, name=name or self.name, mass_model=mass_model,
-                             mean_mass=mean_mass, body=body, cylinder=self._cylinder())
+                             mean_mass=mean_mass, body=body, cylinder=self._cylinder(), resolution=resolution)
 
     def _cylinder(self):
         """(length, diameter) of the cylinder of the ``cylinder`` mass model (a segment's)."""
