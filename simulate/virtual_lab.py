@@ -709,7 +709,13 @@ def _compression(truth: Truth, rng, specimens, n: int, root: Path) -> pd.DataFra
     return pd.DataFrame(rows)
 
 
-def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base: int, geometry=None):
+#: The analytic heap photos' default resolution [px] and scale [px/m].
+PHOTO_SIZE = (900, 1200)
+PHOTO_PX_PER_M = 2500.0
+
+
+def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base: int, geometry=None,
+            size=PHOTO_SIZE):
     import cv2
 
     from demcal.simulate.render import Lighting, heap_photo, heap_profile
@@ -744,8 +750,10 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
             x, z = heap_profile(angle + flank, angle - flank, height_m=0.10, floor_m=0.04,
                                 roughness_m=0.002, rng=rng)
             side = "both"
+            # the same field of view at any resolution: the heap spans the same share of the frame
             img = heap_photo(x, z, rng=rng, camera_roll_deg=float(np.clip(roll, -15, 15)), light=light,
-                             noise_sd=4.0, blur_px=1.0, jpeg_quality=int(rng.integers(75, 93)))
+                             noise_sd=4.0, blur_px=1.0, jpeg_quality=int(rng.integers(75, 93)),
+                             size=size, px_per_m=PHOTO_PX_PER_M * size[1] / PHOTO_SIZE[1])
         else:
             img, side = _dem_heap_photo(truth, rng, roll, light, seeds, discarded, geometry)
         name = f"photos/heap_{i + 1}.jpg"
@@ -860,7 +868,7 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
                            surfaces=("particle", "steel"), n_incline: int = 30,
                            n_compression: int = 10, n_photos: int = 4,
                            cache_dir=None, geometry=None, trials_per_specimen: int | None = None,
-                           interleaved: bool = False) -> VirtualWorkbook:
+                           interleaved: bool = False, photo_size=PHOTO_SIZE) -> VirtualWorkbook:
     """Write a complete lab workbook from ``truth``, with ``effects`` planted.
 
     Parameters
@@ -905,6 +913,9 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
     interleaved : bool
         Drops of every pair in one random order (``trial_order`` runs over the whole sheet, and
         a planted drift with it); default each pair's drops in a session of its own.
+    photo_size : (int, int)
+        Height and width of the analytic heap photos [px], the same field of view at any size
+        (default 900 x 1200, 2.5 px/mm).
 
     Returns
     -------
@@ -923,6 +934,9 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
                  n_incline=n_incline, n_compression=n_compression, n_photos=n_photos, n_tracks=n_tracks,
                  trials_per_specimen=trials_per_specimen, orientation_range_deg=orientation_range_deg,
                  drop_heights_mm=drop_heights_mm)
+    if (len(photo_size) != 2 or not all(isinstance(v, (int, np.integer)) for v in photo_size)
+            or min(photo_size) < 120):
+        raise InputError(f"photo_size must be (height, width) in whole pixels, each >= 120, got {photo_size!r}")
     lo, hi = (float(v) for v in orientation_range_deg)
 
     stated_geometry = geometry
@@ -957,7 +971,7 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
     if photos != "none" and n_photos:
         sheets["repose"], exp, discarded_heaps = _photos(truth, rng, effects, n_photos, root, photos,
                                                          seed_base=int(rng.integers(0, 2**31)),
-                                                         geometry=geometry)
+                                                         geometry=geometry, size=photo_size)
         expected += exp
     for e in effects:
         if e.sheet not in sheets or not any(x["kind"] == e.kind for x in expected):
