@@ -3,6 +3,7 @@
     python -m benchmarks.repose_vs_liggghts                      # 5 seeds each, 10 s (the paper's)
     python -m benchmarks.repose_vs_liggghts --seeds 1 --duration 1.5   # a quick end-to-end check
     python -m benchmarks.repose_vs_liggghts --skip-liggghts      # demcal only
+    python -m benchmarks.repose_vs_liggghts --truth data/soybean/truth.yaml   # another material
 
 What it measures, on one core each and sequentially (never both codes at once):
 
@@ -21,6 +22,12 @@ The case is the LIGGGHTS deck's (``benchmarks.liggghts.deck.ReposeCase``): 500 f
 segments, carton 200 x 100 x 250 mm, plate lifted at 0.1 m/s from 4 s, 10 s at
 7.43678e-5 s, the paper's calibrated contact parameters. demcal runs it with LIGGGHTS'
 conventions: rolling friction lever ``liggghts_reff`` and the cylinder mass model.
+
+With ``--truth FILE`` (a ``demcal virtual-lab`` truth file) the case is that material's: its
+parameters and shape, the paper's carton in proportion to the particle
+(``ReposeGeometry.for_particle``), the same fill, lift and duration. demcal then runs with its
+own conventions and LIGGGHTS with the particle, materials and contact model of demcal's
+LIGGGHTS export (``ReposeCase.for_params``), so the comparison covers the export too.
 
 Outputs: ``benchmarks/results/repose_vs_liggghts_<UTC time>.json`` (every run, the summary,
 machine, versions) and one row appended to ``benchmarks/RESULTS.md``.
@@ -77,6 +84,7 @@ def benchmark_parameters(case=None):
     """``DEMParameters`` of the LIGGGHTS deck's case, with LIGGGHTS' lever and mass model."""
     from benchmarks.liggghts.deck import ReposeCase
     from demcal.simulate.params import DEMParameters
+    from demcal.simulate.shapes.segment import Segment
 
     c = case or ReposeCase()
     return DEMParameters(
@@ -129,14 +137,15 @@ def warm_up(params) -> None:
     build_paper_repose_case(params, seed=0, n_clumps=5).run(n_steps=2)
 
 
-def run_demcal(seed: int, duration: float, params) -> dict:
-    """The paper case by demcal's repose rig (``paper`` profile, ``duration`` simulated)."""
+def run_demcal(seed: int, duration: float, params, geometry=None) -> dict:
+    """The case by demcal's repose rig (``paper`` profile, ``duration`` simulated; the paper's
+    carton unless ``geometry``)."""
     from demcal.simulate.rigs import run_rig
     from demcal.simulate.rigs.repose import PROFILES
 
     profile = dataclasses.replace(PROFILES["paper"], duration=float(duration))
     t0 = time.perf_counter()
-    res = run_rig("repose", params, seed, profile=profile)
+    res = run_rig("repose", params, seed, profile=profile, geometry=geometry)
     meta = res.meta
     sphere_steps = meta["spheres"] * meta["steps"]          # LIGGGHTS' convention: final spheres
     return {"code": "demcal", "seed": seed, "wall_s": meta["wall_s"], "elapsed_s": time.perf_counter() - t0,
@@ -148,12 +157,12 @@ def run_demcal(seed: int, duration: float, params) -> dict:
             "escaped": res.observable["escaped"], "notes": meta["notes"]}
 
 
-def run_reference(seed: int, duration: float, workdir: Path) -> dict:
+def run_reference(seed: int, duration: float, workdir: Path, case=None) -> dict:
     """The same case by LIGGGHTS on one core; its final spheres measured by ``heap_angles``."""
     from benchmarks.liggghts.run import heap_summary, run_liggghts
     from demcal.simulate.rigs.repose import heap_angles
 
-    res = run_liggghts(seed, workdir / f"seed{seed}", duration=duration, nice=0)
+    res = run_liggghts(seed, workdir / f"seed{seed}", duration=duration, case=case, nice=0)
     heap = heap_angles(res["positions"], res["radii"], res["deck"]["case"]["box_length"])
     summary = heap_summary(res)
     return {"code": "liggghts", "seed": seed, "wall_s": res["wall_s"], "cpu_s": res["cpu_s"],
@@ -196,7 +205,8 @@ def results_row(doc: dict) -> str:
     cells = [doc["date"], f"{m['cpu']}, {m['cores']} cores",
              f"demcal {v['demcal']} ({(v['git_sha'] or '?')[:12]}), numba {v['numba']}"
              + (f", LIGGGHTS {lig_version}" if lig_version else ""),
-             f"{doc['duration']:g}", str(doc["seeds"]), f"{d['sphere_steps_per_s']:.3g}",
+             f"{doc['duration']:g}" + (f", {doc['material']['truth']}" if doc.get("material") else ""),
+             str(doc["seeds"]), f"{d['sphere_steps_per_s']:.3g}",
              f"{lg['sphere_steps_per_s']:.3g}" if lg else "skipped",
              f"{ratio:.2f}" if ratio else "-",
              " / ".join(f"{t:.1f}" for t in doc["startup_s"]),
@@ -212,6 +222,8 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, default=5, help="seeds per code (default 5)")
     parser.add_argument("--duration", type=float, default=10.0, help="simulated time [s] (default 10)")
     parser.add_argument("--skip-liggghts", action="store_true", help="run demcal only")
+    parser.add_argument("--truth", type=Path, help="a virtual-lab truth file: that material's case instead "
+                                                   "of the paper's (LIGGGHTS from demcal's export)")
     parser.add_argument("--results", type=Path, default=HERE / "results", help="folder of the JSON output")
     parser.add_argument("--results-md", type=Path, default=HERE / "RESULTS.md", help="table the row is appended to")
     args = parser.parse_args(argv)
@@ -232,12 +244,30 @@ def main(argv=None) -> int:
     print(f"demcal start-up to the first step: {doc['startup_s'][0]:.1f} s compiling the kernels, "
           f"{doc['startup_s'][1]:.1f} s loading them from numba's cache", flush=True)
 
-    params = benchmark_parameters()
+    geometry = case = None
+    if args.truth is not None:
+        from benchmarks.liggghts.deck import ReposeCase
+        from demcal.simulate.rigs.repose import ReposeGeometry
+        from demcal.simulate.truth_file import read_truth_file
+
+        try:
+            params = read_truth_file(args.truth).truth.params
+        except DemcalError as exc:
+            parser.error(str(exc))
+        geometry = ReposeGeometry.for_particle(params.shape)
+        case = ReposeCase.for_params(params, geometry)
+        doc["material"] = {"truth": str(args.truth), "shape": params.shape.describe(),
+                           "geometry": geometry.to_dict()}
+        print(f"material: {params.shape.describe()}; {geometry.fill_count} particles in a "
+              f"{geometry.box_length * 1e3:.0f} x {geometry.box_width * 1e3:.0f} x "
+              f"{geometry.box_height * 1e3:.0f} mm carton", flush=True)
+    else:
+        params = benchmark_parameters()
     doc["params"] = params.to_dict()
     warm_up(params)
     seeds = list(range(1, args.seeds + 1))
     for seed in seeds:
-        r = run_demcal(seed, args.duration, params)
+        r = run_demcal(seed, args.duration, params, geometry)
         doc["runs"].append(r)
         print(f"demcal   seed {seed}: {r['wall_s']:.1f} s, {r['sphere_steps_per_s']:.3g} sphere-steps/s, "
               f"angle {r['angle_deg']:.1f} deg (profile {r['angle_profile_deg']:.1f}, outside "
@@ -249,7 +279,7 @@ def main(argv=None) -> int:
         workdir = args.results / "tmp" / "liggghts"
         for seed in seeds:
             try:
-                r = run_reference(seed, args.duration, workdir)
+                r = run_reference(seed, args.duration, workdir, case)
             except LiggghtsUnavailable as exc:
                 skipped = str(exc)
                 print(f"LIGGGHTS skipped: {exc}", flush=True)

@@ -79,6 +79,9 @@ TARGET_NAMES = {"liggghts": "LIGGGHTS", "yade": "Yade", "edem": "EDEM"}
 
 #: LIGGGHTS refuses a Young's modulus above this without ``hard_particles yes`` [Pa].
 LIGGGHTS_SOFT_LIMIT_PA = 1e9
+#: LIGGGHTS refuses a Young's modulus below this in SI units unless told ``soft_particles yes``
+#: (src/global_properties.cpp): a seed of shear modulus 1 MPa is below it.
+LIGGGHTS_HARD_LIMIT_PA = 5e6
 
 #: Points per sphere of the surface sample that averages a clump's rolling lever.
 LEVER_SAMPLE = 4000
@@ -392,6 +395,8 @@ def liggghts_fragment(model: ExportModel, seed: int = 0) -> str:
     out += [""]
     if max(e_p, e_s) > LIGGGHTS_SOFT_LIMIT_PA:
         out.append(f"hard_particles yes  # E up to {_g(max(e_p, e_s))} Pa exceeds LIGGGHTS' default limit of 1e9 Pa")
+    if min(e_p, e_s) < LIGGGHTS_HARD_LIMIT_PA:
+        out.append(f"soft_particles yes  # E down to {_g(min(e_p, e_s))} Pa is below LIGGGHTS' default limit of 5e6 Pa")
     out += [
         f"fix m1 all property/global youngsModulus peratomtype {_g(e_p)} {_g(e_s)}",
         f"fix m2 all property/global poissonsRatio peratomtype {_g(p.poisson_ratio)} {_g(p.wall_poisson_ratio)}",

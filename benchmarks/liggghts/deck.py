@@ -40,7 +40,7 @@ References
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -59,6 +59,8 @@ MESH_NAMES = ("back", "side_y0", "side_y1", "plate")
 #: Columns of the final positions file (``write_dump ... custom``) and their format: the
 #: LIGGGHTS default of 6 significant digits would round positions to 1e-6 m.
 POSITION_COLUMNS = ("id", "mol", "x", "y", "z", "radius")
+#: The same for single spheres: ``mol`` exists with fix multisphere only; a sphere is its own body.
+SPHERE_POSITION_COLUMNS = ("id", "id", "x", "y", "z", "radius")
 POSITION_FORMAT = '"%d %d %.10g %.10g %.10g %.10g"'
 
 
@@ -139,6 +141,10 @@ class ReposeCase:
         Time between two thermo lines in the log [s].
     ntry : int
         Monte Carlo samples LIGGGHTS uses for the clump volume and centre of mass.
+    particle : simulate.export.ExportModel, optional
+        Any other material (:meth:`for_params`): its materials, contact model and particle
+        template are demcal's own LIGGGHTS export (``simulate.export.liggghts_fragment``),
+        and the segment and contact fields above only describe it; None: the paper's segment.
     """
 
     box_length: float = 0.200
@@ -171,6 +177,39 @@ class ReposeCase:
     gravity: float = GRAVITY
     thermo_interval: float = 0.1
     ntry: int = 1_000_000
+    particle: object = field(default=None, compare=False, repr=False)
+
+    @classmethod
+    def for_params(cls, params, geometry=None) -> "ReposeCase":
+        """The repose case of any parameter set (``DEMParameters``, any shape): the carton of
+        ``geometry`` (``simulate.rigs.repose.ReposeGeometry``; default the paper's carton in
+        proportion to the particle, ``ReposeGeometry.for_particle``), filled over the paper's
+        share of it (x 5-95 %, y 10-90 %, z 40-96 %), the neighbour skin half the largest
+        sphere radius, the parameters' time step, and the particle as demcal exports it."""
+        from demcal.simulate.export import export_model
+        from demcal.simulate.rigs.repose import ReposeGeometry
+        from demcal.simulate.timestep import material_time_step
+
+        g = ReposeGeometry.for_particle(params.shape) if geometry is None else geometry
+        model = export_model(params, material=params.shape.name)
+        radius = float(np.max(model.template.radii))
+        L, W, H = g.box_length, g.box_width, g.box_height
+        dt = params.dt if params.dt is not None else material_time_step(params)
+        return cls(box_length=L, box_width=W, box_height=H, plate_lift_speed=g.lift_speed,
+                   n_segments=g.fill_count, sphere_radius=radius,
+                   sphere_offsets=tuple(float(np.linalg.norm(o)) for o in model.template.offsets),
+                   segment_diameter=2.0 * radius, segment_length=2.0 * model.template.bounding_radius,
+                   particle_density=params.particle_density_kg_m3, particle_shear_modulus=params.shear_modulus_pa,
+                   particle_poisson=params.poisson_ratio, steel_shear_modulus=params.wall_shear_modulus_pa,
+                   steel_poisson=params.wall_poisson_ratio, restitution_pp=params.e_pp, restitution_ps=params.e_pw,
+                   friction_pp=params.mu_s_pp, friction_ps=params.mu_s_pw, rolling_pp=params.mu_r_pp,
+                   rolling_ps=params.mu_r_pw, time_step=float(dt),
+                   fill_region=(0.05 * L, 0.95 * L, 0.1 * W, 0.9 * W, 0.4 * H, 0.96 * H),
+                   skin=radius / 2.0, particle=model)
+
+    @property
+    def spheres_per_particle(self) -> int:
+        return len(self.sphere_offsets)
 
     def __post_init__(self):
         positive = ("box_length", "box_width", "box_height", "plate_lift_speed",
@@ -233,6 +272,8 @@ class ReposeCase:
     @property
     def clump_half_length(self) -> float:
         """Distance from the clump centre to its farthest surface point [m]."""
+        if self.particle is not None:
+            return float(self.particle.template.bounding_radius)
         return max(abs(o) for o in self.sphere_offsets) + self.sphere_radius
 
     @property
@@ -263,7 +304,12 @@ class ReposeCase:
         return tuple((label, n) for label, n in phases if n > 0)
 
     def to_dict(self) -> dict:
-        d = asdict(self)
+        d = asdict(replace(self, particle=None))
+        if self.particle is not None:   # its contact fields are the export's inputs
+            d["particle"] = {"shape": self.particle.params.shape.to_dict(),
+                             "spheres": self.particle.spheres().tolist(), "mass": self.particle.template.mass,
+                             "mass_model": self.particle.template.mass_model,
+                             "rolling_lever": self.particle.params.rolling_lever}
         d.update(particle_youngs_modulus=self.particle_youngs_modulus,
                  steel_youngs_modulus=self.steel_youngs_modulus,
                  segment_mass=self.segment_mass, segment_inertia=self.segment_inertia,
@@ -329,6 +375,41 @@ def _g(x: float) -> str:
     return f"{x:.9g}"
 
 
+def _segment_lines(case: ReposeCase, p_template: int, p_distribution: int) -> list:
+    """Materials, contact model and template of the paper's segment, written by hand: a
+    5-sphere clump with the mass and inertia of an 11 x 25 mm cylinder."""
+    E_p, E_s = case.particle_youngs_modulus, case.steel_youngs_modulus
+    i_ax, i_tr, _ = case.segment_inertia
+    spheres = " ".join(f"{_g(o)} 0 0 {_g(case.sphere_radius)}" for o in case.sphere_offsets)
+
+    def pair(pp, ps):  # 2 x 2 type-pair matrix; type 1 = segment, type 2 = steel
+        return f"{_g(pp)} {_g(ps)} {_g(ps)} {_g(ps)}"
+
+    return [
+        "hard_particles  yes  # steel E = 2.08e11 Pa exceeds the SI default cap of 1e9 Pa",
+        "",
+        "# materials: type 1 = segment, type 2 = steel (floor and carton)",
+        f"fix m1 all property/global youngsModulus peratomtype {_g(E_p)} {_g(E_s)}",
+        f"fix m2 all property/global poissonsRatio peratomtype {_g(case.particle_poisson)} {_g(case.steel_poisson)}",
+        f"fix m3 all property/global coefficientRestitution peratomtypepair 2 {pair(case.restitution_pp, case.restitution_ps)}",
+        f"fix m4 all property/global coefficientFriction peratomtypepair 2 {pair(case.friction_pp, case.friction_ps)}",
+        f"fix m5 all property/global coefficientRollingFriction peratomtypepair 2 {pair(case.rolling_pp, case.rolling_ps)}",
+        "",
+        'variable demcal_model string "model hertz tangential history rolling_friction cdt"',
+        "pair_style      gran model hertz tangential history rolling_friction cdt",
+        "pair_coeff      * *",
+        "",
+        "# segment: 5-sphere clump with the mass and inertia of an 11 x 25 mm cylinder",
+        f"fix pts all particletemplate/multisphere {p_template} atom_type 1 "
+        f"density constant {_g(case.particle_density)} nspheres {len(case.sphere_offsets)} "
+        f"ntry {case.ntry} spheres {spheres} type 1 mass {_g(case.segment_mass)} "
+        f"inertia_tensor {_g(i_ax)} 0 0 {_g(i_tr)} 0 {_g(i_tr)} use_volume",
+        f"fix pdd all particledistribution/discrete {p_distribution} 1 pts 1.0",
+        "fix ms all multisphere",
+        "",
+    ]
+
+
 def render_script(case: ReposeCase, seed: int, duration: float = 10.0,
                   positions_file: str = POSITIONS_NAME, dump_interval: float | None = None) -> str:
     """The LIGGGHTS input script for ``case`` (meshes are read from the run folder).
@@ -350,18 +431,12 @@ def render_script(case: ReposeCase, seed: int, duration: float = 10.0,
     if not (math.isfinite(duration) and duration > 0):
         raise InputError(f"duration must be a positive number of seconds, got {duration!r}")
     p_template, p_distribution, p_insert = liggghts_seeds(seed)
-    E_p, E_s = case.particle_youngs_modulus, case.steel_youngs_modulus
-    nu_p, nu_s = case.particle_poisson, case.steel_poisson
-    i_ax, i_tr, _ = case.segment_inertia
     xlo, xhi, ylo, yhi, zlo, zhi = case.domain
     fx0, fx1, fy0, fy1, fz0, fz1 = case.fill_region
-    spheres = " ".join(f"{_g(o)} 0 0 {_g(case.sphere_radius)}" for o in case.sphere_offsets)
     every = max(case.steps(case.insert_interval), 1)
     thermo = max(case.steps(case.thermo_interval), 1)
-    walls = "model hertz tangential history rolling_friction cdt"
-
-    def pair(pp, ps):  # 2 x 2 type-pair matrix; type 1 = segment, type 2 = steel
-        return f"{_g(pp)} {_g(ps)} {_g(ps)} {_g(ps)}"
+    clump = case.spheres_per_particle > 1
+    columns = POSITION_COLUMNS if clump else SPHERE_POSITION_COLUMNS
 
     out = [
         "# Angle of repose, plate withdrawal (source paper, Fig. 11), LIGGGHTS-PUBLIC 3.8",
@@ -376,17 +451,14 @@ def render_script(case: ReposeCase, seed: int, duration: float = 10.0,
         "create_box      2 domain",
         f"neighbor        {_g(case.skin)} bin",
         "neigh_modify    delay 0",
-        "hard_particles  yes  # steel E = 2.08e11 Pa exceeds the SI default cap of 1e9 Pa",
-        "",
-        "# materials: type 1 = segment, type 2 = steel (floor and carton)",
-        f"fix m1 all property/global youngsModulus peratomtype {_g(E_p)} {_g(E_s)}",
-        f"fix m2 all property/global poissonsRatio peratomtype {_g(nu_p)} {_g(nu_s)}",
-        f"fix m3 all property/global coefficientRestitution peratomtypepair 2 {pair(case.restitution_pp, case.restitution_ps)}",
-        f"fix m4 all property/global coefficientFriction peratomtypepair 2 {pair(case.friction_pp, case.friction_ps)}",
-        f"fix m5 all property/global coefficientRollingFriction peratomtypepair 2 {pair(case.rolling_pp, case.rolling_ps)}",
-        "",
-        f"pair_style      gran {walls}",
-        "pair_coeff      * *",
+    ]
+    if case.particle is None:
+        out += _segment_lines(case, p_template, p_distribution)
+    else:   # demcal's own export of the material: the side-by-side tests the export too
+        from demcal.simulate.export import liggghts_fragment
+        out += ["", "# materials, contact model and particle: demcal's LIGGGHTS export",
+                liggghts_fragment(case.particle, seed)]
+    out += [
         f"timestep        {_g(case.time_step)}",
         f"fix gravi all gravity {_g(case.gravity)} vector 0.0 0.0 -1.0",
         "",
@@ -394,31 +466,24 @@ def render_script(case: ReposeCase, seed: int, duration: float = 10.0,
     ]
     out += [f"fix {name} all mesh/surface file {name}.stl type 2" for name in MESH_NAMES]
     out += [
-        f"fix carton all wall/gran {walls} mesh n_meshes {len(MESH_NAMES)} meshes {' '.join(MESH_NAMES)}",
-        f"fix floor all wall/gran {walls} primitive type 2 zplane 0.0",
+        f"fix carton all wall/gran ${{demcal_model}} mesh n_meshes {len(MESH_NAMES)} meshes {' '.join(MESH_NAMES)}",
+        "fix floor all wall/gran ${demcal_model} primitive type 2 zplane 0.0",
         "",
-        "# segment: 5-sphere clump with the mass and inertia of an 11 x 25 mm cylinder",
-        f"fix pts all particletemplate/multisphere {p_template} atom_type 1 "
-        f"density constant {_g(case.particle_density)} nspheres {len(case.sphere_offsets)} "
-        f"ntry {case.ntry} spheres {spheres} type 1 mass {_g(case.segment_mass)} "
-        f"inertia_tensor {_g(i_ax)} 0 0 {_g(i_tr)} 0 {_g(i_tr)} use_volume",
-        f"fix pdd all particledistribution/discrete {p_distribution} 1 pts 1.0",
-        "fix ms all multisphere",
         f"region fill block {_g(fx0)} {_g(fx1)} {_g(fy0)} {_g(fy1)} {_g(fz0)} {_g(fz1)} units box",
         f"fix ins all insert/rate/region seed {p_insert} distributiontemplate pdd "
         f"nparticles {case.n_segments} particlerate {_g(case.n_segments / case.fill_time)} "
         f"insert_every {every} overlapcheck yes all_in yes orientation random "
         "vel constant 0.0 0.0 0.0 region fill",
         "",
-        "compute tke all ke/multisphere",
-        "compute rke all erotate/multisphere",
+        "compute tke all ke/multisphere" if clump else "compute tke all ke",
+        "compute rke all erotate/multisphere" if clump else "compute rke all erotate/sphere",
         "thermo_style    custom step atoms c_tke c_rke cpu",
         f"thermo          {thermo}",
         "thermo_modify   lost ignore norm no",
     ]
     if dump_interval:
         out.append(f"dump snap all custom {max(case.steps(dump_interval), 1)} post/dump.* "
-                   f"{' '.join(POSITION_COLUMNS)}")
+                   f"{' '.join(columns)}")
         out.append(f"dump_modify snap format {POSITION_FORMAT}")
     for label, n in case.phase_steps(duration):
         out.append("")
@@ -428,7 +493,7 @@ def render_script(case: ReposeCase, seed: int, duration: float = 10.0,
         out.append(f"run             {n}")
         if label == "plate_lift":
             out.append("unfix lift")
-    out += ["", f"write_dump all custom {positions_file} {' '.join(POSITION_COLUMNS)} "
+    out += ["", f"write_dump all custom {positions_file} {' '.join(columns)} "
                 f"modify format {POSITION_FORMAT}", ""]
     return "\n".join(out)
 

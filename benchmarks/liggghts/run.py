@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.liggghts.deck import LOG_NAME, POSITION_COLUMNS, ReposeCase, write_deck
+from benchmarks.liggghts.deck import LOG_NAME, POSITION_COLUMNS, SPHERE_POSITION_COLUMNS, ReposeCase, write_deck
 from demcal.errors import InputError, SimulationError
 from demcal.jsonio import write_json
 from demcal.provenance import Provenance, sha256_file
@@ -115,7 +115,8 @@ def parse_log(text: str) -> dict:
 
 
 def read_positions(path):
-    """Spheres of a ``write_dump ... custom id mol x y z radius`` file, sorted by atom id.
+    """Spheres of a ``write_dump ... custom id mol x y z radius`` file (``id id ...`` for
+    single spheres, each its own body), sorted by atom id.
 
     Returns
     -------
@@ -129,7 +130,7 @@ def read_positions(path):
     except StopIteration:
         raise SimulationError(f"{path}: no 'ITEM: ATOMS' section; not a LIGGGHTS dump") from None
     columns = lines[start].split()[2:]
-    if tuple(columns) != POSITION_COLUMNS:
+    if tuple(columns) not in (POSITION_COLUMNS, SPHERE_POSITION_COLUMNS):
         raise SimulationError(f"{path}: columns {columns}, expected {list(POSITION_COLUMNS)}")
     data = np.loadtxt(lines[start + 1:], ndmin=2).reshape(-1, len(POSITION_COLUMNS))
     data = data[np.argsort(data[:, 0], kind="stable")]
@@ -221,7 +222,7 @@ def run_liggghts(seed: int, workdir, duration: float = 10.0, case: ReposeCase | 
     if not (np.isfinite(positions).all() and np.isfinite(log["thermo"]).all()):
         raise SimulationError(f"non-finite positions or energies in {deck.workdir}")
 
-    expected = _inserted_bodies(log_text) * len(deck.case.sphere_offsets)
+    expected = _inserted_bodies(log_text) * deck.case.spheres_per_particle
     wall = sum(lp["loop_s"] for lp in log["loops"])
     steps = sum(lp["steps"] for lp in log["loops"])
     spheres = int(len(atom_id))

@@ -5,7 +5,6 @@ deck for 200 steps and is skipped when the binary is absent.
 """
 
 import math
-import re
 
 import numpy as np
 import pytest
@@ -315,3 +314,30 @@ def test_liggghts_runs_200_steps_of_the_deck(tmp_path):
     expected = [0.5 * G * dt * dt * ((200 - s) ** 2 - (100 - s) ** 2) for s in (1, 0)]
     assert np.all((drop > expected[0] * (1 - 1e-3)) & (drop < expected[1] * (1 + 1e-3)))
     np.testing.assert_allclose(p200[:, :2], p100[:, :2], atol=1e-7)
+
+
+@pytest.mark.parametrize("shape", ["sphere:0.0066", "kernel:0.009:0.006:0.006"])
+def test_any_shape_runs_in_liggghts_from_demcals_export(shape, tmp_path):
+    """Another material's case takes its particle from demcal's LIGGGHTS export: the inserted
+    bodies are the template's spheres at its radii, every one present after 200 steps."""
+    from dataclasses import replace as with_
+
+    from demcal.simulate.params import DEMParameters, parse_shape
+
+    params = DEMParameters(shape=parse_shape(shape), particle_density_kg_m3=1200.0, shear_modulus_pa=1.04e6,
+                           dt=None)
+    case = dk.ReposeCase.for_params(params)
+    template = params.template()
+    assert case.spheres_per_particle == template.n_spheres
+    assert case.clump_half_length == pytest.approx(template.bounding_radius)
+    script = dk.render_script(case, seed=3)
+    assert ("particletemplate/sphere" in script) == (template.n_spheres == 1)
+    assert "soft_particles yes" in script      # E = 2.6 MPa: LIGGGHTS refuses it otherwise
+    if find_liggghts() is None:
+        pytest.skip("LIGGGHTS not installed")
+    case = with_(case, fill_time=0.05)   # every body inserted in the first batch
+    result = run_liggghts(seed=3, workdir=tmp_path, duration=200 * case.time_step, case=case, nice=0)
+    assert result["lost_spheres"] == 0 and result["bodies"] > 0
+    assert result["spheres"] == result["bodies"] * template.n_spheres
+    np.testing.assert_allclose(np.sort(np.unique(np.round(result["radii"], 9))),
+                               np.sort(np.unique(np.round(template.radii, 9))), rtol=1e-6)
