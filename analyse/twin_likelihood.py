@@ -9,9 +9,13 @@ parameter, at every logged trial (drop height and landing orientation, as the la
 a random orientation seeded by the row where it did not), and the parameter's likelihood is
 that of the trials' mean residual, lab minus twin:
 
-    r_i(theta) = y_i - twin_i(theta),   L(theta) = N(mean_i r_i; 0, sd_i(r_i)^2 / n)
+    r_i(theta) = y_i - twin_i(theta),   t(theta) = mean_i r_i / (sd_i(r_i) / sqrt(n)),
+    L(theta) = (1 + t^2 / (n - 1))^(-n/2) / (sd_i(r_i) / sqrt(n))
 
-(linear interpolation between grid points; a flat prior over the grid). For the incline the
+the Student-t likelihood of the mean when its standard error is estimated from the same n
+trials (a normal one, exp(-t^2 / 2), would trust the sd of two drops as if it were known and
+give a prior several times too narrow; the two agree as n grows), by linear interpolation
+between grid points, with a flat prior over the grid. For the incline the
 twin is deterministic and the same for every trial of a group, so r_i spreads only by the lab's
 scatter. The posterior on the grid has a mean and an sd (of the parameter's mean value). The
 heap stage then uses, as its prior for the parameter, a normal of that mean and of the spread
@@ -100,11 +104,11 @@ class TwinConstraint:
         return asdict(self)
 
 
-def _grid_posterior(grid, r_mean, r_se) -> tuple[float, float, bool]:
+def _grid_posterior(grid, r_mean, r_se, n: int) -> tuple[float, float, bool]:
     fine = np.linspace(grid[0], grid[-1], FINE)
     m = np.interp(fine, grid, r_mean)
     se = np.maximum(np.interp(fine, grid, r_se), 1e-9)
-    logw = -0.5 * (m / se) ** 2 - np.log(se)
+    logw = -0.5 * n * np.log1p((m / se) ** 2 / (n - 1)) - np.log(se)
     w = np.exp(logw - logw.max())
     w /= w.sum()
     mean = float(np.sum(w * fine))
@@ -185,7 +189,7 @@ def twin_constraints(measurement, base, factors: dict, execute, run_refs) -> dic
         resid = y[None, :] - sim[ok]
         r_mean = resid.mean(axis=1)
         r_se = resid.std(axis=1, ddof=1) / math.sqrt(len(y))
-        mean, sd, edge = _grid_posterior(grid[ok], r_mean, r_se)
+        mean, sd, edge = _grid_posterior(grid[ok], r_mean, r_se, len(y))
         response = _response(grid[ok], sim[ok].mean(axis=1))
         informative = bool(abs(response) > half)
         note = "" if informative else (

@@ -421,13 +421,14 @@ def camera_track(rng: np.random.Generator, drop_height_m: float, e: float, *, fp
 def force_curve(rng: np.random.Generator, stiffness_n_per_m: float, max_disp_mm: float, *,
                 rate_mm_s: float = 5.0, hz: float = 500.0, noise_n: float = 0.3) -> pd.DataFrame:
     """Texture-analyser loading curve: linear (``stiffness``) over the first 20 % of the travel,
-    then softening as the tissue yields; load-cell noise ``noise_n``. Columns
-    ``displacement_mm``, ``force_N``."""
+    then softening as the tissue yields; load-cell noise ``noise_n``, at most 0.2 % of the
+    linear part's force (a lab fits the load cell to the specimen: a seed of 1 MPa shear
+    modulus loads a few newtons). Columns ``displacement_mm``, ``force_N``."""
     d = np.arange(0.0, max_disp_mm, rate_mm_s / hz)
     d_lin = 0.2 * max_disp_mm
     k = stiffness_n_per_m * 1e-3
     f = np.where(d <= d_lin, k * d, k * d_lin + 0.45 * k * (d - d_lin) - 0.02 * k * (d - d_lin) ** 2 / d_lin)
-    f = f + rng.normal(0.0, noise_n, d.size)
+    f = f + rng.normal(0.0, min(noise_n, 0.002 * k * d_lin), d.size)
     return pd.DataFrame({"displacement_mm": d.round(4), "force_N": f.round(3)})
 
 

@@ -42,10 +42,19 @@ def virtual_campaign(root, geometry, config, truth=TRUTH, **lab):
 
 
 def check_truth_and_verdict(res, truth=TRUTH):
+    """The truth against the calibration's intervals, as a run of a calibrated method can be
+    held to: with 7 parameters, each truth inside its 95 % interval happens in only 70 % of
+    runs (0.95^7), so at most 2 of the 7 lie outside (a calibrated method has 3 or more in
+    0.4 % of runs) and every one lies within 3.29 posterior sd of the posterior mean (its
+    99.9 % interval; 0.7 % of runs miss one); and the validation finds the heaps equivalent."""
     params = res.calibration.parameters
+    outside = []
     for name, p in params.items():
         value = getattr(truth, name)
-        assert p.ci95[0] <= value <= p.ci95[1], (name, value, p.ci95)
+        assert abs(value - p.posterior_mean) <= 3.29 * p.posterior_sd, (name, value, p.posterior_mean, p.posterior_sd)
+        if not p.ci95[0] <= value <= p.ci95[1]:
+            outside.append((name, value, p.ci95))
+    assert len(params) == 7 and len(outside) <= 2, outside
     assert res.validation.verdict == "equivalent", res.validation.test["note"]
 
 
