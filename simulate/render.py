@@ -228,9 +228,14 @@ def _trend_free(x, z, rough, a, b, height, band):
     return rough - sum(c * col for c, col in zip(coef, cols))
 
 
-def heap_photo(profile_x_m, profile_z_m, *, rng, px_per_m=2500.0, camera_roll_deg=0.0,
+#: A heap photo's default height and width [px] and scale [px/m].
+PHOTO_SIZE = (900, 1200)
+PHOTO_PX_PER_M = 2500.0
+
+
+def heap_photo(profile_x_m, profile_z_m, *, rng, px_per_m=PHOTO_PX_PER_M, camera_roll_deg=0.0,
                light=None, noise_sd=3.0, blur_px=1.0, jpeg_quality=None, grid=True,
-               texture=True, heap_tone="dark", size=(900, 1200), floor_row=0.78,
+               texture=True, heap_tone="dark", size=PHOTO_SIZE, floor_row=0.78,
                centre_x_m=None, strays=4):
     """Photograph of a heap of cut root segments seen from the side.
 

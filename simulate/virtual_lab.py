@@ -710,16 +710,13 @@ def _compression(truth: Truth, rng, specimens, n: int, root: Path) -> pd.DataFra
     return pd.DataFrame(rows)
 
 
-#: The analytic heap photos' default resolution [px] and scale [px/m].
-PHOTO_SIZE = (900, 1200)
-PHOTO_PX_PER_M = 2500.0
-
-
 def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base: int, geometry=None,
-            size=PHOTO_SIZE):
+            size=None):
     import cv2
 
-    from demcal.simulate.render import Lighting, heap_photo, heap_profile
+    from demcal.simulate.render import PHOTO_PX_PER_M, PHOTO_SIZE, Lighting, heap_photo, heap_profile
+
+    size = PHOTO_SIZE if size is None else size
 
     tilt = [e for e in effects if e.kind == "camera_tilt"]
     block = [e for e in effects if e.kind == "block_effect" and e.sheet == "repose"]
@@ -869,7 +866,7 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
                            surfaces=("particle", "steel"), n_incline: int = 30,
                            n_compression: int = 10, n_photos: int = 4,
                            cache_dir=None, geometry=None, trials_per_specimen: int | None = None,
-                           interleaved: bool = False, photo_size=PHOTO_SIZE) -> VirtualWorkbook:
+                           interleaved: bool = False, photo_size=None) -> VirtualWorkbook:
     """Write a complete lab workbook from ``truth``, with ``effects`` planted.
 
     Parameters
@@ -914,9 +911,9 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
     interleaved : bool
         Drops of every pair in one random order (``trial_order`` runs over the whole sheet, and
         a planted drift with it); default each pair's drops in a session of its own.
-    photo_size : (int, int)
+    photo_size : (int, int), optional
         Height and width of the analytic heap photos [px], the same field of view at any size
-        (default 900 x 1200, 2.5 px/mm).
+        (default ``simulate.render.PHOTO_SIZE``, 900 x 1200 at 2.5 px/mm).
 
     Returns
     -------
@@ -935,8 +932,8 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
                  n_incline=n_incline, n_compression=n_compression, n_photos=n_photos, n_tracks=n_tracks,
                  trials_per_specimen=trials_per_specimen, orientation_range_deg=orientation_range_deg,
                  drop_heights_mm=drop_heights_mm)
-    if (len(photo_size) != 2 or not all(isinstance(v, (int, np.integer)) for v in photo_size)
-            or min(photo_size) < 120):
+    if photo_size is not None and (len(photo_size) != 2 or min(photo_size) < 120
+                                   or not all(isinstance(v, (int, np.integer)) for v in photo_size)):
         raise InputError(f"photo_size must be (height, width) in whole pixels, each >= 120, got {photo_size!r}")
     lo, hi = (float(v) for v in orientation_range_deg)
 

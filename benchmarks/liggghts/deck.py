@@ -194,7 +194,6 @@ class ReposeCase:
         model = export_model(params, material=params.shape.name)
         radius = float(np.max(model.template.radii))
         L, W, H = g.box_length, g.box_width, g.box_height
-        dt = params.dt if params.dt is not None else material_time_step(params)
         return cls(box_length=L, box_width=W, box_height=H, plate_lift_speed=g.lift_speed,
                    n_segments=g.fill_count, sphere_radius=radius,
                    sphere_offsets=tuple(float(np.linalg.norm(o)) for o in model.template.offsets),
@@ -203,7 +202,7 @@ class ReposeCase:
                    particle_poisson=params.poisson_ratio, steel_shear_modulus=params.wall_shear_modulus_pa,
                    steel_poisson=params.wall_poisson_ratio, restitution_pp=params.e_pp, restitution_ps=params.e_pw,
                    friction_pp=params.mu_s_pp, friction_ps=params.mu_s_pw, rolling_pp=params.mu_r_pp,
-                   rolling_ps=params.mu_r_pw, time_step=float(dt),
+                   rolling_ps=params.mu_r_pw, time_step=material_time_step(params),
                    fill_region=(0.05 * L, 0.95 * L, 0.1 * W, 0.9 * W, 0.4 * H, 0.96 * H),
                    skin=radius / 2.0, particle=model)
 
@@ -311,9 +310,9 @@ class ReposeCase:
                              "mass_model": self.particle.template.mass_model,
                              "rolling_lever": self.particle.params.rolling_lever}
         d.update(particle_youngs_modulus=self.particle_youngs_modulus,
-                 steel_youngs_modulus=self.steel_youngs_modulus,
-                 segment_mass=self.segment_mass, segment_inertia=self.segment_inertia,
-                 domain=self.domain)
+                 steel_youngs_modulus=self.steel_youngs_modulus, domain=self.domain)
+        if self.particle is None:   # the hand-written segment's cylinder
+            d.update(segment_mass=self.segment_mass, segment_inertia=self.segment_inertia)
         return d
 
 

@@ -131,7 +131,8 @@ def read_positions(path):
         raise SimulationError(f"{path}: no 'ITEM: ATOMS' section; not a LIGGGHTS dump") from None
     columns = lines[start].split()[2:]
     if tuple(columns) not in (POSITION_COLUMNS, SPHERE_POSITION_COLUMNS):
-        raise SimulationError(f"{path}: columns {columns}, expected {list(POSITION_COLUMNS)}")
+        raise SimulationError(f"{path}: columns {columns}, expected {list(POSITION_COLUMNS)} "
+                              f"or {list(SPHERE_POSITION_COLUMNS)}")
     data = np.loadtxt(lines[start + 1:], ndmin=2).reshape(-1, len(POSITION_COLUMNS))
     data = data[np.argsort(data[:, 0], kind="stable")]
     return (data[:, 0].astype(np.int64), data[:, 1].astype(np.int64),
