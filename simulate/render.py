@@ -236,14 +236,14 @@ PHOTO_PX_PER_M = 2500.0
 def heap_photo(profile_x_m, profile_z_m, *, rng, px_per_m=PHOTO_PX_PER_M, camera_roll_deg=0.0,
                light=None, noise_sd=3.0, blur_px=1.0, jpeg_quality=None, grid=True,
                texture=True, heap_tone="dark", size=PHOTO_SIZE, floor_row=0.78,
-               centre_x_m=None, strays=4):
-    """Photograph of a heap of cut root segments seen from the side.
+               centre_x_m=None, strays=4, particle_m=(SEGMENT_LENGTH_M, SEGMENT_DIAMETER_M)):
+    """Photograph of a heap of particles (cut root segments by default) seen from the side.
 
     The scene, in the plane of the profile: a backdrop (grid paper), a floor plate whose far
     edge is the line z = 0, and the heap, the region between the floor and the piecewise
-    linear profile, filled with segment-like capsules (about 11 mm x 25 mm, light
-    brownish-yellow, with bark, cut faces and shadowed gaps) and lined along its surface with
-    segments lying on the slope; a few segments have rolled past the toes. The camera then
+    linear profile, filled with capsules of the particle's size (light brownish-yellow, with
+    bark, cut faces on elongated ones and shadowed gaps) and lined along its surface with
+    particles lying on the slope; a few have rolled past the toes. The camera then
     adds, in order: illumination gradient, camera roll, vignetting, defocus blur, sensor noise
     and JPEG compression.
 
@@ -283,6 +283,10 @@ def heap_photo(profile_x_m, profile_z_m, *, rng, px_per_m=PHOTO_PX_PER_M, camera
         Profile abscissa shown at the image centre [m]; the middle of the profile by default.
     strays : int
         Number of segments lying on the floor beyond the toes.
+    particle_m : (float, float)
+        Length and width of one particle as the photo shows it lying down [m]
+        (``Shape.outline_m``); a root segment of the source paper by default. Equal values
+        draw round particles.
 
     Returns
     -------
@@ -331,7 +335,13 @@ def heap_photo(profile_x_m, profile_z_m, *, rng, px_per_m=PHOTO_PX_PER_M, camera
     xc = 0.5 * (x[0] + x[-1]) if centre_x_m is None else float(centre_x_m)
     col0 = ox + 0.5 * w - xc * s                 # canvas column of x = 0
     row0 = oy + floor_row * h                    # canvas row of z = 0 (the floor line)
-    seg_len, seg_dia = SEGMENT_LENGTH_M * s, SEGMENT_DIAMETER_M * s
+    try:
+        length_m, width_m = (float(v) for v in particle_m)
+    except (TypeError, ValueError):
+        raise InputError(f"heap_photo: particle_m must be (length, width) [m], got {particle_m!r}") from None
+    if not (0 < width_m <= length_m < math.inf):
+        raise InputError(f"heap_photo: particle_m must be 0 < width <= length [m], got {particle_m!r}")
+    seg_len, seg_dia = length_m * s, width_m * s
 
     img = _backdrop(ch, cw, scene, grid, s, col0, row0, rng)
     img = cv2.GaussianBlur(img, (0, 0), 0.8)     # the backdrop is behind the focal plane
@@ -554,7 +564,7 @@ def _draw_segment(img, cx, cy, phi, seg_len, seg_dia, tilt, colour, rng, floor_r
         q2 = (cx + b * half * u[0] + o * v[0], cy + b * half * u[1] + o * v[1])
         cv2.line(img, _pt(*q1), _pt(*q2), _bgr(colour, rng.uniform(0.7, 0.85)), 1,
                  cv2.LINE_AA, _SHIFT)
-    if tilt > math.radians(25):
+    if tilt > math.radians(25) and seg_len > 1.5 * seg_dia:
         # Cut face at the end nearer the camera: cream wood, brown bark ring, dark pith.
         end = p2 if rng.random() < 0.5 else p1
         minor = 0.5 * dia * math.sin(tilt)

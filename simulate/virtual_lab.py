@@ -751,7 +751,8 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
             # the same field of view at any resolution: the heap spans the same share of the frame
             img = heap_photo(x, z, rng=rng, camera_roll_deg=float(np.clip(roll, -15, 15)), light=light,
                              noise_sd=4.0, blur_px=1.0, jpeg_quality=int(rng.integers(75, 93)),
-                             size=size, px_per_m=PHOTO_PX_PER_M * size[1] / PHOTO_SIZE[1])
+                             size=size, px_per_m=PHOTO_PX_PER_M * size[1] / PHOTO_SIZE[1],
+                             particle_m=truth.params.shape.outline_m)
         else:
             img, side = _dem_heap_photo(truth, rng, roll, light, seeds, discarded, geometry)
         name = f"photos/heap_{i + 1}.jpg"
@@ -794,7 +795,8 @@ def _dem_heap_photo(truth: Truth, rng, roll, light, seeds, discarded: list, geom
         x = np.asarray(res.record["profile_x"], float)
         z = np.asarray(res.record["profile_z"], float)
         img = heap_photo(x, z, rng=rng, camera_roll_deg=float(np.clip(roll, -15, 15)), light=light,
-                         noise_sd=4.0, blur_px=1.0, jpeg_quality=int(rng.integers(75, 93)))
+                         noise_sd=4.0, blur_px=1.0, jpeg_quality=int(rng.integers(75, 93)),
+                         particle_m=truth.params.shape.outline_m)
         # read it back as the workbook will hold it (the JPEG written by _photos)
         stored = cv2.imdecode(cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 95])[1], cv2.IMREAD_COLOR)
         try:

@@ -120,6 +120,13 @@ class Shape:
         c, r = self.spheres()
         return (c + r[:, None]).max(axis=0) - (c - r[:, None]).min(axis=0)
 
+    @property
+    def outline_m(self) -> tuple[float, float]:
+        """(length, width) [m] of the particle lying on a heap as a side photo shows it: its
+        longest extent, and the geometric mean of the other two (``render.heap_photo``)."""
+        e = self.extent
+        return float(e[0]), float(math.sqrt(e[1] * e[2]))
+
     def template(self, density: float, mass_model: str = "union", mean_mass: float | None = None,
                  name: str | None = None, resolution: int = 600) -> ClumpTemplate:
         """The DEM's clump of this shape (``simulate.clump.make_template``'s mass models and

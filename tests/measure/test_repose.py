@@ -336,6 +336,25 @@ def test_heap_photo_is_seeded_and_validated():
         heap_photo(x[::-1], z, rng=3, **kw)
     with pytest.raises(InputError, match="angle_right_deg"):
         heap_profile(35.0, 95.0)
+    with pytest.raises(InputError, match="particle_m"):
+        heap_photo(x, z, rng=3, particle_m=(0.005, 0.007), **kw)
+
+
+@pytest.mark.parametrize("particle", [("sphere:0.0066", 22.0, 1.5, 0.06),
+                                      ("kernel:0.009:0.006:0.005", 31.0, -2.0, 0.08)])
+def test_heap_photo_of_each_shape_reads_its_angle(particle):
+    """Heaps of round seeds and of kernels, each drawn at its shape's outline, read back their
+    true flank angles and camera roll (the photo set above is of segments)."""
+    from demcal.simulate.params import parse_shape
+
+    spec, angle, roll, height = particle
+    shape = parse_shape(spec)
+    x, z = heap_profile(angle, angle, height_m=height, floor_m=0.04, roughness_m=0.002, rng=5)
+    img = heap_photo(x, z, rng=6, camera_roll_deg=roll, jpeg_quality=85, particle_m=shape.outline_m)
+    result = angle_from_photo(img, side="both")
+    for flank in ("left", "right"):
+        assert result.flanks[flank] == pytest.approx(angle, abs=ANGLE_TOL_DEG), flank
+    assert result.base_tilt_deg == pytest.approx(roll, abs=TILT_TOL_DEG)
 
 
 # ------------------------------------------------------------------------------------------

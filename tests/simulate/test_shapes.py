@@ -28,6 +28,7 @@ def test_a_sphere_is_one_sphere_with_the_mass_and_inertia_of_a_solid_ball():
     assert t.mass == pytest.approx(m, rel=1e-12)
     assert t.principal_moments == pytest.approx([0.4 * m * 0.0033 ** 2] * 3, rel=1e-12)
     assert s.volume() == pytest.approx(m / RHO, rel=1e-12)
+    assert s.outline_m == pytest.approx((0.0066, 0.0066), rel=1e-12)   # a photo shows a disc
 
 
 def test_a_sphere_from_three_axes_takes_their_geometric_mean():
@@ -47,6 +48,7 @@ def test_the_segment_shape_is_the_papers_row_of_spheres_and_its_body_a_cylinder(
     body = seg.template(912.0, "body")
     assert body.mass == pytest.approx(912.0 * seg.volume(), rel=1e-12)
     assert seg.template(912.0, "cylinder").mass == body.mass
+    assert seg.outline_m == pytest.approx((0.025, 0.011), rel=1e-12)
 
 
 def test_the_largest_sphere_inside_a_spheroid_about_a_point_of_its_axis():
@@ -72,6 +74,10 @@ def test_a_kernels_spheres_lie_inside_its_ellipsoid_and_touch_it(dims):
     # the model spans the measured length, and its extent never exceeds the axes
     assert k.extent[0] == pytest.approx(dims[0], rel=1e-6)
     assert np.all(k.extent <= np.array(dims) * (1 + 1e-6))
+    # a photo shows it its length long and about the mean of its other axes wide
+    length, width = k.outline_m
+    assert length == pytest.approx(dims[0], rel=1e-6)
+    assert min(dims[1:]) * 0.95 <= width <= math.sqrt(dims[1] * dims[2]) * (1 + 1e-6)
 
 
 def test_a_kernels_body_is_the_exact_ellipsoid_and_the_approximation_is_reported():
