@@ -22,7 +22,9 @@ from demcal.jsonio import to_jsonable
 #: in free flight after the whole impact sequence (a tilted body's centre of mass descending
 #: between its end impacts no longer ends it). Revision 4: a run's parameters carry the particle's
 #: shape (``simulate.shapes``) and time step, so runs of revision 3 and earlier no longer replay.
-MODEL_VERSION = 4
+#: Revision 5: a size distribution is of any shape (``particle_sizes``, formerly the segments'
+#: ``segment_sizes``); the physics is unchanged, the keys are not.
+MODEL_VERSION = 5
 
 
 def run_key(inputs: dict) -> str:

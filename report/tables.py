@@ -1079,16 +1079,12 @@ def table_covariate_tests(c: Campaign) -> Table:
                  formats=("d", "", "", "", "", "", "", "d", ".3g", ".3g", "", ".3g", ".3g", "p", "p", ""))
 
 
-def _within(flag) -> str:
-    return {True: "within its uncertainty", False: "beyond its uncertainty"}.get(flag, "no interval")
-
-
 def table_heap_parameters(c: Campaign) -> Table:
     """Table C5: the calibrated parameters before and after recalibrating with each accepted
     extension (``Critique.heap_gains``), each against its own 95 % plausible interval."""
     gains = c.critique.heap_gains
     rows = tuple((h.extension, p.name, p.before, _cell(p.before_ci95), p.after, _cell(p.after_ci95), p.shift,
-                  _within(p.within_uncertainty)) for h in gains for p in h.parameters)
+                  p.verdict) for h in gains for p in h.parameters)
     notes = [f"{h.extension} (recalibrated in {h.campaign} with "
              + ", ".join(f"{k} = {_long(v)}" for k, v in h.settings.items()) + f"): {h.conclusion}" for h in gains]
     if not gains:

@@ -23,11 +23,10 @@ and is recorded, by name and settings, in the provenance of every run that uses 
     restitution: an elongated body turns part of its energy into rotation, so sqrt(h2/h1) is
     not the contact restitution. :func:`invert_drop_twin` solves twin(e) = measured.
 ``size_distribution``
-    Segments drawn from the calliper size distribution (:class:`SizeDistribution`): a twin of
-    one trial uses its own specimen's length and diameter (:func:`segment_of_size`); a heap
-    draws each segment from the measured (length, diameter) pairs (engine hook
-    ``segment_sizes``: a particle factory with one template per pair,
-    ``simulate.scenes.build_paper_repose_case``).
+    Particles drawn from the calliper size distribution (:class:`SizeDistribution`): a twin
+    of one trial uses its own specimen's sizes (:func:`particle_of_size`); a heap draws each
+    particle from the measured sizes (engine hook ``particle_sizes``: a particle factory with
+    one template per size, ``simulate.scenes.build_paper_repose_case``).
 ``more_spheres``
     More spheres per clump (:func:`with_more_spheres`): a smoother surface, closer to the
     cylinder's volume and inertia (:func:`surface_ripple`).
@@ -94,7 +93,8 @@ from demcal.simulate.clump import ClumpTemplate
 from demcal.simulate.shapes.segment import Segment
 from demcal.simulate.contact.rolling import epsd_damping, epsd_rolling_torque, epsd_stiffness  # noqa: F401
 from demcal.simulate.params import DEMParameters
-from demcal.units import GRAVITY, MM
+from demcal.simulate.shapes import Shape
+from demcal.units import GRAVITY
 
 #: Extension names, in the order of the critique's catalogue.
 EXTENSIONS = ("velocity_dependent_restitution", "inverted_restitution", "size_distribution",
@@ -112,7 +112,7 @@ ENGINE_HOOKS = {
     "velocity_dependent_restitution": ("e_pp_exponent", "e_pp_v_ref", "e_pp_v_min",
                                        "e_pw_exponent", "e_pw_v_ref", "e_pw_v_min"),
     "rolling_spring_dashpot": ("rolling_model", "rolling_damping_ratio"),
-    "size_distribution": ("segment_sizes",),
+    "size_distribution": ("particle_sizes",),
     "contact_effective_mass": ("contact_effective_mass",),
 }
 
@@ -138,11 +138,11 @@ def engine_hooks(params: DEMParameters) -> list[dict]:
     if params.rolling_model == "epsd":
         out.append(describe("rolling_spring_dashpot", rolling_model=params.rolling_model,
                             damping_ratio=params.rolling_damping_ratio))
-    if params.segment_sizes is not None:
-        sizes = np.asarray(params.segment_sizes)
-        out.append(describe("size_distribution", mode="segments drawn per clump (engine)",
+    if params.particle_sizes is not None:
+        sizes = np.asarray(params.particle_sizes)
+        out.append(describe("size_distribution", mode="particles drawn per clump (engine)",
                             n_sizes=int(sizes.shape[0]),
-                            length_mean=float(sizes[:, 0].mean()), diameter_mean=float(sizes[:, 1].mean())))
+                            means={name: float(v) for name, v in zip(params.shape.sizes, sizes.mean(axis=0))}))
     if params.contact_effective_mass:
         out.append(describe("contact_effective_mass", mode="each normal dashpot damps the smaller of the "
                             "contact's rigid-body effective mass and the body's mass over its "
@@ -470,71 +470,74 @@ def invert_drop_twin(twin, measured, *, pair: str = "particle-steel", start: flo
 
 @dataclass(frozen=True)
 class SizeDistribution:
-    """Segment sizes measured with callipers: (length, diameter) pairs, drawn jointly.
+    """Particle sizes measured with callipers, one entry per specimen, drawn jointly.
 
     Attributes
     ----------
-    lengths, diameters : tuple of float
-        Measured segment lengths and diameters [m], one pair per specimen.
+    sizes : tuple of tuple of float
+        Each specimen's lengths [m] in the order of its shape's ``sizes`` (a segment's
+        (length, diameter), a sphere's (diameter,), a kernel's (length, width, thickness)).
     specimen_ids : tuple of str
-        Specimen of each pair.
+        Specimen of each entry.
     """
 
-    lengths: tuple
-    diameters: tuple
+    sizes: tuple
     specimen_ids: tuple = ()
 
     def __post_init__(self):
-        if len(self.lengths) != len(self.diameters) or not self.lengths:
-            raise InputError("a size distribution needs equal, non-empty lists of lengths and diameters")
-        for length, dia in zip(self.lengths, self.diameters):
-            if not (length > 0 and dia > 0 and dia <= length):
-                raise InputError(f"segment size must have 0 < diameter <= length, got "
-                                 f"length {length!r} m, diameter {dia!r} m")
+        sizes = tuple(tuple(float(v) for v in entry) for entry in self.sizes)
+        if not sizes or len({len(e) for e in sizes}) != 1:
+            raise InputError("a size distribution needs a non-empty list of entries of equal length")
+        if self.specimen_ids and len(self.specimen_ids) != len(sizes):
+            raise InputError(f"a size distribution of {len(sizes)} entries names {len(self.specimen_ids)} specimens")
+        for entry in sizes:
+            if not all(math.isfinite(v) and v > 0 for v in entry):
+                raise InputError(f"a particle size must be lengths > 0 [m], got {entry!r}")
+        object.__setattr__(self, "sizes", sizes)
+        object.__setattr__(self, "specimen_ids", tuple(str(v) for v in self.specimen_ids))
 
     @classmethod
-    def from_specimens(cls, frame) -> "SizeDistribution":
-        """From a ``specimens`` sheet frame (columns ``specimen_id``, ``length_mm``, ``diameter_mm``)."""
-        return cls(tuple(float(v) * MM for v in frame["length_mm"]),
-                   tuple(float(v) * MM for v in frame["diameter_mm"]),
+    def from_specimens(cls, frame, shape: Shape) -> "SizeDistribution":
+        """From a ``specimens`` sheet frame (``specimen_id`` and ``shape``'s calliper columns
+        [mm]), each row read as the shape reads a specimen (``Shape.from_specimen``)."""
+        return cls(tuple(shape.sized_as(row).size_values for row in frame.to_dict("records")),
                    tuple(str(v) for v in frame["specimen_id"]))
 
-    def size_of(self, specimen_id: str) -> tuple[float, float]:
-        """(length, diameter) [m] of one specimen."""
+    def size_of(self, specimen_id: str) -> tuple:
+        """The sizes [m] of one specimen."""
         try:
             i = self.specimen_ids.index(str(specimen_id))
         except ValueError:
             raise InputError(f"specimen {specimen_id!r} is not in the size distribution") from None
-        return self.lengths[i], self.diameters[i]
+        return self.sizes[i]
 
     def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
-        """``n`` (length, diameter) pairs [m] resampled from the measured pairs, shape (n, 2)."""
-        idx = rng.integers(0, len(self.lengths), int(n))
-        return np.column_stack([np.asarray(self.lengths)[idx], np.asarray(self.diameters)[idx]])
+        """``n`` entries [m] resampled from the measured ones, shape (n, number of sizes)."""
+        idx = rng.integers(0, len(self.sizes), int(n))
+        return np.asarray(self.sizes)[idx]
 
     def to_dict(self) -> dict:
         return asdict(self)
 
 
 def with_size_distribution(params: DEMParameters, distribution: SizeDistribution) -> DEMParameters:
-    """``params`` whose heaps draw each segment from ``distribution``'s (length, diameter) pairs."""
+    """``params`` whose heaps draw each particle from ``distribution``'s sizes."""
     if not isinstance(distribution, SizeDistribution):
         raise InputError(f"distribution must be a SizeDistribution, got {type(distribution).__name__}")
-    return params.with_(segment_sizes=tuple(zip(distribution.lengths, distribution.diameters)))
+    return params.with_(particle_sizes=distribution.sizes)
 
 
-def segment_of_size(params: DEMParameters, length: float, diameter: float) -> ClumpTemplate:
-    """The segment template of ``params`` with another length and diameter [m] (same number of
-    spheres, density and mass model; a ``scaled`` mass model keeps its mass per volume)."""
+def particle_of_size(params: DEMParameters, sizes) -> ClumpTemplate:
+    """The template of ``params``' shape at other ``sizes`` [m] (in the order of the shape's
+    ``sizes``; same sphere count, density and mass model; a ``scaled`` mass model keeps its
+    mass per volume)."""
     shape = params.shape
-    if not isinstance(shape, Segment):
-        raise InputError(f"a segment size distribution needs the segment shape; the shape is {shape.name}")
-    sized = replace(shape, length_m=float(length), diameter_m=float(diameter))
+    sized = shape.with_sizes(sizes)
     mean_mass = params.mean_mass_kg
     if params.mass_model == "scaled" and mean_mass:
         mean_mass = mean_mass * sized.volume() / shape.volume()
     return sized.template(params.particle_density_kg_m3, params.mass_model, mean_mass,
-                          name=f"segment {length * 1e3:.2f} x {diameter * 1e3:.2f} mm")
+                          name=f"{shape.name} " + " x ".join(f"{v * 1e3:.2f}" for v in sized.size_values) + " mm")
 
 
 # ----------------------------------------------------------------------------------------------

@@ -18,7 +18,7 @@ the sizes of a segment shape (``SEGMENT_FIELDS``).
 Four engine extensions (``simulate.extensions.ENGINE_HOOKS``) are switched by fields here and
 so recorded with every run; all are off by default: a velocity-dependent restitution
 (``e_pp_exponent``, ``e_pw_exponent`` != 0), the spring-dashpot rolling model
-(``rolling_model="epsd"``), segments drawn from a size distribution (``segment_sizes``) and
+(``rolling_model="epsd"``), particles drawn from a size distribution (``particle_sizes``) and
 dashpots that damp the effective mass at each contact (``contact_effective_mass``). A field
 renamed since (``RENAMED``) is still read under its former name, so that stored results and
 truth files keep their meaning.
@@ -100,11 +100,13 @@ class DEMParameters:
         2011 type C); ``simulate.contact.rolling``.
     rolling_damping_ratio : float
         Rolling damping ratio eta_r of the ``"epsd"`` model [-] (default 0.3, Ai et al. 2011).
-    segment_sizes : tuple of (float, float) or None
-        (length, diameter) pairs [m] of a measured size distribution of a segment shape
-        (callipers): when given, the repose scene draws each segment from them (equal weight per pair, duplicates
-        counting twice; ``simulate.extensions.SizeDistribution``) instead of
-        ``segment_length_m`` x ``segment_diameter_m``. Default None (one size).
+    particle_sizes : tuple of tuple of float, or None
+        A measured size distribution (callipers): one entry per specimen, its lengths [m] in
+        the order of the shape's ``sizes`` (a segment's (length, diameter), a sphere's
+        (diameter,), a kernel's (length, width, thickness)). When given, the repose scene draws
+        each particle from them (equal weight per entry, duplicates counting twice;
+        ``simulate.extensions.SizeDistribution``) instead of ``shape``'s one size. Default
+        None (one size).
     contact_effective_mass : bool
         Engine hook (``simulate.extensions``): each normal dashpot damps the body's effective
         mass at its contact, rotation included, shared among the body's simultaneous contacts
@@ -139,7 +141,7 @@ class DEMParameters:
     e_pw_v_min: float = 0.0
     rolling_model: str = "constant_torque"
     rolling_damping_ratio: float = EPSD_DAMPING_RATIO
-    segment_sizes: tuple | None = None
+    particle_sizes: tuple | None = None
     contact_effective_mass: bool = False
 
     def __post_init__(self):
@@ -164,8 +166,6 @@ class DEMParameters:
             object.__setattr__(self, "shape", parse_shape(self.shape))
         if self.dt is not None and not (isinstance(self.dt, (int, float)) and math.isfinite(self.dt) and self.dt > 0):
             raise InputError(f"dt must be a time step > 0 [s] (or none: from the material), got {self.dt!r}")
-        if self.segment_sizes is not None and not isinstance(self.shape, Segment):
-            raise InputError(f"segment_sizes is a size distribution of segments; the shape is {self.shape.name}")
         if self.mass_model not in MASS_MODELS:
             raise InputError(f"mass_model must be one of {', '.join(MASS_MODELS)}; got {self.mass_model!r}")
         if self.mass_model == "scaled" and not (self.mean_mass_kg and self.mean_mass_kg > 0):
@@ -191,8 +191,8 @@ class DEMParameters:
         value = self.rolling_damping_ratio
         if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
             raise InputError(f"rolling_damping_ratio must be a finite number >= 0, got {value!r}")
-        if self.segment_sizes is not None:
-            object.__setattr__(self, "segment_sizes", _size_pairs(self.segment_sizes))
+        if self.particle_sizes is not None:
+            object.__setattr__(self, "particle_sizes", _particle_sizes(self.shape, self.particle_sizes))
         if self.contact_effective_mass not in (True, False, 0, 1):
             raise InputError(f"contact_effective_mass must be true or false (1 or 0), "
                              f"got {self.contact_effective_mass!r}")
@@ -223,6 +223,12 @@ class DEMParameters:
             out["shape"] = dataclasses.replace(shape, **segment)
         return dataclasses.replace(self, **out)
 
+    def sized_shapes(self) -> tuple:
+        """The shape at each entry of ``particle_sizes`` (duplicates kept), or ``(shape,)``."""
+        if self.particle_sizes is None:
+            return (self.shape,)
+        return tuple(self.shape.with_sizes(entry) for entry in self.particle_sizes)
+
     def template(self, shape: Shape | None = None, name: str | None = None) -> ClumpTemplate:
         """The clump of ``shape`` (default this set's) with this set's density and mass model."""
         shape = self.shape if shape is None else shape
@@ -245,9 +251,10 @@ class DEMParameters:
 
 #: Former field names -> current ones. Results files, critique files and truth files written
 #: before a rename name the field the old way (``multi_contact_damping`` was switched on by
-#: ``--set`` and stored with the calibrated parameters and the campaign's model extensions);
+#: ``--set`` and stored with the calibrated parameters and the campaign's model extensions;
+#: ``segment_sizes`` held a segment's (length, diameter) pairs, its sizes in order);
 #: :func:`current_names` reads them.
-RENAMED = {"multi_contact_damping": "contact_effective_mass"}
+RENAMED = {"multi_contact_damping": "contact_effective_mass", "segment_sizes": "particle_sizes"}
 
 
 def current_names(values: dict) -> dict:
@@ -262,20 +269,23 @@ def current_names(values: dict) -> dict:
     return out
 
 
-def _size_pairs(value) -> tuple:
-    """``segment_sizes`` as a tuple of (length, diameter) float pairs [m], checked."""
+def _particle_sizes(shape: Shape, value) -> tuple:
+    """``particle_sizes`` as a tuple of float tuples [m], each a size ``shape`` can take."""
+    what = f"particle_sizes of the {shape.name} shape: each entry is ({', '.join(shape.sizes)}) [m]"
     try:
-        pairs = tuple((float(length), float(dia)) for length, dia in value)
+        entries = tuple(tuple(float(v) for v in entry) for entry in value)
     except (TypeError, ValueError):
-        raise InputError(f"segment_sizes must be a list of (length, diameter) pairs [m], "
-                         f"got {value!r}") from None
-    if not pairs:
-        raise InputError("segment_sizes must hold at least one (length, diameter) pair, or be None")
-    for length, dia in pairs:
-        if not (math.isfinite(length) and math.isfinite(dia) and 0.0 < dia <= length):
-            raise InputError(f"segment_sizes: each pair needs 0 < diameter <= length [m], got "
-                             f"length {length!r}, diameter {dia!r}")
-    return pairs
+        raise InputError(f"{what}; got {value!r}") from None
+    if not entries:
+        raise InputError(f"{what}; got none (give at least one, or None for one size)")
+    for entry in entries:
+        if not all(math.isfinite(v) for v in entry):
+            raise InputError(f"{what}; got {entry!r}")
+        try:
+            shape.with_sizes(entry)
+        except InputError as exc:
+            raise InputError(f"particle_sizes: entry {entry!r}: {exc}") from None
+    return entries
 
 
 def parse_shape(value) -> Shape:
@@ -327,15 +337,15 @@ def _coerce(name: str, value):
     text = value.strip()
     if name == "dt" and text.lower() in ("", "none", "auto"):
         return None
-    if name == "segment_sizes":
+    if name == "particle_sizes":
         if text.lower() in ("", "none"):
             return None
-        # "LxD,LxD,..." in metres, e.g. 0.025x0.011,0.024x0.0105
+        # one entry per specimen, its sizes joined by x, in metres: 0.025x0.011,0.024x0.0105
         try:
             return tuple(tuple(float(v) for v in item.lower().split("x")) for item in text.split(","))
         except ValueError:
-            raise InputError(f"DEM parameter segment_sizes needs 'LxD,LxD,...' in metres, "
-                             f"got {value!r}") from None
+            raise InputError(f"DEM parameter particle_sizes needs 'AxB,AxB,...' in metres (the shape's "
+                             f"sizes of each specimen joined by x), got {value!r}") from None
     if isinstance(default, str):
         return text
     if isinstance(default, bool):

@@ -9,10 +9,10 @@ region x 10-190, y 10-90, z 100-240 mm during the first second; the end plate li
 (the carton side walls stop at x = 200 mm). Carton, plate and floor are all the wall material
 of ``params`` (steel). The run length (10 s in the paper) is the caller's ``sim.run(duration)``.
 
-Segments are all ``params``' segment by default; with a size distribution (the
-``size_distribution`` argument, or ``params.segment_sizes``) each segment is drawn from the
-measured (length, diameter) pairs: one template per distinct pair
-(``simulate.extensions.segment_of_size``), drawn with the pair's count as weight.
+Particles are all ``params``' shape by default; with a size distribution (the
+``size_distribution`` argument, or ``params.particle_sizes``) each particle is drawn from the
+measured sizes: one template per distinct size (``simulate.extensions.particle_of_size``),
+drawn with the size's count as weight.
 """
 
 from __future__ import annotations
@@ -74,7 +74,7 @@ def build_paper_repose_case(params: DEMParameters, seed, n_clumps: int = 500, *,
         Steps between returns to Python.
     size_distribution : simulate.extensions.SizeDistribution, optional
         Draw each segment from these measured (length, diameter) pairs; default
-        ``params.segment_sizes`` if set, else every segment is ``params``' segment.
+        ``params.particle_sizes`` if set, else every particle is ``params``' shape.
 
     Returns
     -------
@@ -89,7 +89,7 @@ def build_paper_repose_case(params: DEMParameters, seed, n_clumps: int = 500, *,
                      domain_lo=(-0.05, -outside_width, -0.02),
                      domain_hi=(L + outside_length, W + outside_width, H + 0.05),
                      dt=dt, rolling_lever=params.rolling_lever, force=force, chunk_steps=chunk_steps)
-    templates, weights = _segment_templates(sim, params, size_distribution)
+    templates, weights = _particle_templates(sim, params, size_distribution)
     sim.add_wall(Plane((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), material="steel", name="floor"))
     x_axis, y_axis, z_axis = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
     sim.add_wall(Rectangle((0.0, W / 2, H / 2), y_axis, z_axis, W / 2, H / 2, "steel", name="carton x-"))
@@ -106,21 +106,13 @@ def build_paper_repose_case(params: DEMParameters, seed, n_clumps: int = 500, *,
     return sim
 
 
-def segment_sizes(params: DEMParameters, size_distribution=None):
-    """The (length, diameter) pairs [m] to draw segments from: ``size_distribution``'s, else
-    ``params.segment_sizes`` (None when neither is given)."""
-    if size_distribution is not None:
-        return tuple(zip(size_distribution.lengths, size_distribution.diameters))
-    return params.segment_sizes
-
-
-def _segment_templates(sim: Simulation, params: DEMParameters, size_distribution):
-    """Add the segment template(s) to ``sim``; returns their ids and weights (None for one)."""
-    sizes = segment_sizes(params, size_distribution)
+def _particle_templates(sim: Simulation, params: DEMParameters, size_distribution):
+    """Add the particle template(s) to ``sim``; returns their ids and weights (None for one)."""
+    sizes = size_distribution.sizes if size_distribution is not None else params.particle_sizes
     if sizes is None:
         return sim.add_template(params.template()), None
-    from demcal.simulate.extensions import segment_of_size   # scipy only when a distribution is used
+    from demcal.simulate.extensions import particle_of_size   # scipy only when a distribution is used
 
-    counts = Counter((float(length), float(dia)) for length, dia in sizes)
-    ids = [sim.add_template(segment_of_size(params, length, dia)) for length, dia in counts]
+    counts = Counter(tuple(float(v) for v in entry) for entry in sizes)
+    ids = [sim.add_template(particle_of_size(params, entry)) for entry in counts]
     return ids, np.array(list(counts.values()), dtype=float)

@@ -64,11 +64,8 @@ def check_time_step(dt: float, t_rayleigh: float, max_fraction: float = DEFAULT_
 
 def smallest_radius(params) -> float:
     """Radius [m] of the smallest sphere a ``DEMParameters`` puts in a scene (its shape's, and
-    a segment size distribution's)."""
-    radius = float(params.shape.spheres()[1].min())
-    if params.segment_sizes:
-        radius = min(radius, min(d for _, d in params.segment_sizes) / 2.0)
-    return radius
+    a size distribution's)."""
+    return min(float(shape.spheres()[1].min()) for shape in (params.shape, *params.sized_shapes()))
 
 
 def material_rayleigh_time(params) -> float:

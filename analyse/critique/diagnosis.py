@@ -112,6 +112,7 @@ from scipy import optimize, stats
 
 from demcal.errors import InputError
 from demcal.jsonio import restore_nan
+from demcal.simulate.shapes import size_columns
 
 #: Practical threshold of each quantity family [its unit]: the smallest change over the
 #: covariate's range that matters for a calibration. Restitution and friction: 0.03, about a
@@ -159,8 +160,8 @@ CURVED_DEGREE = 4
 #: Covariates that are never tested (files and identifiers are recognised by name too).
 NOT_COVARIATES = {"id", "file", "track_file", "curve_file", "side", "annotated"}
 
-#: Specimen columns joined to rows that name a specimen.
-SPECIMEN_SIZE = ("length_mm", "diameter_mm", "mass_g")
+#: Specimen columns joined to rows that name a specimen: every shape's calliper columns, and the mass.
+SPECIMEN_SIZE = (*size_columns(), "mass_g")
 
 
 @dataclass(frozen=True)

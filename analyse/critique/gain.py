@@ -265,14 +265,10 @@ def velocity_gain(runner, params, lab_pair: str, rig_pair: str, trials, *, rng,
 
 
 def size_gain(runner, params, lab_pair: str, rig_pair: str, trials, before_twins: dict, *, rng) -> ExtensionGain:
-    """Per-trial segments of the specimen's own calliper size, on the held-out half of the drops."""
+    """Per-trial particles of the specimen's own calliper size, on the held-out half of the drops."""
     quantity = f"restitution.{lab_pair}"
     _, held = split_trials(trials)
-    sizes = {}
-    for row, _, _, _, cov, _ in held:
-        length, dia = cov.get("length_mm"), cov.get("diameter_mm")
-        if isinstance(length, (int, float)) and isinstance(dia, (int, float)):
-            sizes[row] = (float(length) * 1e-3, float(min(dia, length)) * 1e-3)
+    sizes = {row: s for row, s in ((t[0], _specimen_sizes(params.shape, t[4])) for t in held) if s is not None}
     held = [t for t in held if t[0] in sizes]
     if len(held) < 2:
         raise InputError(f"{quantity}: fewer than 2 held-out drops name a specimen with a calliper size")
@@ -280,11 +276,19 @@ def size_gain(runner, params, lab_pair: str, rig_pair: str, trials, before_twins
     after_tw = run_drop_twins(runner, params, held, rig_pair, quantity=quantity, sizes=sizes, extension=ext,
                               desc=f"held-out drops ({lab_pair}, specimen sizes)")
     before = [before_twins[t[0]].residual for t in held]
-    # a heap draws its segments from the sizes of every dropped specimen
-    every = [(float(c["length_mm"]) * 1e-3, float(min(c["diameter_mm"], c["length_mm"])) * 1e-3)
-             for _, _, _, _, c, _ in trials
-             if isinstance(c.get("length_mm"), (int, float)) and isinstance(c.get("diameter_mm"), (int, float))]
+    # a heap draws its particles from the sizes of every dropped specimen
+    every = [s for s in (_specimen_sizes(params.shape, t[4]) for t in trials) if s is not None]
     return _gain("size_distribution", "size_dependence", "rms_residual", quantity,
                  f"{len(held)} drops (every other row)", before, [t.residual for t in after_tw], rng,
-                 fitted="nothing fitted: each segment has its specimen's length and diameter", extension=ext,
-                 heap_settings={"segment_sizes": [list(x) for x in every]})
+                 fitted=f"nothing fitted: each {params.shape.name} has its specimen's "
+                        f"{', '.join(n.removesuffix('_m') for n in params.shape.sizes)}", extension=ext,
+                 heap_settings={"particle_sizes": [list(x) for x in every]})
+
+
+def _specimen_sizes(shape, covariates: dict):
+    """The sizes [m] (``Shape.size_values``) of the specimen a trial names, from the calliper
+    readings among its ``covariates``; None when it has none the shape can take."""
+    try:
+        return shape.sized_as(covariates).size_values
+    except InputError:
+        return None

@@ -41,6 +41,10 @@ HEAP_OBSERVABLES = (
 )
 
 
+#: An interval at most this share of its width before the extension counts as narrowed by it.
+NARROWED = 0.5
+
+
 @dataclass(frozen=True)
 class ParameterShift(Record):
     """One calibrated parameter before and after the extension.
@@ -66,6 +70,24 @@ class ParameterShift(Record):
     after_ci95: tuple | None
     shift: float
     within_uncertainty: bool | None
+
+    @property
+    def narrowed(self) -> bool:
+        """Whether the extension at least halved the 95 % interval (``NARROWED``): a twin that
+        could not reach the lab leaves its parameter unidentified, one that can pins it down."""
+        if self.before_ci95 is None or self.after_ci95 is None:
+            return False
+        before = self.before_ci95[1] - self.before_ci95[0]
+        return bool(before > 0 and self.after_ci95[1] - self.after_ci95[0] <= NARROWED * before)
+
+    @property
+    def verdict(self) -> str:
+        """In words: within or beyond its uncertainty, and whether its interval narrowed."""
+        if self.within_uncertainty is None:
+            return "no interval"
+        if not self.within_uncertainty:
+            return "beyond its uncertainty"
+        return "within its uncertainty, interval narrowed" if self.narrowed else "within its uncertainty"
 
 
 @dataclass(frozen=True)
@@ -221,15 +243,23 @@ def compare_campaigns(before: CampaignResult, before_values: dict, after: Campai
 def _conclusion(extension, params, obs, verdict_before, verdict_after) -> str:
     judged = [p for p in params if p.within_uncertainty is not None]
     moved = [p for p in judged if not p.within_uncertainty]
+    narrowed = [p for p in judged if p.within_uncertainty and p.narrowed]
     text = [f"Recalibrated with {extension}:"]
+    if narrowed:
+        text.append("; ".join(f"{p.name}: its 95 % interval narrowed from [{_fmt(p.before_ci95[0])}, "
+                              f"{_fmt(p.before_ci95[1])}] to [{_fmt(p.after_ci95[0])}, {_fmt(p.after_ci95[1])}] "
+                              f"({_fmt(p.before)} -> {_fmt(p.after)})" for p in narrowed) + ".")
     if not judged:
         text.append("the workflow gives no interval on the parameters, so their shifts "
                     + ", ".join(f"{p.name} {_fmt(p.before)} -> {_fmt(p.after)}" for p in params)
                     + " cannot be judged against their uncertainty.")
+    elif not moved and not narrowed:
+        text.append("every calibrated parameter moved by less than its own uncertainty (each new value "
+                    "inside the 95 % plausible interval of the campaign under critique), so the extension "
+                    "does not change the calibration.")
     elif not moved:
-        text.append(f"every calibrated parameter moved by less than its own uncertainty (each new value "
-                    f"inside the 95 % plausible interval of the campaign under critique), so the extension "
-                    f"does not change the calibration.")
+        text.append("every calibrated parameter's new value lies inside its 95 % plausible interval of the "
+                    "campaign under critique.")
     else:
         text.append("; ".join(f"{p.name} moved beyond its uncertainty, {_fmt(p.before)} "
                               f"[{_fmt(p.before_ci95[0])}, {_fmt(p.before_ci95[1])}] -> {_fmt(p.after)}"

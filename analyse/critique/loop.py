@@ -146,8 +146,7 @@ class Critique:
             lines.append(f"  heap-side gain of {h.extension} ({h.campaign}):")
             for p in h.parameters:
                 lines.append(f"    {p.name:14s} {_fmt(p.before, 4)} -> {_fmt(p.after, 4)}"
-                             + ("" if p.within_uncertainty is None else
-                                "  (within its uncertainty)" if p.within_uncertainty else "  (beyond its uncertainty)"))
+                             + ("" if p.within_uncertainty is None else f"  ({p.verdict})"))
             for o in h.observables:
                 lines.append(f"    {o.name:26s} {_fmt(o.before)} -> {with_unit(o.after, o.unit)}, difference "
                              f"{_fmt(o.difference)} [{_fmt(o.ci95[0])}, {_fmt(o.ci95[1])}]"

@@ -95,14 +95,14 @@ def twin_parameters(measurement, results=None):
 
 def drop_twin_runner(inputs: dict) -> dict:
     """One drop twin (top level, so that worker processes can run it)."""
-    from demcal.simulate.extensions import segment_of_size
+    from demcal.simulate.extensions import particle_of_size
     from demcal.simulate.params import DEMParameters
     from demcal.simulate.rigs import run_rig
 
     params = DEMParameters(**inputs["params"])
     opts = {}
     if inputs.get("template"):
-        opts["template"] = segment_of_size(params, *inputs["template"])
+        opts["template"] = particle_of_size(params, inputs["template"])
     res = run_rig("drop", params, int(inputs["seed"]), height=float(inputs["height"]),
                   orientation_deg=inputs.get("orientation_deg"), pair=inputs["pair"], **opts)
     return {"rig": "drop", "observable": res.observable, "notes": res.meta.get("notes", []),
@@ -241,14 +241,14 @@ def drop_task(params, pair: str, height: float, orientation, seed: int, *, templ
     """Inputs of one drop twin run."""
     return {"rig": "drop", "params": params.to_dict(), "pair": pair, "height": round(float(height), 9),
             "orientation_deg": orientation, "seed": int(seed),
-            "template": None if template is None else [float(template[0]), float(template[1])],
+            "template": None if template is None else [float(v) for v in template],
             "extension": extension}
 
 
 def run_drop_twins(runner: TwinRunner, params, trials, rig_pair_name: str, *, quantity: str,
                    sizes=None, extension=None, desc="drop twins") -> list:
     """Twin of each drop trial (``drop_trials`` rows) with ``params``; ``sizes`` maps a row to
-    its specimen's (length, diameter) [m] for per-trial segment templates."""
+    its specimen's sizes [m] (``Shape.size_values``) for per-trial templates."""
     tasks = [drop_task(params, rig_pair_name, h, o, row,
                        template=None if sizes is None else sizes.get(row), extension=extension)
              for row, _, h, o, _, _ in trials]

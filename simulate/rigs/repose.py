@@ -40,8 +40,8 @@ Profiles (``PROFILES``):
     the plate rises, exactly as in the paper case, so the angles agree within the seed
     scatter and respond to the contact parameters in the same directions.
 
-Size distribution. With ``size_distribution`` (or ``params.segment_sizes``) each segment is
-drawn from the measured (length, diameter) pairs (``simulate.extensions``, engine hook
+Size distribution. With ``size_distribution`` (or ``params.particle_sizes``) each particle is
+drawn from the measured sizes (``simulate.extensions``, engine hook
 ``size_distribution``); the engine hooks in use are named in the provenance options
 (``extensions``).
 
@@ -383,8 +383,8 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
         ``callback(sim, t_end, final)`` after each chunk (see ``simulate.rigs``).
     size_distribution : simulate.extensions.SizeDistribution, optional
         Draw each segment from these measured (length, diameter) pairs; they are set as
-        ``params.segment_sizes``, so the result's ``params`` record them. Default: as
-        ``params`` says (one segment size unless ``segment_sizes`` is set).
+        ``params.particle_sizes``, so the result's ``params`` record them. Default: as
+        ``params`` says (one particle size unless ``particle_sizes`` is set).
 
     Returns
     -------
@@ -457,7 +457,7 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
         advance_to(min(t_lift, prof.duration))
     # the plate is clear once its lower edge is a particle's width above the highest sphere
     z_top = float((sim.sphere_positions()[:, 2] + sim.sphere_radii()).max()) if sim.n_spheres else 0.0
-    width = max(d for _, d in params.segment_sizes) if params.segment_sizes else float(params.shape.extent[1])
+    width = max(float(shape.extent[1]) for shape in params.sized_shapes())
     t_clear = t_lift + (z_top + width) / geo.lift_speed
     if prof.early_end:
         sim.set_wall_motion(plate, (0.0, 0.0, geo.lift_speed), t_lift, t_clear)

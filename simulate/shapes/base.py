@@ -99,6 +99,28 @@ class Shape:
         """This shape's settings (sphere counts, a clump table) at ``other``'s size."""
         return replace(self, **{n: getattr(other, n) for n in self.sizes})
 
+    def sized_as(self, row: dict) -> "Shape":
+        """This shape's settings at the size of the specimen whose calliper readings ``row``
+        (column -> mm, other columns ignored) holds; :class:`InputError` when the row lacks the
+        shape's columns or they are not lengths it can take."""
+        columns = self.columns_of(row)
+        return self.scaled_to(type(self).from_specimen({c: row[c] for c in columns}))
+
+    @property
+    def size_values(self) -> tuple:
+        """The lengths named by ``sizes`` [m], in that order (one specimen's entry of a size
+        distribution)."""
+        return tuple(getattr(self, n) for n in self.sizes)
+
+    def with_sizes(self, values) -> "Shape":
+        """This shape's settings at the lengths ``values`` [m] (in the order of ``sizes``),
+        checked as the shape checks a specimen."""
+        values = tuple(values)
+        if len(values) != len(self.sizes):
+            raise InputError(f"shape {self.name} has {len(self.sizes)} size(s) ({', '.join(self.sizes)}), "
+                             f"got {len(values)}: {values!r}")
+        return replace(self, **dict(zip(self.sizes, (float(v) for v in values))))
+
     # -- geometry ------------------------------------------------------------------------------
 
     def spheres(self) -> tuple[np.ndarray, np.ndarray]:

@@ -17,7 +17,7 @@ import yaml
 from demcal.errors import InputError
 from demcal.simulate.extensions import (EXTENSIONS, SizeDistribution, describe, epsd_damping, epsd_rolling_torque,
                                  epsd_stiffness, fit_velocity_restitution, impact_speed, invert_drop_twin,
-                                 parameters_for_impact, segment_of_size, surface_ripple, with_more_spheres)
+                                 parameters_for_impact, particle_of_size, surface_ripple, with_more_spheres)
 from demcal.simulate.params import DEMParameters
 from demcal.simulate.shapes.segment import Segment
 
@@ -131,7 +131,7 @@ def test_size_distribution_resamples_measured_pairs():
 
     frame = pd.DataFrame({"specimen_id": ["a", "b", "c"], "length_mm": [20.0, 25.0, 30.0],
                           "diameter_mm": [9.0, 11.0, 13.0]})
-    dist = SizeDistribution.from_specimens(frame)
+    dist = SizeDistribution.from_specimens(frame, Segment(0.025, 0.011, 5))
     draws = dist.draw(np.random.default_rng(1), 3000)
     pairs = {tuple(np.round(d * 1e3, 6)) for d in draws}
     assert pairs == {(20.0, 9.0), (25.0, 11.0), (30.0, 13.0)}      # lengths and diameters stay paired
@@ -139,10 +139,31 @@ def test_size_distribution_resamples_measured_pairs():
     assert dist.size_of("c") == pytest.approx((0.030, 0.013))
 
 
-def test_segment_of_size_scales_the_mass_as_the_cylinder():
+def test_size_distribution_of_other_shapes_reads_each_specimen_as_its_shape():
+    import pandas as pd
+
+    from demcal.simulate.extensions import with_size_distribution
+    from demcal.simulate.shapes.kernel import Kernel
+    from demcal.simulate.shapes.sphere import Sphere
+
+    axes = pd.DataFrame({"specimen_id": ["a", "b"], "length_mm": [7.0, 8.0], "width_mm": [6.0, 6.5],
+                         "thickness_mm": [5.0, 5.5], "moisture_pct": [10.0, 11.0]})
+    spheres = SizeDistribution.from_specimens(axes, Sphere(0.0066))
+    assert spheres.size_of("b") == pytest.approx(((8.0 * 6.5 * 5.5) ** (1 / 3) * 1e-3,))  # geometric mean
+    kernels = SizeDistribution.from_specimens(axes, Kernel(0.0072, 0.006, 0.005, n_spheres=3))
+    np.testing.assert_allclose(kernels.sizes, ((0.007, 0.006, 0.005), (0.008, 0.0065, 0.0055)), rtol=1e-12)
+    p = with_size_distribution(DEMParameters(shape=Kernel(0.0072, 0.006, 0.005, n_spheres=3)), kernels)
+    assert [s.n_spheres for s in p.sized_shapes()] == [3, 3]        # the shape's settings, each size
+    tpl = particle_of_size(p, kernels.sizes[1])
+    assert tpl.mass == pytest.approx(Kernel(0.008, 0.0065, 0.0055, n_spheres=3).template(912.0).mass, rel=1e-12)
+    with pytest.raises(InputError, match="width_mm"):
+        SizeDistribution.from_specimens(axes.drop(columns="width_mm"), Kernel(0.0072, 0.006, 0.005))
+
+
+def test_particle_of_size_scales_the_segments_mass_as_the_cylinder():
     params = DEMParameters(mass_model="cylinder")
-    a = segment_of_size(params, 0.025, 0.011)
-    b = segment_of_size(params, 0.030, 0.0121)
+    a = particle_of_size(params, (0.025, 0.011))
+    b = particle_of_size(params, (0.030, 0.0121))
     # solid cylinder: m = rho pi D^2 L / 4
     assert a.mass == pytest.approx(912.0 * math.pi * 0.011 ** 2 * 0.025 / 4, rel=1e-9)
     assert b.mass / a.mass == pytest.approx((0.030 * 0.0121 ** 2) / (0.025 * 0.011 ** 2), rel=1e-9)
@@ -234,7 +255,7 @@ def test_engine_hooks_are_named_from_the_parameters():
     assert (p.e_pw, p.e_pw_v_ref, p.e_pw_exponent) == (law.e_ref, law.v_ref, law.exponent)
     assert p.e_pw_v_min == pytest.approx(math.sqrt(2 * 9.81 * 0.1))  # held below the slowest drop
     p = with_spring_dashpot_rolling(p, damping_ratio=0.2)
-    p = with_size_distribution(p, SizeDistribution((0.025, 0.03), (0.011, 0.012)))
+    p = with_size_distribution(p, SizeDistribution(((0.025, 0.011), (0.03, 0.012))))
     hooks = engine_hooks(p)
     assert [h["extension"] for h in hooks] == ["velocity_dependent_restitution", "rolling_spring_dashpot",
                                                "size_distribution"]
@@ -242,8 +263,11 @@ def test_engine_hooks_are_named_from_the_parameters():
     assert hooks[1]["damping_ratio"] == 0.2 and hooks[2]["n_sizes"] == 2
     # the switches travel with the parameters (run records) and back
     again = DEMParameters(**p.to_dict())
-    assert again == p and again.segment_sizes == ((0.025, 0.011), (0.03, 0.012))
-    assert DEMParameters.from_names({"segment_sizes": "0.025x0.011,0.03x0.012"}).segment_sizes == p.segment_sizes
+    assert again == p and again.particle_sizes == ((0.025, 0.011), (0.03, 0.012))
+    assert DEMParameters.from_names({"particle_sizes": "0.025x0.011,0.03x0.012"}).particle_sizes == p.particle_sizes
+    # a results file written before the rename reads as the same distribution
+    assert DEMParameters.from_names({"segment_sizes": ((0.025, 0.011), (0.03, 0.012))}) == DEMParameters().with_(
+        particle_sizes=p.particle_sizes)
 
 
 def test_engine_velocity_law_equals_the_per_impact_twin():
@@ -274,13 +298,13 @@ def test_repose_rig_records_the_hooks_it_runs():
     tiny = ReposeProfile(name="tiny", scale=1.0, fill_time=0.1, fill_bottom=0.1,
                          fill_top=0.9, lift_time=None, duration=0.4, early_end=True)
     geo = ReposeGeometry(box_length=0.08, box_width=0.06, box_height=0.08, fill_count=20)
-    dist = SizeDistribution((0.022, 0.025, 0.028), (0.010, 0.011, 0.012))
+    dist = SizeDistribution(((0.022, 0.010), (0.025, 0.011), (0.028, 0.012)))
     params = DEMParameters(rolling_model="epsd", e_pp_exponent=0.1, e_pw_exponent=0.1)
     res = run_rig("repose", params, seed=1, profile=tiny, geometry=geo, size_distribution=dist)
-    assert res.params["segment_sizes"] == ((0.022, 0.010), (0.025, 0.011), (0.028, 0.012))
+    assert res.params["particle_sizes"] == ((0.022, 0.010), (0.025, 0.011), (0.028, 0.012))
     assert res.params["rolling_model"] == "epsd" and res.params["e_pw_exponent"] == 0.1
     names = [h["extension"] for h in res.provenance.options["extensions"]]
     assert names == ["velocity_dependent_restitution", "rolling_spring_dashpot", "size_distribution"]
     assert set(np.round(2 * np.unique(res.record["sphere_radii"]), 6)) <= {0.010, 0.011, 0.012}
     plain = run_rig("repose", DEMParameters(), seed=1, profile=tiny, geometry=geo)
-    assert "extensions" not in plain.provenance.options and plain.params["segment_sizes"] is None
+    assert "extensions" not in plain.provenance.options and plain.params["particle_sizes"] is None

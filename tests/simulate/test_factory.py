@@ -87,12 +87,12 @@ SIZES = ((0.021, 0.0095), (0.023, 0.0100), (0.025, 0.0110), (0.025, 0.0110), (0.
 def _sized_sim(n, seed, sizes=SIZES, dt=7.43678e-5):
     from collections import Counter
 
-    from demcal.simulate.extensions import segment_of_size
+    from demcal.simulate.extensions import particle_of_size
 
     params = DEMParameters()
     sim = simulation(params, dt=dt, lo=(-0.3, -0.3, -0.3), hi=(0.3, 0.3, 0.3))
     counts = Counter(sizes)
-    ids = [sim.add_template(segment_of_size(params, length, dia)) for length, dia in counts]
+    ids = [sim.add_template(particle_of_size(params, size)) for size in counts]
     factory = ParticleFactory(ids, n, (-0.25, -0.25, -0.25), (0.25, 0.25, 0.25), seed=seed,
                               end_time=0.0, weights=list(counts.values()))
     sim.add_factory(factory)

@@ -23,9 +23,9 @@ def test_engine_hooks_are_off_by_default():
     p = DEMParameters()
     assert (p.e_pp_exponent, p.e_pw_exponent, p.e_pp_v_ref, p.e_pw_v_ref, p.e_pp_v_min, p.e_pw_v_min) == \
         (0.0, 0.0, 1.0, 1.0, 0.0, 0.0)
-    assert (p.rolling_model, p.rolling_damping_ratio, p.segment_sizes) == ("constant_torque", 0.3, None)
-    q = DEMParameters.from_names({"e_pw_exponent": "0.25", "rolling_model": "epsd", "segment_sizes": "none"})
-    assert q.e_pw_exponent == 0.25 and q.rolling_model == "epsd" and q.segment_sizes is None
+    assert (p.rolling_model, p.rolling_damping_ratio, p.particle_sizes) == ("constant_torque", 0.3, None)
+    q = DEMParameters.from_names({"e_pw_exponent": "0.25", "rolling_model": "epsd", "particle_sizes": "none"})
+    assert q.e_pw_exponent == 0.25 and q.rolling_model == "epsd" and q.particle_sizes is None
 
 
 def test_from_names_converts_strings():
@@ -48,8 +48,9 @@ def test_unknown_name_lists_the_valid_ones():
     ({"shear_modulus_pa": "soft"}, "needs a number"),
     ({"rolling_model": "type_c"}, "constant_torque, epsd"), ({"rolling_damping_ratio": -1.0}, "rolling_damping_ratio"),
     ({"e_pw_v_ref": -2.0}, "e_pw_v_ref"), ({"e_pw_exponent": float("nan")}, "e_pw_exponent"),
-    ({"segment_sizes": ((0.01, 0.02),)}, "0 < diameter <= length"), ({"segment_sizes": ()}, "at least one"),
-    ({"segment_sizes": "0.025-0.011"}, "LxD"),
+    ({"particle_sizes": ((0.01, 0.02),)}, "exceeds the length"), ({"particle_sizes": ()}, "at least one"),
+    ({"particle_sizes": "0.025-0.011"}, "AxB"), ({"particle_sizes": ((0.025,),)}, "has 2 size"),
+    ({"shape": "sphere:0.0066", "particle_sizes": ((0.006, 0.007),)}, "has 1 size"),
 ])
 def test_invalid_values_name_the_parameter(changes, match):
     with pytest.raises(InputError, match=match):

@@ -57,9 +57,9 @@ def test_paper_repose_case_full_run_liggghts_convention():
 
 
 def test_repose_case_draws_segments_from_a_size_distribution():
-    from demcal.simulate.extensions import SizeDistribution, segment_of_size
+    from demcal.simulate.extensions import SizeDistribution, particle_of_size
 
-    dist = SizeDistribution(lengths=(0.022, 0.025, 0.025, 0.028), diameters=(0.010, 0.011, 0.011, 0.012))
+    dist = SizeDistribution(((0.022, 0.010), (0.025, 0.011), (0.025, 0.011), (0.028, 0.012)))
     params = DEMParameters().with_(**BENCHMARK)
     small = dict(n_clumps=60, box_length=0.08, box_width=0.05, fill_time=0.0, fill_bottom=0.02, fill_top=0.2)
     sim = build_paper_repose_case(params, seed=5, size_distribution=dist, **small)
@@ -68,12 +68,12 @@ def test_repose_case_draws_segments_from_a_size_distribution():
     factory = sim.factories[0]
     np.testing.assert_allclose(factory.probabilities, [0.25, 0.5, 0.25])
     for tpl, (length, dia) in zip(sim.templates, ((0.022, 0.010), (0.025, 0.011), (0.028, 0.012))):
-        ref = segment_of_size(params, length, dia)
+        ref = particle_of_size(params, (length, dia))
         assert tpl.mass == ref.mass and np.array_equal(tpl.radii, ref.radii)
     sim.run(n_steps=0)
     assert set(factory.body_templates) == {0, 1, 2}
     # the same distribution given as parameters (what a run record holds) builds the same heap
-    again = build_paper_repose_case(params.with_(segment_sizes=tuple(zip(dist.lengths, dist.diameters))),
+    again = build_paper_repose_case(params.with_(particle_sizes=dist.sizes),
                                     seed=5, **small)
     again.run(n_steps=0)
     np.testing.assert_array_equal(again.positions(), sim.positions())
