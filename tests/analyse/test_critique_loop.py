@@ -149,6 +149,24 @@ def test_a_round_seeds_size_extension_drops_each_specimen_at_its_own_size(tmp_pa
     assert "each sphere has its specimen's diameter" in gain.fitted
 
 
+def test_a_round_seed_dropped_at_any_orientation_shows_no_orientation_effect(tmp_path):
+    """A sphere has no orientation: drops logged at random orientations show no effect in the
+    lab's data, and the twin rebounds alike at every orientation (no slope against
+    orientation_deg), so the discrepancy is not named and orientation_rotation is ruled out."""
+    from demcal.simulate.params import DEMParameters, parse_shape
+
+    truth = Truth(params=DEMParameters(shape=parse_shape("sphere:0.0066"), particle_density_kg_m3=1200.0,
+                                       shear_modulus_pa=1.04e6, e_pw=0.6, dt=None))
+    vw = write_virtual_workbook(truth, tmp_path / "lab", rng=11, photos="none", pairs=("particle-steel",),
+                                drop_heights_mm=(400.0,), n_drop=12, surfaces=("steel",), n_incline=6, n_tracks=0,
+                                orientation_range_deg=(0.0, 90.0))
+    c = run_critique(vw.path, rigs=("drop",), store_dir=tmp_path / "store")
+    assert c.found() == []
+    slope = next(d for d in c.discrepancies if "slope against orientation_deg" in d.observable)
+    assert not slope.exceeds and abs(slope.simulated) < 1e-6
+    assert {m.mechanism: m.verdict for m in c.model_findings}.get("orientation_rotation") == "ruled_out"
+
+
 def test_twin_only_orientation_dependence_is_a_model_discrepancy_not_a_data_effect(tmp_path):
     """Drops at random orientations whose rebound does not depend on it: no data effect; the
     twin's strong dependence on orientation is a discrepancy of its own, and its causes are
