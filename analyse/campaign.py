@@ -325,11 +325,11 @@ def base_parameters(measurement):
     return DEMParameters().with_(**changes)
 
 
-def repose_geometry(meta: dict) -> dict:
-    """The repose rig's geometry from the workbook meta, as a plain dict."""
+def repose_geometry(measurement) -> dict:
+    """The repose rig's geometry from a measurement's workbook meta, as a plain dict."""
     from demcal.simulate.rigs.repose import ReposeGeometry
 
-    return ReposeGeometry.from_meta(meta).to_dict()
+    return ReposeGeometry.from_meta(measurement.meta, file=measurement.workbook.get("source")).to_dict()
 
 
 # ----------------------------------------------------------------------------------------------
@@ -499,7 +499,7 @@ def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
     factors = factor_levels(measurement, config.levels)
     base = base_parameters(measurement).with_(**config.model_extensions)
     material_time_step(base)          # a time step above the safe limit is refused before any run
-    geometry = repose_geometry(measurement.meta)
+    geometry = repose_geometry(measurement)
     if config.workflow == "plausible":
         from demcal.analyse.plausible import derive_plausible
 

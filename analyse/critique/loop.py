@@ -409,7 +409,7 @@ def _repose_twins(runner, measurement, results, campaign, params, repose_seeds, 
     elif repose_seeds > 0:
         from demcal.analyse.campaign import repose_geometry, repose_runner
         tasks = [{"rig": "repose", "profile": "quick", "params": params.to_dict(),
-                  "geometry": repose_geometry(measurement.meta), "seed": 9000 + i} for i in range(repose_seeds)]
+                  "geometry": repose_geometry(measurement), "seed": 9000 + i} for i in range(repose_seeds)]
         angles = [r["observable"]["angle_deg"] for r in runner(repose_runner, tasks, "repose twins")]
         note = f"{repose_seeds} quick-profile repose runs"
     else:

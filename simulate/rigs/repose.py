@@ -116,7 +116,10 @@ class ReposeGeometry:
         """From a workbook ``meta`` dict (keys ``box_length_mm``, ``box_width_mm``,
         ``box_height_mm``, ``plate_lift_speed_mm_s``, ``fill_count``; docs/workbook.md); a
         missing or empty key keeps the default (200, 100, 250 mm, 100 mm/s, 500). A bad value
-        raises ``WorkbookError`` naming the sheet, the key and the value (and ``file``)."""
+        raises ``WorkbookError`` naming the sheet, the key and the value (and ``file``), and so
+        does a heap of another rig (``repose_rig``, or that rig's dimensions): the twin would
+        simulate the carton while the lab photographed another heap."""
+        _refuse_other_rigs(meta or {}, file)
         values = {}
         for key, (name, factor) in cls.META_KEYS.items():
             raw = meta.get(key) if meta else None
@@ -162,6 +165,30 @@ class ReposeGeometry:
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+
+#: The repose rig this twin is (meta ``repose_rig``, the default when it is not given).
+REPOSE_RIG = "lifted_plate"
+#: Repose rigs labs use that the twin does not simulate, with the prefix of their meta keys.
+OTHER_REPOSE_RIGS = {"lifting_cylinder": "cylinder_", "funnel": "funnel_", "drum": "drum_"}
+
+
+def _refuse_other_rigs(meta: dict, file) -> None:
+    """Refuse a workbook whose heap is not the lifted plate's, by its ``repose_rig`` or a
+    dimension of another rig, naming the key."""
+    rig = meta.get("repose_rig")
+    if rig is not None and str(rig).strip() and str(rig).strip().lower() != REPOSE_RIG:
+        raise WorkbookError(f"meta repose_rig: the repose twin simulates the carton with a lifted end plate "
+                            f"({REPOSE_RIG}) only, so a heap of another rig cannot be calibrated against "
+                            f"(its photos still measure with demcal measure); rigs labs use: "
+                            f"{', '.join((REPOSE_RIG, *OTHER_REPOSE_RIGS))}",
+                            file=file, sheet="meta", column="value", value=rig)
+    for key in meta:
+        other = next((r for r, prefix in OTHER_REPOSE_RIGS.items() if str(key).startswith(prefix)), None)
+        if other is not None:
+            raise WorkbookError(f"meta {key}: a dimension of the {other} rig, which the repose twin does not "
+                                f"simulate (it simulates the lifted plate: {', '.join(ReposeGeometry.META_KEYS)})",
+                                file=file, sheet="meta", column="key", value=key)
 
 
 @dataclass(frozen=True)

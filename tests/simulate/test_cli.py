@@ -87,3 +87,23 @@ def test_simulate_bad_input_exits_2_with_one_line(argv, needle, capsys):
     assert rc == 2
     assert needle in err
     assert "Traceback" not in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("command", ["simulate", "calibrate"])
+def test_a_lifting_cylinder_workbook_is_refused_before_any_run(command, tmp_path, capsys):
+    """A lab whose heap came from a lifting cylinder is told the twin simulates the lifted plate
+    only, naming the file, the sheet and the key, instead of having the carton simulated."""
+    from demcal.simulate.virtual_lab import Truth, write_virtual_workbook
+
+    vw = write_virtual_workbook(Truth(), tmp_path / "lab", rng=1, photos="analytic", n_photos=3, n_drop=2,
+                                n_incline=3, n_tracks=0, n_specimens=5, n_compression=3)
+    wb = vw.path                                  # a folder of CSV sheets
+    with open(wb / "meta.csv", "a", encoding="utf-8") as f:
+        f.write("repose_rig,lifting_cylinder\n")
+    argv = (["simulate", "repose", "--workbook", str(wb), "--json", str(tmp_path / "r.json")] if command == "simulate"
+            else ["calibrate", str(wb), "--out", str(tmp_path / "out"), "--profile", "quick"])
+    rc = main(argv)
+    err = capsys.readouterr().err
+    assert rc == 2 and "Traceback" not in err and err.count("\n") == 1
+    assert "sheet 'meta'" in err and "repose_rig" in err and "lifted_plate" in err
+    assert not (tmp_path / "r.json").exists() and not list((tmp_path / "out").glob("runs/*.json"))

@@ -282,6 +282,18 @@ def test_repose_geometry_from_workbook_meta():
     assert (q.box_length, q.fill_count) == (pytest.approx(0.12), 108)
 
 
+def test_a_heap_of_another_rig_is_refused_not_simulated_as_the_carton():
+    assert ReposeGeometry.from_meta({"repose_rig": "lifted_plate"}) == ReposeGeometry()
+    assert ReposeGeometry.from_meta({"repose_rig": " Lifted_Plate "}) == ReposeGeometry()
+    with pytest.raises(WorkbookError, match=r"file wb.xlsx, sheet .meta.*repose_rig.*lifted end plate.*"
+                                            r"lifting_cylinder, funnel, drum.*'lifting_cylinder'"):
+        ReposeGeometry.from_meta({"repose_rig": "lifting_cylinder"}, file="wb.xlsx")
+    for key, rig in (("cylinder_diameter_mm", "lifting_cylinder"), ("drum_speed_rpm", "drum"),
+                     ("funnel_outlet_mm", "funnel")):
+        with pytest.raises(WorkbookError, match=f"meta {key}: a dimension of the {rig} rig"):
+            ReposeGeometry.from_meta({key: 100.0})
+
+
 # ---------------------------------------------------------------------------------- run_rig
 
 def test_run_rig_rejects_unknown_rig_listing_valid_ones():
