@@ -237,30 +237,12 @@ def model_settings() -> tuple:
 
 
 def campaign_runner(inputs: dict) -> dict:
-    """Run one campaign task on the rig its ``rig`` names: the repose twin, or the drop and
-    incline twins of the joint calibration (top level, so workers can pickle it)."""
-    rig = inputs.get("rig", "repose")
-    if rig == "repose":
-        return repose_runner(inputs)
-    from demcal.analyse.critique.twins import drop_twin_runner, incline_twin_runner
+    """Run one campaign task on the rig it names (``simulate.rigs.run_task``): the repose
+    twin, or the drop and incline twins of the joint calibration. The name a campaign records
+    as its runner (top level, so workers can pickle it)."""
+    from demcal.simulate.rigs import run_task
 
-    if rig == "drop":
-        return drop_twin_runner(inputs)
-    if rig == "incline":
-        return incline_twin_runner(inputs)
-    raise InputError(f"unknown rig {rig!r} in a campaign task")
-
-
-def repose_runner(inputs: dict) -> dict:
-    """Run the repose rig for one set of campaign inputs (top level, so workers can pickle it)."""
-    from demcal.simulate.params import DEMParameters
-    from demcal.simulate.rigs import run_rig
-    from demcal.simulate.rigs.repose import ReposeGeometry
-
-    params = DEMParameters.from_names(inputs["params"])
-    result = run_rig("repose", params, inputs["seed"], profile=inputs["profile"],
-                     geometry=ReposeGeometry(**inputs["geometry"]))
-    return result.to_dict()
+    return run_task(inputs)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -535,6 +517,8 @@ def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
 
 def _derive_design_expert(measurement, config: CampaignConfig, execute, factors, base, geometry) -> dict:
     """Steps 2-7 of the source paper's procedure (module docstring)."""
+    from demcal.simulate.rigs import repose
+
     target = float(measurement.quantities["repose_angle_deg"].value)
     letters = list(factors)
     low = np.array([factors[f]["low"] for f in letters])
@@ -543,9 +527,7 @@ def _derive_design_expert(measurement, config: CampaignConfig, execute, factors,
     param_of = {f: factors[f]["parameter"] for f in letters}
 
     def inputs(settings: dict, seed: int) -> dict:
-        params = base.with_(**settings)
-        return {"rig": "repose", "profile": config.profile, "params": params.to_dict(),
-                "geometry": geometry, "seed": int(seed)}
+        return repose.task(base.with_(**settings), seed, profile=config.profile, geometry=geometry)
 
     def settings(actual_by_letter: dict) -> dict:
         return {param_of[f]: float(v) for f, v in actual_by_letter.items()}

@@ -128,7 +128,8 @@ def twin_constraints(measurement, base, factors: dict, execute, run_refs) -> dic
     one parameter is varied the others stay at their measured means.
     """
     from demcal.analyse.campaign import PARAMETER_BOUNDS
-    from demcal.analyse.critique.twins import drop_task, drop_trials, incline_groups, wall_of
+    from demcal.analyse.critique.twins import drop_trials, incline_groups, wall_of
+    from demcal.simulate.rigs import drop, incline
 
     wall = wall_of(measurement.meta)
     trials = drop_trials(measurement)
@@ -150,7 +151,7 @@ def twin_constraints(measurement, base, factors: dict, execute, run_refs) -> dic
                 continue
             pair = "particle-particle" if surface == "particle-particle" else "particle-steel"
             grid = np.linspace(*RESTITUTION_RANGE, GRID["drop"])
-            tasks = [drop_task(base.with_(**{name: float(g)}), pair, h, o, row)
+            tasks = [drop.task(base.with_(**{name: float(g)}), pair, h, o, row)
                      for g in grid for row, _, h, o, _, _ in rows]
             records = execute(f"drop twins, {name}", tasks)
             y = np.array([r[1] for r in rows])
@@ -167,8 +168,7 @@ def twin_constraints(measurement, base, factors: dict, execute, run_refs) -> dic
             lo = max(lo_b, est.value - 4 * est.sd)
             hi = min(hi_b, est.value + 4 * est.sd)
             grid = np.linspace(lo, hi, GRID["incline"])
-            tasks = [{"rig": "incline", "params": base.with_(**{name: float(g)}).to_dict(), "mode": mode,
-                      "surface": rig_surface, "seed": 0} for g in grid]
+            tasks = [incline.task(base.with_(**{name: float(g)}), mode, rig_surface, 0) for g in grid]
             records = execute(f"incline twins, {name}", tasks)
             key = "rolling_friction_apparent" if mode == "roll" else "static_friction_apparent"
             onset = np.array([r["result"]["observable"].get(key) for r in records], dtype=float)

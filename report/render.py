@@ -212,7 +212,8 @@ def _runner_text(r: CampaignResult) -> tuple[str, bool]:
     runner = r.runner
     if runner is None:
         return "The DEM runner of this campaign is not recorded in results.json.", True
-    # Campaigns stored before the demcal namespace name the runner without the prefix.
+    # Campaigns stored before the demcal namespace name the runner without the prefix; the
+    # first ones ran their heaps by analyse.campaign.repose_runner.
     if runner.removeprefix("demcal.") in ("analyse.campaign.campaign_runner",
                                           "analyse.campaign.repose_runner"):
         return ("Every DEM run was made by demcal's own DEM (numba; Hertz-Mindlin contacts, "

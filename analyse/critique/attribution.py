@@ -48,7 +48,7 @@ from scipy import stats
 
 from demcal.analyse.critique.diagnosis import MIN_ROWS, PRACTICAL_THRESHOLDS, trend_test
 from demcal.analyse.critique.gain import N_BOOTSTRAP, _gain, split_trials
-from demcal.analyse.critique.twins import Discrepancy, drop_task, drop_twin_runner, run_drop_twins
+from demcal.analyse.critique.twins import Discrepancy, run_drop_twins
 from demcal.simulate.extensions import engine_hooks
 from demcal.simulate.rigid_impact import rigid_drop
 
@@ -241,8 +241,10 @@ def _rigid_body_signature(runner, params, on_params, rig_pair: str, trials, twin
         off, on = (float(np.mean([twins[row][k] for row, _, _ in logged])) for k in (0, 1))
         return f"at the {len(logged)} drops' logged orientations", reference, off, on
     height = float(np.median([t[2] for t in trials]))
-    flat = runner(drop_twin_runner, [drop_task(params, rig_pair, height, FLAT_DEG, 0),
-                                     drop_task(on_params, rig_pair, height, FLAT_DEG, 0)], "flat landing")
+    from demcal.simulate.rigs import drop, run_task
+
+    flat = runner(run_task, [drop.task(params, rig_pair, height, FLAT_DEG, 0),
+                             drop.task(on_params, rig_pair, height, FLAT_DEG, 0)], "flat landing")
     off, on = (float(r["observable"]["apparent_restitution"]) for r in flat)
     return "landing flat", rigid_drop(body, FLAT_DEG, e_c, height).apparent_restitution, off, on
 

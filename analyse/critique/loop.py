@@ -57,8 +57,7 @@ from demcal.analyse.critique.gain import ExtensionGain
 from demcal.analyse.critique.heap_gain import HeapGain, with_unit
 from demcal.analyse.critique.mechanisms import CATALOGUE, Finding, ill_conditioned, judge
 from demcal.analyse.critique.twins import (Discrepancy, TwinRunner, constant_discrepancy, drop_trials,
-                                    incline_groups,
-                                    incline_twin_runner, independent_discrepancy, paired_discrepancy,
+                                    incline_groups, independent_discrepancy, paired_discrepancy,
                                     repose_validation_angles, rig_pair, run_drop_twins, twin_parameters,
                                     wall_of)
 from demcal.analyse.results import read_campaign_results
@@ -371,6 +370,8 @@ def _drop_twins(runner, measurement, workbook, params, wall, discrepancies, stat
 
 
 def _incline_twins(runner, measurement, workbook, params, wall, discrepancies):
+    from demcal.simulate.rigs import incline, run_task
+
     groups = incline_groups(measurement, workbook)
     tasks, keys = [], []
     for (quantity, surface, mode), rows in groups.items():
@@ -380,10 +381,9 @@ def _incline_twins(runner, measurement, workbook, params, wall, discrepancies):
                                                       [r[1] for r in rows], None,
                                                       f"not simulated: no DEM parameters for surface {surface}"))
             continue
-        tasks.append({"rig": "incline", "params": params.to_dict(), "mode": mode, "surface": rig_surface,
-                      "seed": 0})
+        tasks.append(incline.task(params, mode, rig_surface, 0))
         keys.append((quantity, surface, mode))
-    results = runner(incline_twin_runner, tasks, "incline twins")
+    results = runner(run_task, tasks, "incline twins")
     for key, res in zip(keys, results):
         quantity, surface, mode = key
         ob = res["observable"]
@@ -399,6 +399,8 @@ def _incline_twins(runner, measurement, workbook, params, wall, discrepancies):
 
 
 def _repose_twins(runner, measurement, results, campaign, params, repose_seeds, discrepancies):
+    from demcal.simulate.rigs import repose, run_task
+
     est = measurement.quantities.get("repose_angle_deg")
     if est is None:
         return
@@ -407,10 +409,10 @@ def _repose_twins(runner, measurement, results, campaign, params, repose_seeds, 
     if results is not None:
         angles, note = repose_validation_angles(campaign, results)
     elif repose_seeds > 0:
-        from demcal.analyse.campaign import repose_geometry, repose_runner
-        tasks = [{"rig": "repose", "profile": "quick", "params": params.to_dict(),
-                  "geometry": repose_geometry(measurement), "seed": 9000 + i} for i in range(repose_seeds)]
-        angles = [r["observable"]["angle_deg"] for r in runner(repose_runner, tasks, "repose twins")]
+        from demcal.analyse.campaign import repose_geometry
+        tasks = [repose.task(params, 9000 + i, profile="quick", geometry=repose_geometry(measurement))
+                 for i in range(repose_seeds)]
+        angles = [r["observable"]["angle_deg"] for r in runner(run_task, tasks, "repose twins")]
         note = f"{repose_seeds} quick-profile repose runs"
     else:
         discrepancies.append(independent_discrepancy("repose_angle_deg (photo method)", "repose", measured, [],

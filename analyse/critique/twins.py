@@ -46,16 +46,6 @@ from demcal.jsonio import restore_nan
 from demcal.units import GRAVITY
 
 
-#: Screening factors' measured quantity -> DEM parameter ({wall}: the rig's plate material).
-MEASURED_PARAMETERS = (("poisson_ratio", "poisson_ratio"),
-                       ("restitution.particle-particle", "e_pp"),
-                       ("static_friction.particle", "mu_s_pp"),
-                       ("rolling_friction.particle", "mu_r_pp"),
-                       ("restitution.particle-{wall}", "e_pw"),
-                       ("static_friction.{wall}", "mu_s_pw"),
-                       ("rolling_friction.{wall}", "mu_r_pw"))
-
-
 def wall_of(meta: dict) -> str:
     """The rig's plate material from the workbook meta (default ``steel``)."""
     return str(meta.get("contact_material") or "steel").strip().lower() or "steel"
@@ -73,7 +63,7 @@ def twin_parameters(measurement, results=None):
     -------
     (simulate.params.DEMParameters, str)
     """
-    from demcal.analyse.campaign import PARAMETER_BOUNDS, base_parameters
+    from demcal.analyse.campaign import PARAMETER_BOUNDS, SCREENING_FACTORS, base_parameters
     from demcal.simulate.params import DEMParameters
 
     if results and results.calibrated_parameters:
@@ -81,7 +71,7 @@ def twin_parameters(measurement, results=None):
     params = base_parameters(measurement)
     wall = wall_of(measurement.meta)
     changes = {}
-    for quantity, name in MEASURED_PARAMETERS:
+    for _, name, quantity in SCREENING_FACTORS:
         est = measurement.quantities.get(quantity.format(wall=wall))
         if est is not None and math.isfinite(est.value):
             lo, hi = PARAMETER_BOUNDS[name]
@@ -91,33 +81,6 @@ def twin_parameters(measurement, results=None):
 
 # ----------------------------------------------------------------------------------------------
 # run execution
-
-
-def drop_twin_runner(inputs: dict) -> dict:
-    """One drop twin (top level, so that worker processes can run it)."""
-    from demcal.simulate.extensions import particle_of_size
-    from demcal.simulate.params import DEMParameters
-    from demcal.simulate.rigs import run_rig
-
-    params = DEMParameters(**inputs["params"])
-    opts = {}
-    if inputs.get("template"):
-        opts["template"] = particle_of_size(params, inputs["template"])
-    res = run_rig("drop", params, int(inputs["seed"]), height=float(inputs["height"]),
-                  orientation_deg=inputs.get("orientation_deg"), pair=inputs["pair"], **opts)
-    return {"rig": "drop", "observable": res.observable, "notes": res.meta.get("notes", []),
-            "dt": res.meta["dt"], "steps": res.meta["steps"], "wall_s": res.meta["wall_s"]}
-
-
-def incline_twin_runner(inputs: dict) -> dict:
-    """One incline twin (top level)."""
-    from demcal.simulate.params import DEMParameters
-    from demcal.simulate.rigs import run_rig
-
-    params = DEMParameters(**inputs["params"])
-    res = run_rig("incline", params, int(inputs["seed"]), mode=inputs["mode"], surface=inputs["surface"])
-    return {"rig": "incline", "observable": res.observable, "notes": res.meta.get("notes", []),
-            "dt": res.meta["dt"], "steps": res.meta["steps"], "wall_s": res.meta["wall_s"]}
 
 
 class TwinRunner:
@@ -236,23 +199,16 @@ def drop_trials(measurement, workbook=None) -> dict:
     return out
 
 
-def drop_task(params, pair: str, height: float, orientation, seed: int, *, template=None,
-              extension: dict | None = None) -> dict:
-    """Inputs of one drop twin run."""
-    return {"rig": "drop", "params": params.to_dict(), "pair": pair, "height": round(float(height), 9),
-            "orientation_deg": orientation, "seed": int(seed),
-            "template": None if template is None else [float(v) for v in template],
-            "extension": extension}
-
-
 def run_drop_twins(runner: TwinRunner, params, trials, rig_pair_name: str, *, quantity: str,
                    sizes=None, extension=None, desc="drop twins") -> list:
     """Twin of each drop trial (``drop_trials`` rows) with ``params``; ``sizes`` maps a row to
     its specimen's sizes [m] (``Shape.size_values``) for per-trial templates."""
-    tasks = [drop_task(params, rig_pair_name, h, o, row,
+    from demcal.simulate.rigs import drop, run_task
+
+    tasks = [drop.task(params, rig_pair_name, h, o, row,
                        template=None if sizes is None else sizes.get(row), extension=extension)
              for row, _, h, o, _, _ in trials]
-    results = runner(drop_twin_runner, tasks, desc)
+    results = runner(run_task, tasks, desc)
     out = []
     for (row, y, h, o, cov, _), task, res in zip(trials, tasks, results):
         out.append(TwinTrial("drop", quantity, row, y, float(res["observable"]["apparent_restitution"]),

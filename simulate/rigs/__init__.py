@@ -11,7 +11,11 @@ incline   inclinometer, plate tilted slowly           ``slide_angle_deg``, ``rol
           (``simulate.rigs.incline``)
 ========  ==========================================  ============================================
 
-Every rig returns a :class:`RigResult`; :func:`run_rig` runs one by name.
+Every rig returns a :class:`RigResult`; :func:`run_rig` runs one by name. Each rig module
+also has ``task(params, ...)``, the inputs of one run as a plain dict naming its rig (what a run
+store keys, ``analyse.runs.run_key``), and ``run_task(inputs)``, which runs it;
+:func:`run_task` runs any task on the rig it names, so the stages above never dispatch on a
+rig's name.
 
 >>> from simulate.params import DEMParameters
 >>> result = run_rig("drop", DEMParameters(), seed=1, height=0.4, orientation_deg=0.0)
@@ -90,6 +94,16 @@ def run_rig(name: str, params, seed: int = 0, **opts) -> RigResult:
     return rig_function(name)(params, seed, **opts)
 
 
+def run_task(inputs: dict) -> dict:
+    """Run one task (a rig module's ``task(...)``) on the rig it names; a task naming no rig is
+    a repose run, as the first campaigns stored them (top level, so worker processes run it)."""
+    name = inputs.get("rig", "repose")
+    if name not in RIGS:
+        raise InputError(f"unknown rig {name!r} in a run's task; valid rigs: {', '.join(RIGS)}")
+    module = importlib.import_module(RIGS[name].split(":")[0])
+    return module.run_task(inputs)
+
+
 def run_meta(seed, dt, tally, spheres, simulated_s, profile=None, **extra) -> dict:
     """The ``meta`` dict of a :class:`RigResult` from a :class:`RunTally` of its runs."""
     wall = tally.wall_s
@@ -125,4 +139,4 @@ def check_seed(seed) -> int:
     return value
 
 
-__all__ = ["RIGS", "RigResult", "RunTally", "check_seed", "rig_function", "run_meta", "run_rig"]
+__all__ = ["RIGS", "RigResult", "RunTally", "check_seed", "rig_function", "run_meta", "run_rig", "run_task"]

@@ -381,3 +381,32 @@ def _safe_steps(gap: float, vz: float, w: float, reach: float, g: float, dt: flo
     a = max(-vz, 0.0) + w * reach
     t = (-a + math.sqrt(a * a + 2.0 * g * gap)) / g
     return int(min(max(1, math.floor(0.5 * t / dt)), MAX_CHUNK))
+
+
+# ----------------------------------------------------------------------------------------------
+# a run as a task: what a run store keys and a worker runs
+
+
+def task(params: DEMParameters, pair: str, height: float, orientation_deg, seed: int, *, template=None,
+         extension: dict | None = None) -> dict:
+    """The inputs of one drop run (``analyse.runs.run_key`` keys its record): ``template`` the
+    specimen's sizes [m] (``Shape.size_values``) for a particle of its own size, ``extension``
+    the provenance of the model extension it evaluates."""
+    return {"rig": "drop", "params": params.to_dict(), "pair": pair, "height": round(float(height), 9),
+            "orientation_deg": orientation_deg, "seed": int(seed),
+            "template": None if template is None else [float(v) for v in template],
+            "extension": extension}
+
+
+def run_task(inputs: dict) -> dict:
+    """One drop run from its :func:`task`: the observable and the run's tally."""
+    from demcal.simulate.extensions import particle_of_size
+
+    params = DEMParameters.from_names(inputs["params"])
+    opts = {}
+    if inputs.get("template"):
+        opts["template"] = particle_of_size(params, inputs["template"])
+    res = run_drop(params, int(inputs["seed"]), height=float(inputs["height"]),
+                   orientation_deg=inputs.get("orientation_deg"), pair=inputs["pair"], **opts)
+    return {"rig": "drop", "observable": res.observable, "notes": res.meta.get("notes", []),
+            "dt": res.meta["dt"], "steps": res.meta["steps"], "wall_s": res.meta["wall_s"]}

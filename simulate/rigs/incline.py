@@ -252,3 +252,20 @@ def _gravity(tilt_deg: float) -> tuple:
     """Gravity [m/s2] for a plate tilted by ``tilt_deg``, +x down the slope."""
     a = math.radians(tilt_deg)
     return (GRAVITY * math.sin(a), 0.0, -GRAVITY * math.cos(a))
+
+
+# ----------------------------------------------------------------------------------------------
+# a run as a task: what a run store keys and a worker runs
+
+
+def task(params: DEMParameters, mode: str, surface: str, seed: int = 0) -> dict:
+    """The inputs of one incline run (``analyse.runs.run_key`` keys its record)."""
+    return {"rig": "incline", "params": params.to_dict(), "mode": mode, "surface": surface, "seed": int(seed)}
+
+
+def run_task(inputs: dict) -> dict:
+    """One incline run from its :func:`task`: the observable and the run's tally."""
+    params = DEMParameters.from_names(inputs["params"])
+    res = run_incline(params, int(inputs["seed"]), mode=inputs["mode"], surface=inputs["surface"])
+    return {"rig": "incline", "observable": res.observable, "notes": res.meta.get("notes", []),
+            "dt": res.meta["dt"], "steps": res.meta["steps"], "wall_s": res.meta["wall_s"]}

@@ -531,3 +531,23 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
                     profile_settings=prof.to_dict(), bodies=sim.n_bodies,
                     inserted=inserted)
     return RigResult("repose", observable, rec, meta, params.to_dict(), Provenance(seed=seed, options=options))
+
+
+# ----------------------------------------------------------------------------------------------
+# a run as a task: what a run store keys and a worker runs
+
+
+def task(params: DEMParameters, seed: int, *, profile: str, geometry) -> dict:
+    """The inputs of one repose run (``analyse.runs.run_key`` keys its record); ``geometry`` a
+    :class:`ReposeGeometry` or its ``to_dict()``."""
+    if isinstance(geometry, ReposeGeometry):
+        geometry = geometry.to_dict()
+    return {"rig": "repose", "profile": profile, "params": params.to_dict(), "geometry": geometry,
+            "seed": int(seed)}
+
+
+def run_task(inputs: dict) -> dict:
+    """One repose run from its :func:`task`: the whole :class:`RigResult` as a dict."""
+    params = DEMParameters.from_names(inputs["params"])
+    return run_repose(params, inputs["seed"], profile=inputs["profile"],
+                      geometry=ReposeGeometry(**inputs["geometry"])).to_dict()

@@ -27,9 +27,9 @@ KILL_AFTER = 6
 def tiny_repose_runner(inputs: dict) -> dict:
     """The campaign's repose runner; a heap of 12 segments that slid flat and shows no slope
     counts as 0 deg (this test is about the run store, not about the angle)."""
-    from demcal.analyse.campaign import repose_runner
+    from demcal.analyse.campaign import campaign_runner
 
-    result = repose_runner(inputs)
+    result = campaign_runner(inputs)
     obs = result["observable"]
     if all(obs[k] is None or obs[k] != obs[k] for k in ("angle_deg", "angle_profile_deg")):
         obs["angle_deg"] = 0.0

@@ -314,3 +314,26 @@ def test_rig_result_round_trips_through_json(tmp_path):
     assert back["observable"]["apparent_restitution"] == pytest.approx(res.observable["apparent_restitution"])
     with pytest.raises(InputError, match="seed"):
         run_rig("drop", PARAMS, seed=-1)
+
+
+# ---------------------------------------------------------------------------------- tasks
+
+def test_each_rigs_task_is_the_run_stores_key_layout_and_runs_on_its_rig():
+    """A task is what a run store keys: its layout is fixed (a change would orphan every stored
+    run), and ``run_task`` runs it on the rig it names, as ``run_rig`` would."""
+    from demcal.simulate.rigs import drop, incline, repose, run_task
+
+    p = PARAMS.to_dict()
+    assert drop.task(PARAMS, "particle-steel", 0.05, 0.0, 5) == {
+        "rig": "drop", "params": p, "pair": "particle-steel", "height": 0.05, "orientation_deg": 0.0, "seed": 5,
+        "template": None, "extension": None}
+    assert incline.task(PARAMS, "slide", "steel") == {"rig": "incline", "params": p, "mode": "slide",
+                                                      "surface": "steel", "seed": 0}
+    geo = ReposeGeometry(box_length=0.08, box_width=0.05, box_height=0.1, fill_count=12)
+    assert repose.task(PARAMS, 3, profile="quick", geometry=geo) == {
+        "rig": "repose", "profile": "quick", "params": p, "geometry": geo.to_dict(), "seed": 3}
+    ran = run_task(drop.task(PARAMS, "particle-steel", 0.05, 0.0, 5))
+    direct = run_rig("drop", PARAMS, seed=5, height=0.05, orientation_deg=0.0, pair="particle-steel")
+    assert ran["rig"] == "drop" and ran["observable"] == direct.observable
+    with pytest.raises(InputError, match="unknown rig 'shear' in a run's task; valid rigs: repose, drop, incline"):
+        run_task({"rig": "shear"})
