@@ -1090,7 +1090,9 @@ def table_heap_parameters(c: Campaign) -> Table:
     if not gains:
         notes.append("None: no extension was recalibrated (see the conclusions above for why).")
     notes.append("A recalibrated value inside the 95 % plausible interval of the campaign under critique "
-                 "has moved by less than the parameter's own uncertainty.")
+                 "has moved by less than the parameter's own uncertainty; its interval narrowed when the "
+                 "extension at least halved its width (a twin that could not reach the lab left it "
+                 "unidentified).")
     return Table("C5", "Heap-side gain: calibrated parameters recalibrated with each accepted extension",
                  ("Extension", "Parameter", "Before", "Before 95 % set", "After", "After 95 % set", "Shift",
                   "Shift judged"), ("",) * 8, rows, notes=tuple(notes),

@@ -282,7 +282,7 @@ def heap_photo(profile_x_m, profile_z_m, *, rng, px_per_m=PHOTO_PX_PER_M, camera
     centre_x_m : float, optional
         Profile abscissa shown at the image centre [m]; the middle of the profile by default.
     strays : int
-        Number of segments lying on the floor beyond the toes.
+        Number of particles lying on the floor beyond the toes.
     particle_m : (float, float)
         Length and width of one particle as the photo shows it lying down [m]
         (``Shape.outline_m``); a root segment of the source paper by default. Equal values

@@ -73,7 +73,7 @@ def build_paper_repose_case(params: DEMParameters, seed, n_clumps: int = 500, *,
     chunk_steps : int
         Steps between returns to Python.
     size_distribution : simulate.extensions.SizeDistribution, optional
-        Draw each segment from these measured (length, diameter) pairs; default
+        Draw each particle from these measured sizes; default
         ``params.particle_sizes`` if set, else every particle is ``params``' shape.
 
     Returns

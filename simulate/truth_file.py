@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from demcal.errors import InputError
-from demcal.simulate.params import SEGMENT_FIELDS, DEMParameters
+from demcal.simulate.params import SEGMENT_FIELDS, DEMParameters, current_names
 from demcal.simulate.virtual_lab import PHOTO_MODES, Truth, write_virtual_workbook
 
 #: Valid range of each numeric field of ``Truth``: (low, high, low included, high included).
@@ -137,6 +137,7 @@ def parse_params(values, where: str = "params") -> DEMParameters:
         return DEMParameters()
     if not isinstance(values, dict):
         raise InputError(f"{where}: must be a mapping of DEM parameter names to values, got {values!r}")
+    values = current_names(values)                  # a file written before a rename reads as it meant
     names = DEMParameters.names() + tuple(SEGMENT_FIELDS)
     unknown = [k for k in values if k not in names]
     if unknown:
@@ -154,9 +155,11 @@ def parse_params(values, where: str = "params") -> DEMParameters:
         # file's values, not a mix of them and the defaults
         return DEMParameters.from_names(values)
     except errors as exc:
-        for name, value in values.items():       # name the field when one alone is wrong
+        # name the field when one alone is wrong (on the file's shape: sizes are the shape's)
+        shape = {"shape": values["shape"]} if "shape" in values else {}
+        for name, value in (*shape.items(), *values.items()):
             try:
-                DEMParameters.from_names({name: value})
+                DEMParameters.from_names({**shape, name: value})
             except errors as one:
                 raise InputError(f"{where}.{name}: {one}") from None
         raise InputError(f"{where}: {exc}") from None

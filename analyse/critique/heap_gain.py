@@ -75,10 +75,12 @@ class ParameterShift(Record):
     def narrowed(self) -> bool:
         """Whether the extension at least halved the 95 % interval (``NARROWED``): a twin that
         could not reach the lab leaves its parameter unidentified, one that can pins it down."""
-        if self.before_ci95 is None or self.after_ci95 is None:
-            return False
-        before = self.before_ci95[1] - self.before_ci95[0]
-        return bool(before > 0 and self.after_ci95[1] - self.after_ci95[0] <= NARROWED * before)
+        widths = []
+        for ci in (self.before_ci95, self.after_ci95):
+            if ci is None or any(v is None or not math.isfinite(v) for v in ci):
+                return False
+            widths.append(ci[1] - ci[0])
+        return bool(widths[0] > 0 and widths[1] <= NARROWED * widths[0])
 
     @property
     def verdict(self) -> str:

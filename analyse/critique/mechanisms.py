@@ -37,7 +37,7 @@ contact_effective_mass             model only: at the logged orientations the tw
                                    flat, the contact restitution), and the twin with the hook
                                    on against off closes the gap to the drops (``attribution``)
 size_dependence                    a series of a test sheet varies with the specimen's
-                                   ``length_mm``, ``diameter_mm`` or ``mass_g``
+                                   calliper sizes (``length_mm``, ``diameter_mm``, ...) or ``mass_g``
 block_effect                       a series differs between the levels of a categorical
                                    covariate (operator, date, batch, ...)
 trial_order_drift                  a series trends with trial order

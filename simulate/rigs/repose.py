@@ -183,7 +183,9 @@ def _refuse_other_rigs(meta: dict, file) -> None:
                             f"(its photos still measure with demcal measure); rigs labs use: "
                             f"{', '.join((REPOSE_RIG, *OTHER_REPOSE_RIGS))}",
                             file=file, sheet="meta", column="value", value=rig)
-    for key in meta:
+    for key, value in meta.items():
+        if value is None or (isinstance(value, str) and not value.strip()):
+            continue                              # a blank row of a template says nothing
         other = next((r for r, prefix in OTHER_REPOSE_RIGS.items() if str(key).startswith(prefix)), None)
         if other is not None:
             raise WorkbookError(f"meta {key}: a dimension of the {other} rig, which the repose twin does not "
@@ -409,7 +411,7 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
     callback : callable, optional
         ``callback(sim, t_end, final)`` after each chunk (see ``simulate.rigs``).
     size_distribution : simulate.extensions.SizeDistribution, optional
-        Draw each segment from these measured (length, diameter) pairs; they are set as
+        Draw each particle from these measured sizes; they are set as
         ``params.particle_sizes``, so the result's ``params`` record them. Default: as
         ``params`` says (one particle size unless ``particle_sizes`` is set).
 

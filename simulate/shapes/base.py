@@ -103,8 +103,10 @@ class Shape:
         """This shape's settings at the size of the specimen whose calliper readings ``row``
         (column -> mm, other columns ignored) holds; :class:`InputError` when the row lacks the
         shape's columns or they are not lengths it can take."""
-        columns = self.columns_of(row)
-        return self.scaled_to(type(self).from_specimen({c: row[c] for c in columns}))
+        read = [c for c, v in row.items() if v is not None and not (isinstance(v, float) and math.isnan(v))]
+        columns = self.columns_of(read)
+        settings = {f: getattr(self, f) for f in self.field_names() if f not in self.sizes}
+        return self.scaled_to(type(self).from_specimen({c: row[c] for c in columns}, **settings))
 
     @property
     def size_values(self) -> tuple:

@@ -114,3 +114,5 @@ def test_a_parameter_pinned_down_by_the_extension_is_said_to_narrow():
     assert "does not change the calibration" not in text
     assert "does not change the calibration" in _conclusion("x", [loose], [], "equivalent", "equivalent")
     assert "e_pp moved beyond its uncertainty" in _conclusion("x", [moved, pinned], [], "equivalent", "equivalent")
+    # an interval a file stores as nulls says nothing about narrowing
+    assert not ParameterShift("e_pw", 0.75, 0.35, (None, None), (0.32, 0.38), -0.4, True).narrowed

@@ -158,6 +158,16 @@ def test_size_distribution_of_other_shapes_reads_each_specimen_as_its_shape():
     assert tpl.mass == pytest.approx(Kernel(0.008, 0.0065, 0.0055, n_spheres=3).template(912.0).mass, rel=1e-12)
     with pytest.raises(InputError, match="width_mm"):
         SizeDistribution.from_specimens(axes.drop(columns="width_mm"), Kernel(0.0072, 0.006, 0.005))
+    # a clump table keeps its table at each specimen's size
+    from demcal.simulate.params import parse_shape
+
+    clump = parse_shape({"shape": "clump", "length_m": 0.008, "table": [[0, 0, 0, 0.002], [0.004, 0, 0, 0.002]]})
+    clumps = SizeDistribution.from_specimens(axes[["specimen_id", "length_mm"]], clump)
+    np.testing.assert_allclose(clumps.sizes, ((0.007,), (0.008,)), rtol=1e-12)
+    assert clump.with_sizes(clumps.sizes[0]).table == clump.table
+    # a blank calliper column is no reading: the three axes measure the sphere
+    for blank in (None, float("nan")):
+        assert SizeDistribution.from_specimens(axes.assign(diameter_mm=blank), Sphere(0.0066)).sizes == spheres.sizes
 
 
 def test_particle_of_size_scales_the_segments_mass_as_the_cylinder():

@@ -288,6 +288,7 @@ def test_a_heap_of_another_rig_is_refused_not_simulated_as_the_carton():
     with pytest.raises(WorkbookError, match=r"file wb.xlsx, sheet .meta.*repose_rig.*lifted end plate.*"
                                             r"lifting_cylinder, funnel, drum.*'lifting_cylinder'"):
         ReposeGeometry.from_meta({"repose_rig": "lifting_cylinder"}, file="wb.xlsx")
+    assert ReposeGeometry.from_meta({"cylinder_diameter_mm": None, "drum_speed_rpm": " "}) == ReposeGeometry()
     for key, rig in (("cylinder_diameter_mm", "lifting_cylinder"), ("drum_speed_rpm", "drum"),
                      ("funnel_outlet_mm", "funnel")):
         with pytest.raises(WorkbookError, match=f"meta {key}: a dimension of the {rig} rig"):

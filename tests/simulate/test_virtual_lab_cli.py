@@ -114,6 +114,15 @@ def test_params_are_checked_together_not_one_by_one():
         parse_params({"segment_length_m": 0.015, "segment_diameter_m": 0.02})
 
 
+def test_params_read_former_names_and_blame_the_wrong_field_on_the_files_shape():
+    # a truth file written before the rename of segment_sizes reads as the distribution it meant
+    p = parse_params({"segment_sizes": [[0.025, 0.011], [0.03, 0.012]]})
+    assert p.particle_sizes == ((0.025, 0.011), (0.03, 0.012))
+    # a sphere's sizes are valid on the file's sphere: the bad field, not particle_sizes, is named
+    with pytest.raises(InputError, match=r"^params\.e_pw: e_pw must be in"):
+        parse_params({"shape": "sphere:0.0066", "particle_sizes": [[0.006], [0.007]], "e_pw": 1.5})
+
+
 def test_hand_released_segments_are_compared_with_their_apparent_restitution(tmp_path, capsys):
     """Released at any angle, a segment turns part of its energy into rotation: the drops read
     the drop twin's apparent restitution, which the command prints, not the contact one."""
