@@ -97,7 +97,7 @@ class Shape:
 
     def scaled_to(self, other: "Shape") -> "Shape":
         """This shape's settings (sphere counts, a clump table) at ``other``'s size."""
-        return replace(self, **{n: getattr(other, n) for n in self.sizes})
+        return self.with_sizes(other.size_values)
 
     def sized_as(self, row: dict) -> "Shape":
         """This shape's settings at the size of the specimen whose calliper readings ``row``
