@@ -8,7 +8,7 @@ Public API (details in each module's docstring):
 - ``ClumpTemplate``, ``segment_template``, ``make_template`` (``simulate.clump``): clumps and
   their mass properties; ``DEMParameters.template()`` builds the clump of its shape
   (``simulate.shapes``).
-- ``Plane``, ``Rectangle``, ``box_rectangles`` (``simulate.walls``).
+- ``Plane``, ``Rectangle``, ``Cylinder``, ``box_rectangles`` (``simulate.walls``).
 - ``ParticleFactory`` (``simulate.factory``).
 - ``rayleigh_time`` (``simulate.timestep``).
 - ``build_paper_repose_case`` (``simulate.scenes``): the paper's repose-angle case.
@@ -23,9 +23,9 @@ from demcal.simulate.params import DEMParameters
 from demcal.simulate.scenes import build_paper_repose_case
 from demcal.simulate.timestep import rayleigh_time
 from demcal.simulate.vtk import write_vtp
-from demcal.simulate.walls import Plane, Rectangle, box_rectangles
+from demcal.simulate.walls import Cylinder, Plane, Rectangle, box_rectangles
 
-__all__ = ["ClumpTemplate", "DEMParameters", "Escape", "MaterialTable", "ParticleFactory", "Plane",
+__all__ = ["ClumpTemplate", "Cylinder", "DEMParameters", "Escape", "MaterialTable", "ParticleFactory", "Plane",
            "Rectangle", "RunSummary", "Simulation", "box_rectangles", "build_paper_repose_case",
            "make_template", "rayleigh_time", "segment_template",
            "write_vtp"]

@@ -13,8 +13,9 @@ Building and running a simulation
 ...                      material="particle")                      # body id
 >>> summary = sim.run(duration=0.5)
 
-Walls are ``simulate.walls.Plane`` (infinite, one-sided) or ``Rectangle`` (finite, two-sided,
-edges included; ``box_rectangles`` gives the faces of a box); ``wall_index(name)`` finds one.
+Walls are ``simulate.walls.Plane`` (infinite, one-sided), ``Rectangle`` (finite, two-sided,
+edges included; ``box_rectangles`` gives the faces of a box) or ``Cylinder`` (an open tube,
+two-sided, rims included); ``wall_index(name)`` finds one.
 A wall translates at its ``velocity`` during ``[move_start, move_stop)``;
 ``set_wall_motion(k, velocity, start, stop)`` changes that between runs. Particle factories
 (``simulate.factory.ParticleFactory``) are added with ``add_factory`` and insert clumps between
@@ -90,7 +91,7 @@ from demcal.simulate.integrate import (damping_inverse_mass, drift, half_kick, m
 from demcal.simulate.materials import MaterialTable
 from demcal.simulate.neighbours import build_pair_list, build_wall_list, grid_shape, padded_cell_count
 from demcal.simulate.timestep import DEFAULT_MAX_FRACTION, check_time_step, rayleigh_time
-from demcal.simulate.walls import Plane, Rectangle, pack_walls, wall_distance, wall_distances
+from demcal.simulate.walls import WALL_TYPES, pack_walls, wall_distance, wall_distances
 from demcal.units import GRAVITY
 
 # ----------------------------------------------------------------------------------------------
@@ -677,9 +678,9 @@ class Simulation:
         return len(self.templates) - 1
 
     def add_wall(self, wall) -> int:
-        """Add a ``Plane`` or ``Rectangle``; returns its index."""
-        if not isinstance(wall, (Plane, Rectangle)):
-            raise InputError(f"add_wall needs a Plane or Rectangle, got {type(wall).__name__}")
+        """Add a ``Plane``, ``Rectangle`` or ``Cylinder``; returns its index."""
+        if not isinstance(wall, WALL_TYPES):
+            raise InputError(f"add_wall needs a Plane, Rectangle or Cylinder, got {type(wall).__name__}")
         self.materials.index(wall.material)
         self.walls.append(wall)
         self._repack_walls()

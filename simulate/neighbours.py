@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from demcal.simulate._jit import kernel
-from demcal.simulate.walls import wall_distance
+from demcal.simulate.walls import CYLINDER, PLANE, wall_distance
 
 
 def grid_shape(lo, hi, cell_min: float, max_cells: int = 4_000_000):
@@ -221,13 +221,15 @@ def build_wall_list(n_spheres, sx, srad, sbody, bactive, skin, kind, origin, nor
             z = sx[s, 2]
             reach = srad[s] + skin
             for k in range(n_walls):
-                # distance to the wall's plane bounds the distance to the wall from below
-                h = ((x - origin[k, 0]) * normal[k, 0] + (y - origin[k, 1]) * normal[k, 1]
-                     + (z - origin[k, 2]) * normal[k, 2])
-                if kind[k] != 0:
-                    h = abs(h)
-                if h >= reach:
-                    continue
+                # distance to a plane or rectangle's plane bounds the distance to the wall
+                # from below (a cylinder has no such plane)
+                if kind[k] != CYLINDER:
+                    h = ((x - origin[k, 0]) * normal[k, 0] + (y - origin[k, 1]) * normal[k, 1]
+                         + (z - origin[k, 2]) * normal[k, 2])
+                    if kind[k] != PLANE:
+                        h = abs(h)
+                    if h >= reach:
+                        continue
                 d, ux, uy, uz = wall_distance(kind, origin, normal, axis_u, axis_v, half, k, x, y, z)
                 if d < reach:
                     ts[n] = s

@@ -7,9 +7,10 @@
     and ``active`` (0 once the body left the domain). In ParaView use a "Glyph" filter of type
     Sphere, scale array ``radius``, scale factor 2 (the glyph's size is a diameter).
 ``write_walls_vtp(path, sim)``
-    One quad per wall, where the wall is at ``sim.time`` (a moving plate at its current height),
-    with cell data ``wall_id`` (index in ``sim.walls``) and ``kind`` (0 plane, 1 rectangle). A
-    ``Rectangle`` is its own quad. An infinite ``Plane`` is drawn as the rectangle on it that
+    Quads of every wall, where the wall is at ``sim.time`` (a moving plate at its current
+    height), with cell data ``wall_id`` (index in ``sim.walls``) and ``kind`` (0 plane,
+    1 rectangle, 2 cylinder). A ``Rectangle`` is its own quad, a ``Cylinder`` a ring of
+    ``CYLINDER_FACETS`` quads. An infinite ``Plane`` is drawn as the rectangle on it that
     covers the orthogonal projection of the simulation domain (``domain_lo``-``domain_hi``):
     bodies leaving the domain are deactivated, so nothing of interest lies beyond it.
 ``write_pvd(path, entries)``
@@ -37,7 +38,10 @@ from pathlib import Path
 import numpy as np
 
 from demcal.errors import InputError
-from demcal.simulate.walls import PLANE, RECTANGLE, Plane, pack_walls
+from demcal.simulate.walls import CYLINDER, PLANE, pack_walls
+
+#: Quads a cylinder is drawn with.
+CYLINDER_FACETS = 32
 
 #: Collections and file names of a ``FrameSeries``.
 PARTICLES_PVD = "particles.pvd"
@@ -131,14 +135,15 @@ def _plane_basis(normal):
 
 
 def wall_quads(walls, origins, domain_lo, domain_hi):
-    """Corners of every wall as a quad, (n_walls, 4, 3), counter-clockwise about its normal.
+    """Corners of the quads that draw the walls, (m, 4, 3), counter-clockwise about the wall's
+    outward side, and the wall of each quad, (m,).
 
     Parameters
     ----------
-    walls : list of Plane or Rectangle
+    walls : list of Plane, Rectangle or Cylinder
         The walls (their axes, sizes and normals; not their positions).
     origins : (n_walls, 3) array
-        Current point (plane) or centre (rectangle) of each wall [m].
+        Current point (plane) or centre (rectangle, cylinder) of each wall [m].
     domain_lo, domain_hi : 3-sequence
         Domain corners [m]; a plane's quad covers the domain's projection onto it.
     """
@@ -147,9 +152,19 @@ def wall_quads(walls, origins, domain_lo, domain_hi):
     origins = np.asarray(origins, dtype=float).reshape(-1, 3)
     lo, hi = np.asarray(domain_lo, float), np.asarray(domain_hi, float)
     box = np.array([[hi[a] if (c >> a) & 1 else lo[a] for a in range(3)] for c in range(8)])
-    out = np.zeros((len(walls), 4, 3))
+    quads, owner = [], []
     for k in range(len(walls)):
         c = origins[k]
+        if packed["kind"][k] == CYLINDER:
+            axis, u, v = packed["normal"][k], packed["axis_u"][k], packed["axis_v"][k]
+            radius, hh = packed["half"][k]
+            phi = np.linspace(0.0, 2.0 * np.pi, CYLINDER_FACETS + 1)
+            rim = radius * (np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v)
+            for f in range(CYLINDER_FACETS):
+                quads.append([c + rim[f] - hh * axis, c + rim[f + 1] - hh * axis,
+                              c + rim[f + 1] + hh * axis, c + rim[f] + hh * axis])
+                owner.append(k)
+            continue
         if packed["kind"][k] == PLANE:
             u, v = _plane_basis(packed["normal"][k])
             a, b = (box - c) @ u, (box - c) @ v
@@ -159,26 +174,28 @@ def wall_quads(walls, origins, domain_lo, domain_hi):
         else:
             u, v = packed["axis_u"][k], packed["axis_v"][k]
             hu, hv = packed["half"][k]
-        out[k] = [c - hu * u - hv * v, c + hu * u - hv * v, c + hu * u + hv * v, c - hu * u + hv * v]
-    return out
+        quads.append([c - hu * u - hv * v, c + hu * u - hv * v, c + hu * u + hv * v, c - hu * u + hv * v])
+        owner.append(k)
+    return np.array(quads, dtype=float).reshape(-1, 4, 3), np.array(owner, dtype=np.int64)
 
 
 def write_walls_vtp(path, sim) -> Path:
-    """Write the walls of ``sim`` where they are now to ``path`` (.vtp), one quad each.
+    """Write the walls of ``sim`` where they are now to ``path`` (.vtp), as quads.
 
-    See the module docstring for how an infinite plane is drawn and for the cell data.
+    See the module docstring for how an infinite plane and a cylinder are drawn and for the
+    cell data.
     """
     path = _check_suffix(path)
-    n = len(sim.walls)
-    quads = wall_quads(sim.walls, sim.wall_origins(), sim.domain_lo, sim.domain_hi)
+    quads, owner = wall_quads(sim.walls, sim.wall_origins(), sim.domain_lo, sim.domain_hi)
+    n = quads.shape[0]
     root, piece = _polydata(quads.reshape(-1, 3), sim.time, n_polys=n)
     polys = ET.SubElement(piece, "Polys")
     _data_array(polys, "connectivity", np.arange(4 * n), 1, "Int64")
     _data_array(polys, "offsets", 4 * np.arange(1, n + 1), 1, "Int64")
     cdata = ET.SubElement(piece, "CellData", Scalars="wall_id")
-    _data_array(cdata, "wall_id", np.arange(n), 1, "Int64")
-    kind = [PLANE if isinstance(w, Plane) else RECTANGLE for w in sim.walls]
-    _data_array(cdata, "kind", kind, 1, "Int64")
+    _data_array(cdata, "wall_id", owner, 1, "Int64")
+    kinds = pack_walls(sim.walls, lambda name: 0)["kind"]
+    _data_array(cdata, "kind", kinds[owner], 1, "Int64")
     return _write(root, path)
 
 

@@ -1,10 +1,14 @@
-"""Rigid walls: infinite planes and finite rectangles, static or translating.
+"""Rigid walls: infinite planes, finite rectangles and open cylinders, static or translating.
 
 ``Plane(point, normal)``
     One-sided infinite plane (the floor); spheres are kept on the side ``normal`` points to.
 ``Rectangle(centre, axis_u, axis_v, half_u, half_v)``
     Finite, two-sided rectangle (carton sides, the lifted end plate). A sphere touches it at the
     closest point of the rectangle, so its edges and corners push correctly.
+``Cylinder(centre, axis, radius, half_height)``
+    Finite, two-sided open tube (the lifting cylinder of a repose test): its surface is the
+    points at ``radius`` from the axis within ``half_height`` of ``centre`` along it; a sphere
+    touches it at the closest point of that surface, so its rims push correctly too.
 ``box_rectangles(lo, hi, faces=...)``
     The faces of an axis-aligned box as rectangles (e.g. an open carton: no "z+" face).
 
@@ -13,8 +17,9 @@ A wall may translate at a constant ``velocity`` [m/s] during ``[move_start, move
 contact velocity, so friction and damping see the moving surface.
 
 Kernel layout (``pack_walls``): one row per wall in float64 arrays ``kind`` (0 plane,
-1 rectangle), ``origin``, ``normal``, ``axis_u``, ``axis_v``, ``half`` (2), ``velocity``,
-``window`` (2) and int ``material``.
+1 rectangle, 2 cylinder), ``origin``, ``normal`` (a cylinder's axis), ``axis_u``, ``axis_v``,
+``half`` (2; a cylinder's radius and half height), ``velocity``, ``window`` (2) and int
+``material``.
 """
 
 from __future__ import annotations
@@ -27,7 +32,7 @@ import numpy as np
 from demcal.errors import InputError
 from demcal.simulate._jit import evaluator
 
-PLANE, RECTANGLE = 0, 1
+PLANE, RECTANGLE, CYLINDER = 0, 1, 2
 
 
 def _unit(vector, name):
@@ -79,6 +84,30 @@ class Rectangle:
                 "move_start": self.move_start, "move_stop": self.move_stop, "name": self.name}
 
 
+@dataclass(frozen=True)
+class Cylinder:
+    """Finite two-sided open tube: axis through ``centre`` [m] along ``axis`` (unit), ``radius``
+    [m], extending ``half_height`` [m] either side of ``centre`` along the axis."""
+
+    centre: tuple
+    axis: tuple
+    radius: float
+    half_height: float
+    material: str = "steel"
+    velocity: tuple = (0.0, 0.0, 0.0)
+    move_start: float = 0.0
+    move_stop: float = math.inf
+    name: str = "cylinder"
+
+    def to_dict(self) -> dict:
+        return {"kind": "cylinder", "centre": list(self.centre), "axis": list(self.axis),
+                "radius": self.radius, "half_height": self.half_height, "material": self.material,
+                "velocity": list(self.velocity), "move_start": self.move_start,
+                "move_stop": self.move_stop, "name": self.name}
+
+
+WALL_TYPES = (Plane, Rectangle, Cylinder)
+
 BOX_FACES = ("x-", "x+", "y-", "y+", "z-", "z+")
 
 
@@ -129,6 +158,19 @@ def pack_walls(walls, material_index) -> dict:
             out["axis_v"][k] = v
             out["normal"][k] = np.cross(u, v)
             out["half"][k] = (w.half_u, w.half_v)
+        elif isinstance(w, Cylinder):
+            if not (w.radius > 0 and w.half_height > 0):
+                raise InputError(f"wall {w.name!r}: radius and half height must be > 0, "
+                                 f"got {w.radius!r}, {w.half_height!r}")
+            axis = _unit(w.axis, f"wall {w.name!r} axis")
+            # any unit vector across the axis: the direction used for a point on the axis
+            u = np.cross(axis, (1.0, 0.0, 0.0) if abs(axis[0]) < 0.9 else (0.0, 1.0, 0.0))
+            out["kind"][k] = CYLINDER
+            out["origin"][k] = np.asarray(w.centre, float)
+            out["normal"][k] = axis
+            out["axis_u"][k] = u / np.linalg.norm(u)
+            out["axis_v"][k] = np.cross(axis, out["axis_u"][k])
+            out["half"][k] = (w.radius, w.half_height)
         else:
             raise InputError(f"not a wall: {w!r}")
         out["velocity"][k] = np.asarray(w.velocity, float).reshape(3)
@@ -146,6 +188,8 @@ def wall_distance(kind, origin, normal, axis_u, axis_v, half, k, x, y, z):
 
     Plane: signed distance along its normal (negative behind it). Rectangle: distance to the
     closest point of the rectangle (its edges included); at zero distance the rectangle normal.
+    Cylinder: distance to the closest point of the tube (its rims included); at zero distance
+    the radial direction.
     """
     dx = x - origin[k, 0]
     dy = y - origin[k, 1]
@@ -155,6 +199,31 @@ def wall_distance(kind, origin, normal, axis_u, axis_v, half, k, x, y, z):
     nz = normal[k, 2]
     if kind[k] == PLANE:
         return dx * nx + dy * ny + dz * nz, nx, ny, nz
+    if kind[k] == CYLINDER:
+        a = dx * nx + dy * ny + dz * nz
+        rx = dx - a * nx
+        ry = dy - a * ny
+        rz = dz - a * nz
+        rho = math.sqrt(rx * rx + ry * ry + rz * rz)
+        if rho > 0.0:
+            ex = rx / rho
+            ey = ry / rho
+            ez = rz / rho
+        else:
+            ex = axis_u[k, 0]
+            ey = axis_u[k, 1]
+            ez = axis_u[k, 2]
+        hh = half[k, 1]
+        ac = -hh if a < -hh else (hh if a > hh else a)
+        # vector from the closest point of the tube to the sphere centre
+        px = dx - ac * nx - half[k, 0] * ex
+        py = dy - ac * ny - half[k, 0] * ey
+        pz = dz - ac * nz - half[k, 0] * ez
+        d = math.sqrt(px * px + py * py + pz * pz)
+        if d == 0.0:
+            return 0.0, ex, ey, ez
+        inv = 1.0 / d
+        return d, px * inv, py * inv, pz * inv
     du = dx * axis_u[k, 0] + dy * axis_u[k, 1] + dz * axis_u[k, 2]
     dv = dx * axis_v[k, 0] + dy * axis_v[k, 1] + dz * axis_v[k, 2]
     hu = half[k, 0]
@@ -182,6 +251,15 @@ def wall_distances(packed: dict, points) -> np.ndarray:
         d = p - packed["origin"][k]
         if packed["kind"][k] == PLANE:
             out[:, k] = d @ packed["normal"][k]
+            continue
+        if packed["kind"][k] == CYLINDER:
+            n = packed["normal"][k]
+            radius, hh = packed["half"][k]
+            a = d @ n
+            radial = np.linalg.norm(d - a[:, None] * n, axis=1)
+            # distance within the plane through the axis: from (radial, a) to the segment
+            # {radius} x [-hh, hh]
+            out[:, k] = np.hypot(radial - radius, a - np.clip(a, -hh, hh))
             continue
         u, v = packed["axis_u"][k], packed["axis_v"][k]
         du = np.clip(d @ u, -packed["half"][k, 0], packed["half"][k, 0])

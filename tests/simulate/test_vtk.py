@@ -216,3 +216,20 @@ def test_cli_vtk_needs_a_folder(tmp_path, capsys):
     assert "Traceback" not in err and err.count("\n") == 1
     with pytest.raises(InputError, match="cannot make the frames folder"):
         FrameSeries(target / "inside")
+
+
+def test_cylinder_wall_is_drawn_as_a_ring_of_quads_on_its_surface(tmp_path):
+    from demcal.simulate.vtk import CYLINDER_FACETS, write_walls_vtp
+    from demcal.simulate.walls import CYLINDER, Cylinder
+
+    sim = simulation(DEMParameters(), dt=1e-5)
+    floor(sim)
+    sim.add_wall(Cylinder((0.01, 0.02, 0.05), (0.0, 0.0, 1.0), 0.03, 0.05, "steel", name="cylinder"))
+    walls = _vtk_read(write_walls_vtp(tmp_path / "walls.vtp", sim))
+    quads = _wall_quads(walls)
+    assert quads.shape == (1 + CYLINDER_FACETS, 4, 3)
+    assert walls["cell_data"]["wall_id"].tolist() == [0] + [1] * CYLINDER_FACETS
+    assert walls["cell_data"]["kind"].tolist() == [PLANE] + [CYLINDER] * CYLINDER_FACETS
+    ring = quads[1:].reshape(-1, 3)
+    np.testing.assert_allclose(np.hypot(ring[:, 0] - 0.01, ring[:, 1] - 0.02), 0.03, rtol=1e-12)
+    assert set(np.round(ring[:, 2], 12)) == {0.0, 0.1}

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from demcal.simulate import DEMParameters, Rectangle
+from demcal.simulate import Cylinder, DEMParameters, Plane, Rectangle
 from demcal.simulate.walls import box_rectangles
 from tests.simulate.helpers import R, simulation, sphere_template
 
@@ -97,3 +97,106 @@ def test_no_tunnelling_through_a_carton_wall_at_the_paper_time_step():
     assert not sim.escaped
     assert np.all(x > np.array([0.0, 0.0, 0.0]) + 0.9 * R)
     assert np.all(x < np.array([0.2, 0.1, 0.25]) - 0.9 * R)
+
+
+# ---- cylinders (the lifting cylinder of a repose test)
+
+def _tube(radius=0.03, half_height=0.05, **kwargs):
+    # axis z through (0, 0, 0.05): the tube spans z from 0 to 0.1
+    return Cylinder((0.0, 0.0, 0.05), (0.0, 0.0, 1.0), radius, half_height, "steel", **kwargs)
+
+
+def test_cylinder_distance_by_hand_in_kernel_and_numpy():
+    from demcal.simulate.walls import pack_walls, wall_distance, wall_distances
+
+    packed = pack_walls([_tube()], lambda name: 0)
+    # (point, distance to the tube, unit normal from the tube to the point), by hand
+    cases = [((0.01, 0.0, 0.05), 0.02, (-1.0, 0.0, 0.0)),       # inside, toward the axis
+             ((0.0, 0.05, 0.02), 0.02, (0.0, 1.0, 0.0)),        # outside
+             ((0.03, 0.0, 0.13), 0.03, (0.0, 0.0, 1.0)),        # above the rim
+             ((0.06, 0.0, 0.14), 0.05, (0.6, 0.0, 0.8)),        # beyond the rim, 3-4-5
+             ((0.0, 0.0, 0.07), 0.03, None)]                    # on the axis: any radial way
+    for point, dist, normal in cases:
+        got = wall_distance(packed["kind"], packed["origin"], packed["normal"], packed["axis_u"],
+                            packed["axis_v"], packed["half"], 0, *point)
+        assert got[0] == pytest.approx(dist, abs=1e-15)
+        assert wall_distances(packed, [point])[0, 0] == pytest.approx(dist, abs=1e-15)
+        if normal is not None:
+            np.testing.assert_allclose(got[1:], normal, atol=1e-12)
+        else:
+            assert got[3] == pytest.approx(0.0, abs=1e-12) and math.hypot(got[1], got[2]) == pytest.approx(1.0)
+
+
+def _inner_wall_scattering(start, v0, radius, e_star, mass, t_end):
+    """Independent reference: a sphere inside a tube of ``radius`` under the central Hertz force
+    4/3 E* sqrt(R) d^1.5 toward the axis, d = rho - (radius - R) (frictionless, elastic),
+    integrated by scipy in the plane across the axis."""
+    from scipy.integrate import solve_ivp
+
+    def rhs(t, y):
+        x, yy, vx, vy = y
+        rho = math.hypot(x, yy)
+        d = max(rho - (radius - R), 0.0)
+        f = 4.0 / 3.0 * e_star * math.sqrt(R) * d ** 1.5 / mass
+        return [vx, vy, -f * x / rho, -f * yy / rho]
+
+    out = solve_ivp(rhs, (0.0, t_end), [*start, *v0], rtol=1e-10, atol=1e-13, max_step=2e-6)
+    return out.y[2, -1], out.y[3, -1]
+
+
+def test_elastic_bounce_inside_a_cylinder_matches_central_force_scattering():
+    # frictionless, elastic: a sphere moving out along a radius comes back along it; one moving
+    # along a chord is reflected about the radius it meets (to the turn of the normal during
+    # the contact, which the reference integrates)
+    sim = simulation(_frictionless(), dt=1e-6)
+    tpl = sphere_template(sim)
+    sim.add_wall(_tube())
+    sim.add_clump(tpl, (0.0, 0.0, 0.05), velocity=(1.0, 0.0, 0.0))
+    # along the chord y = 0.6 (0.03 - R): it meets the wall where sin(phi) = 0.6
+    start = (-0.015, 0.6 * (0.03 - R))
+    sim.add_clump(tpl, (*start, 0.02), velocity=(1.0, 0.0, 0.0))
+    sim.run(duration=0.05)                        # one bounce each (the next come after 73 ms)
+    np.testing.assert_allclose(sim.velocities()[0], [-1.0, 0.0, 0.0], atol=1e-6)
+    e_star = 1.0 / ((1 - 0.25 ** 2) / 2.5e7 + (1 - 0.3 ** 2) / (2 * 8e10 * 1.3))
+    vx, vy = _inner_wall_scattering(start, (1.0, 0.0), 0.03, e_star, sim.masses()[1], 0.05)
+    v = sim.velocities()[1]
+    np.testing.assert_allclose(v, [vx, vy, 0.0], rtol=0, atol=1e-4)
+    assert np.linalg.norm(v) == pytest.approx(1.0, rel=1e-6)
+    # a hard wall would give the mirror image (-0.28, -0.96): the soft one turns it a little more
+    assert abs(v[0] + 0.28) < 0.02 and abs(v[1] + 0.96) < 0.01
+
+
+def test_elastic_bounce_off_a_cylinder_rim_matches_central_force_scattering():
+    # the rim seen in the radial plane of the sphere's path is the rectangle's edge: same reference
+    sim = simulation(_frictionless(), dt=1e-6)
+    tpl = sphere_template(sim)
+    radius = 0.03
+    sim.add_wall(Cylinder((0.0, 0.0, 0.05), (0.0, 0.0, 1.0), radius, 0.05, "steel"))
+    sim.add_clump(tpl, (radius + 0.004 + R * math.cos(math.pi / 6), 0.0, 0.1 + R / 2), velocity=(-1.0, 0.0, 0.0))
+    sim.run(duration=0.006)
+    e_star = 1.0 / ((1 - 0.25 ** 2) / 2.5e7 + (1 - 0.3 ** 2) / (2 * 8e10 * 1.3))
+    vx, vz = _edge_scattering(1.0, R / 2, e_star, sim.masses()[0])
+    np.testing.assert_allclose(sim.velocities()[0], [vx, 0.0, vz], rtol=0, atol=1e-4)
+
+
+def test_lifted_cylinder_releases_its_fill_and_nothing_tunnels_while_it_holds():
+    # spheres that do not hold each other by friction: once the tube is gone they spread
+    params = DEMParameters(e_pp=0.5, e_pw=0.5, mu_s_pp=0.0, mu_r_pp=0.0, mu_s_pw=0.3)
+    sim = simulation(params, dt=2e-5, gravity=(0.0, 0.0, -9.81), lo=(-0.3, -0.3, -0.05), hi=(0.3, 0.3, 0.4))
+    tpl = sphere_template(sim)
+    sim.add_wall(Plane((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), material="steel", name="floor"))
+    tube = sim.add_wall(_tube(radius=0.012, half_height=0.1, name="cylinder"))
+    rng = np.random.default_rng(3)
+    for k in range(12):
+        # stacked in the tube, thrown at the wall
+        direction = np.append(rng.normal(size=2), 0.0)
+        sim.add_clump(tpl, (0.0, 0.0, 0.01 + 0.012 * k), velocity=2.0 * direction / np.linalg.norm(direction))
+    sim.run(duration=0.4)
+    rho = np.hypot(*sim.positions()[:, :2].T)
+    assert np.all(rho < 0.012 - 0.9 * R)
+    sim.set_wall_motion(tube, (0.0, 0.0, 0.5), sim.time, sim.time + 0.6)
+    sim.run(duration=1.0)
+    rho = np.hypot(*sim.positions()[:, :2].T)
+    assert sim.wall_origins()[tube, 2] == pytest.approx(0.05 + 0.3, rel=1e-6)
+    assert rho.max() > 0.03                       # the column fell and spread once the tube rose
+    assert sim.positions()[:, 2].max() < 0.05     # and none was carried up
