@@ -141,7 +141,7 @@ def run_demcal(seed: int, duration: float, params, geometry=None) -> dict:
     """The case by demcal's repose rig (``paper`` profile, ``duration`` simulated; the paper's
     carton unless ``geometry``)."""
     from demcal.simulate.rigs import run_rig
-    from demcal.simulate.rigs.repose import PROFILES
+    from demcal.simulate.rigs.heap import PROFILES
 
     profile = dataclasses.replace(PROFILES["paper"], duration=float(duration))
     t0 = time.perf_counter()

@@ -22,23 +22,9 @@ the heap settle. The heap is then measured in three ways:
     it, so this heap is a few segments high and its angle noisy (docs/design.md); it is reported,
     not compared.
 
-Profiles (``PROFILES``):
-
-``paper``
-    The source paper's case: the workbook's carton and fill count (default 500 segments in
-    200 x 100 x 250 mm), segments inserted at random during the first second in the upper part
-    of the carton (z from 0.4 to 0.96 of its height), the end plate lifted at t = 4 s at the
-    logged speed, 10 s in all, at the parameter set's time step (the paper's 7.43678e-5 s).
-``quick``
-    For calibration campaigns (about 45 runs within 15 minutes on 2 cores). The same carton,
-    fill count, lift speed, time step and contact model as the paper case; only the idle
-    time is cut: the segments are inserted over 0.5 s into the whole height of the carton
-    (z from 0.1 to 0.96 of it), the plate is lifted as soon as the fill has settled (rms speed
-    of the bodies below ``SETTLED_SPEED``, about 0.4 s later) and stopped once its lower edge
-    is a segment diameter above the highest sphere, and the run ends when the heap has
-    settled after that (or at 4 s): about 2.4 s simulated instead of 10. The heap forms while
-    the plate rises, exactly as in the paper case, so the angles agree within the seed
-    scatter and respond to the contact parameters in the same directions.
+Profiles: ``paper`` and ``quick`` (``simulate.rigs.heap``). With the paper's carton the quick
+profile simulates about 2.4 s instead of 10, and its heaps agree with the paper profile's within
+the seed scatter.
 
 Size distribution. With ``size_distribution`` (or ``params.particle_sizes``) each particle is
 drawn from the measured sizes (``simulate.extensions``, engine hook
@@ -60,18 +46,11 @@ import numpy as np
 from demcal.errors import InputError, WorkbookError
 from demcal.provenance import Provenance
 from demcal.simulate.params import DEMParameters
-from demcal.simulate.rigs import RigResult, RunTally, check_seed, run_meta
-from demcal.simulate.scenes import PAPER_DURATION, build_paper_repose_case
+from demcal.simulate.rigs import RigResult, check_seed, run_meta
+from demcal.simulate.rigs.heap import PX_PER_M, fill_lift_settle, repose_profile, side_view_angles
+from demcal.simulate.scenes import build_paper_repose_case
 from demcal.simulate.timestep import material_time_step
 from demcal.units import MM
-
-#: rms speed of the bodies below which a fill or a heap counts as settled [m/s].
-SETTLED_SPEED = 0.005
-#: Resolution of the rendered side view [px/m] (0.5 mm per pixel).
-PX_PER_M = 2000.0
-#: Spacing of the top profile [m].
-PROFILE_STEP = 0.001
-
 
 #: The particle the default carton and fill were made for: segments of 25 x 11 mm [m].
 REFERENCE_LENGTH, REFERENCE_WIDTH = 0.025, 0.011
@@ -193,51 +172,6 @@ def _refuse_other_rigs(meta: dict, file) -> None:
                                 file=file, sheet="meta", column="key", value=key)
 
 
-@dataclass(frozen=True)
-class ReposeProfile:
-    """How a repose run is carried out (see the module docstring).
-
-    Attributes
-    ----------
-    name : str
-    scale : float
-        Linear scale of the carton (fill count scaled by its cube) [-].
-    fill_time : float
-        Segments are inserted uniformly over [0, fill_time] [s].
-    fill_bottom, fill_top : float
-        Insertion region height, as fractions of the carton height [-].
-    lift_time : float or None
-        Time the plate starts rising [s]; None: as soon as the fill has settled.
-    duration : float
-        Simulated time [s]; the largest one when ``early_end``.
-    early_end : bool
-        End once the heap has settled after the plate is clear; stop the plate then too.
-    outside_length : float
-        Floor beyond the carton kept in the simulation domain, relative to the carton length [-].
-    """
-
-    name: str
-    scale: float
-    fill_time: float
-    fill_bottom: float
-    fill_top: float
-    lift_time: float | None
-    duration: float
-    early_end: bool
-    outside_length: float = 2.25
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-
-PROFILES = {
-    "paper": ReposeProfile("paper", scale=1.0, fill_time=1.0, fill_bottom=0.4,
-                           fill_top=0.96, lift_time=4.0, duration=PAPER_DURATION, early_end=False),
-    "quick": ReposeProfile("quick", scale=1.0, fill_time=0.5, fill_bottom=0.1,
-                           fill_top=0.96, lift_time=None, duration=4.0, early_end=True),
-}
-
-
 # ----------------------------------------------------------------------------------------------
 # measuring a heap
 
@@ -276,42 +210,6 @@ class HeapAngles:
                 "profile_z": self.profile_z, "crest_height": self.crest_height, "notes": list(self.notes)}
 
 
-def top_profile(centres, radii, x_min: float, x_max: float, step: float = PROFILE_STEP):
-    """Upper envelope over y of the spheres seen from the side: z(x) = max over spheres of
-    z_i + sqrt(r_i^2 - (x - x_i)^2), 0 (the floor) where no sphere covers x.
-
-    Parameters
-    ----------
-    centres : array (n, 3)
-        Sphere centres [m].
-    radii : array (n,)
-        Sphere radii [m].
-    x_min, x_max : float
-        Range of the profile [m].
-    step : float
-        Spacing [m].
-
-    Returns
-    -------
-    x, z : numpy.ndarray
-    """
-    c = np.asarray(centres, dtype=float).reshape(-1, 3)
-    r = np.broadcast_to(np.asarray(radii, dtype=float), (c.shape[0],))
-    x = np.arange(x_min, x_max + 0.5 * step, step)
-    z = np.zeros_like(x)
-    if c.shape[0] == 0:
-        return x, z
-    lo = np.searchsorted(x, c[:, 0] - r)
-    hi = np.searchsorted(x, c[:, 0] + r, side="right")
-    for i in range(c.shape[0]):
-        if hi[i] <= lo[i]:
-            continue
-        xs = x[lo[i]:hi[i]]
-        top = c[i, 2] + np.sqrt(np.clip(r[i] ** 2 - (xs - c[i, 0]) ** 2, 0.0, None))
-        np.maximum(z[lo[i]:hi[i]], top, out=z[lo[i]:hi[i]])
-    return x, z
-
-
 def heap_angles(centres, radii, box_length: float, *, px_per_m: float = PX_PER_M,
                 annotate_to=None, band=None, photo: bool = True) -> HeapAngles:
     """Measure the heap of a plate-withdrawal run from its spheres (demcal's or another code's).
@@ -339,50 +237,20 @@ def heap_angles(centres, radii, box_length: float, *, px_per_m: float = PX_PER_M
     -------
     HeapAngles
     """
-    from demcal.measure.repose import angle_from_photo, angle_from_profile
-    from demcal.simulate.render import silhouette
+    from demcal.measure.repose import angle_from_profile
 
-    c = np.asarray(centres, dtype=float).reshape(-1, 3)
-    r = np.broadcast_to(np.asarray(radii, dtype=float), (c.shape[0],))
-    if c.shape[0] < 3:
-        raise InputError(f"heap_angles: too few spheres ({c.shape[0]}) to make a heap")
-    notes = []
-    r_max = float(r.max())
-    # floor visible on both sides (the photo method finds the floor line there)
-    x_lo = min(0.0, float((c[:, 0] - r).min()))
-    x_hi = float((c[:, 0] + r).max())
-    margin = max(0.15 * (x_hi - x_lo), 0.02)
-    x_lo, x_hi = x_lo - margin, x_hi + margin
-    x, z = top_profile(c, r, x_lo, x_hi)
-
-    def fit(xs, zs, label):
-        try:
-            res = angle_from_profile(xs, zs, side="right", band=band)
-        except InputError as exc:
-            notes.append(f"{label}: {exc}")
-            return math.nan, math.nan
-        return res.angle_deg, res.crest_height
-
-    angle_profile, crest = fit(x, z, "profile")
-    outside = x > box_length
-    angle_outside, _ = fit(x[outside], z[outside], "outside heap")
-
-    if not photo:
-        return HeapAngles(math.nan, float(angle_profile), float(angle_outside), x, z, float(crest),
-                          tuple(notes))
-    # side view: the floor fills the bottom 15 % of the image, a margin above the crest
-    top = float(z.max())
-    z_lo = -0.15 / 0.85 * (top + 2.0 * r_max)
-    img = silhouette(c[:, [0, 2]], r, px_per_m=px_per_m, extent=(x_lo, x_hi, z_lo, top + 2.0 * r_max),
-                     floor_z_m=0.0)
+    view = side_view_angles(centres, radii, "right", x_min=0.0, px_per_m=px_per_m,
+                            annotate_to=annotate_to, band=band, photo=photo)
+    notes = list(view.notes)
+    outside = view.profile_x > box_length
     try:
-        angle_photo = angle_from_photo(img, side="right", annotate_to=annotate_to, band=band,
-                                       scale_mm_per_px=1e3 / px_per_m).angle_deg
+        angle_outside = angle_from_profile(view.profile_x[outside], view.profile_z[outside], side="right",
+                                           band=band).angle_deg
     except InputError as exc:
-        notes.append(f"photo method: {exc}")
-        angle_photo = math.nan
-    return HeapAngles(float(angle_photo), float(angle_profile), float(angle_outside), x, z,
-                      float(crest), tuple(notes))
+        notes.append(f"outside heap: {exc}")
+        angle_outside = math.nan
+    return HeapAngles(view.angle_deg, view.angle_profile_deg, float(angle_outside), view.profile_x,
+                      view.profile_z, view.crest_height, tuple(notes))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -431,12 +299,7 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
         raise InputError(f"params must be a DEMParameters, got {type(params).__name__}")
     if size_distribution is not None:
         params = with_size_distribution(params, size_distribution)
-    if isinstance(profile, ReposeProfile):
-        prof = profile
-    elif profile in PROFILES:
-        prof = PROFILES[profile]
-    else:
-        raise InputError(f"unknown repose profile {profile!r}; valid: {', '.join(PROFILES)}")
+    prof = repose_profile(profile)
     base = geometry if geometry is not None else ReposeGeometry()
     if not isinstance(base, ReposeGeometry):
         raise InputError(f"geometry must be a ReposeGeometry, got {type(base).__name__}")
@@ -449,67 +312,17 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
         lift_speed=geo.lift_speed, lift_time=prof.lift_time if prof.lift_time is not None else math.inf,
         fill_time=prof.fill_time, fill_margin=fill_margin, fill_bottom=prof.fill_bottom * H,
         fill_top=prof.fill_top * H, dt=dt, outside_length=prof.outside_length * L, force=force)
-    plate = sim.wall_index("end plate")
-    tally = RunTally()
-    ke_t, ke = [], []
-    chunk = 0.05                      # simulated seconds between checks [s]
-
-    def advance(seconds):
-        n = int(round(seconds / dt))
-        if n < 1:
-            return False
-        tally.add(sim.run(n_steps=n))
-        ke_t.append(sim.time)
-        ke.append(sim.kinetic_energy())
-        if callback is not None:
-            callback(sim, prof.duration, False)
-        return True
-
-    def advance_to(t_target):
-        while advance(min(chunk, t_target - sim.time)):
-            pass
-
-    def rms_speed():
-        act = sim.active()
-        m = sim.masses()[act].sum()
-        return math.sqrt(2.0 * sim.kinetic_energy() / m) if m > 0 else 0.0
-
-    # fill, then (quick) wait for the fill to settle and lift the plate
-    advance_to(min(prof.fill_time, prof.duration))
-    t_lift = prof.lift_time
-    if t_lift is None:
-        while sim.time < 0.5 * prof.duration and (rms_speed() > SETTLED_SPEED or any(
-                f.inserted < f.n_total for f in sim.factories)):
-            advance(chunk)
-        t_lift = sim.time
-    else:
-        advance_to(min(t_lift, prof.duration))
     # the plate is clear once its lower edge is a particle's width above the highest sphere
-    z_top = float((sim.sphere_positions()[:, 2] + sim.sphere_radii()).max()) if sim.n_spheres else 0.0
     width = max(float(shape.extent[1]) for shape in params.sized_shapes())
-    t_clear = t_lift + (z_top + width) / geo.lift_speed
-    if prof.early_end:
-        sim.set_wall_motion(plate, (0.0, 0.0, geo.lift_speed), t_lift, t_clear)
-    else:
-        sim.set_wall_motion(plate, (0.0, 0.0, geo.lift_speed), t_lift)
-    # flow and settle
-    while advance(min(chunk, prof.duration - sim.time)):
-        if prof.early_end and sim.time > t_clear + 0.2 and rms_speed() < SETTLED_SPEED:
-            break
-    if callback is not None:
-        callback(sim, prof.duration, True)
-
+    run = fill_lift_settle(sim, sim.wall_index("end plate"), geo.lift_speed, prof, width, geo.fill_count,
+                           callback=callback)
     act = sim.active()
     keep = act[sim.sphere_body()]
     pos, rad = sim.sphere_positions()[keep], sim.sphere_radii()[keep]
     body = sim.positions()
     heap = heap_angles(pos, rad, L, annotate_to=annotate_to)
-    notes = list(heap.notes)
+    notes = list(heap.notes) + run.notes
     inserted = sum(f.inserted for f in sim.factories)
-    if inserted < geo.fill_count:
-        notes.append(f"only {inserted} of {geo.fill_count} segments found room in the carton")
-    if sim.time < t_clear:
-        notes.append(f"the run ended at {sim.time:.2f} s, before the plate was clear ({t_clear:.2f} s)")
     n_act = int(act.sum())
     observable = {
         "angle_deg": heap.angle_deg,
@@ -520,8 +333,8 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
     }
     rec = {"profile_x": heap.profile_x, "profile_z": heap.profile_z, "crest_height": heap.crest_height,
            "sphere_positions": pos, "sphere_radii": rad, "sphere_body": sim.sphere_body()[keep],
-           "body_positions": body[act], "geometry": geo.to_dict(), "t_lift": t_lift, "t_clear": t_clear,
-           "t_end": sim.time, "ke_t": np.array(ke_t), "ke": np.array(ke),
+           "body_positions": body[act], "geometry": geo.to_dict(), "t_lift": run.t_lift,
+           "t_clear": run.t_clear, "t_end": sim.time, "ke_t": np.array(run.ke_t), "ke": np.array(run.ke),
            "escapes": [e.to_dict() for e in sim.escaped]}
     from demcal.measure.repose import FLANK_BAND
     options = {"profile": prof.name, "geometry": base.to_dict(), "force": force,
@@ -529,7 +342,7 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
     hooks = engine_hooks(params)
     if hooks:
         options["extensions"] = hooks
-    meta = run_meta(seed, dt, tally, sim.n_spheres, sim.time, profile=prof.name, notes=notes,
+    meta = run_meta(seed, dt, run.tally, sim.n_spheres, sim.time, profile=prof.name, notes=notes,
                     profile_settings=prof.to_dict(), bodies=sim.n_bodies,
                     inserted=inserted)
     return RigResult("repose", observable, rec, meta, params.to_dict(), Provenance(seed=seed, options=options))

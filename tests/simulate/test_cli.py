@@ -54,7 +54,7 @@ def test_simulate_repose_geometry_from_workbook(tmp_path):
     assert JSON_KEYS <= set(doc) and doc["profile"] == "quick"
     assert set(doc["observable"]) == {"angle_deg", "angle_profile_deg", "angle_outside_deg", "escaped",
                                       "outside_fraction"}
-    from demcal.simulate.rigs.repose import PROFILES
+    from demcal.simulate.rigs.heap import PROFILES
     s = PROFILES["quick"].scale
     assert doc["record"]["geometry"]["box_length"] == pytest.approx(0.08 * s)
     assert doc["record"]["geometry"]["fill_count"] == round(60 * s ** 3)

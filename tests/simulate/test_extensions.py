@@ -303,7 +303,8 @@ def test_engine_velocity_law_equals_the_per_impact_twin():
 
 def test_repose_rig_records_the_hooks_it_runs():
     from demcal.simulate.rigs import run_rig
-    from demcal.simulate.rigs.repose import PROFILES, ReposeGeometry, ReposeProfile
+    from demcal.simulate.rigs.heap import ReposeProfile
+    from demcal.simulate.rigs.repose import ReposeGeometry
 
     tiny = ReposeProfile(name="tiny", scale=1.0, fill_time=0.1, fill_bottom=0.1,
                          fill_top=0.9, lift_time=None, duration=0.4, early_end=True)

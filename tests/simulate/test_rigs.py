@@ -24,7 +24,8 @@ from demcal.simulate.clump import make_template
 from demcal.simulate.params import DEMParameters
 from demcal.simulate.rigs import RIGS, RigResult, run_rig
 from demcal.simulate.rigs.drop import release_orientation
-from demcal.simulate.rigs.repose import PROFILES, ReposeGeometry, ReposeProfile, heap_angles, top_profile
+from demcal.simulate.rigs.heap import ReposeProfile, top_profile
+from demcal.simulate.rigs.repose import ReposeGeometry, heap_angles
 from demcal.simulate.rigs.surfaces import make_surface, surface_from_pair
 
 PARAMS = DEMParameters()

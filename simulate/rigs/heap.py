@@ -1,0 +1,324 @@
+"""What the repose rigs share: how a heap run is carried out, and how a heap is measured.
+
+A repose rig fills a container (the carton of the lifted plate, the lifting cylinder), waits
+for the fill to settle, lifts a wall at the logged speed and lets the heap settle
+(:func:`fill_lift_settle`); its heap is then seen from the side, as the lab's camera sees it,
+and measured by the photo estimator of the lab's photos (:func:`side_view_angles`).
+
+Profiles (``PROFILES``):
+
+``paper``
+    The source paper's timing: particles inserted at random during the first second in the
+    upper part of the container (z from 0.4 to 0.96 of its height), the wall lifted at t = 4 s,
+    10 s in all.
+``quick``
+    For calibration campaigns. The same container, fill, lift speed, time step and contact
+    model; only the idle time is cut: the particles are inserted over 0.5 s into the whole
+    height of the container (z from 0.1 to 0.96 of it), the wall is lifted as soon as the fill
+    has settled (rms speed of the bodies below ``SETTLED_SPEED``) and stopped once its lower
+    edge is a particle's width above the highest sphere, and the run ends when the heap has
+    settled after that (or at 4 s). The heap forms while the wall rises, exactly as in the
+    paper's timing, so the angles agree within the seed scatter.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from demcal.errors import InputError
+from demcal.simulate.rigs import RunTally
+from demcal.simulate.scenes import PAPER_DURATION
+
+#: rms speed of the bodies below which a fill or a heap counts as settled [m/s].
+SETTLED_SPEED = 0.005
+#: Resolution of the rendered side view [px/m] (0.5 mm per pixel).
+PX_PER_M = 2000.0
+#: Spacing of the top profile [m].
+PROFILE_STEP = 0.001
+#: Simulated time between checks of a heap run [s].
+CHUNK_S = 0.05
+
+
+@dataclass(frozen=True)
+class ReposeProfile:
+    """How a repose run is carried out (see the module docstring).
+
+    Attributes
+    ----------
+    name : str
+    scale : float
+        Linear scale of the container (fill count scaled by its cube) [-].
+    fill_time : float
+        Particles are inserted uniformly over [0, fill_time] [s].
+    fill_bottom, fill_top : float
+        Insertion region height, as fractions of the container height [-].
+    lift_time : float or None
+        Time the wall starts rising [s]; None: as soon as the fill has settled.
+    duration : float
+        Simulated time [s]; the largest one when ``early_end``.
+    early_end : bool
+        End once the heap has settled after the wall is clear; stop the wall then too.
+    outside_length : float
+        Floor kept in the simulation domain beyond the container, relative to its length (the
+        carton) or diameter (the cylinder) [-].
+    """
+
+    name: str
+    scale: float
+    fill_time: float
+    fill_bottom: float
+    fill_top: float
+    lift_time: float | None
+    duration: float
+    early_end: bool
+    outside_length: float = 2.25
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+PROFILES = {
+    "paper": ReposeProfile("paper", scale=1.0, fill_time=1.0, fill_bottom=0.4,
+                           fill_top=0.96, lift_time=4.0, duration=PAPER_DURATION, early_end=False),
+    "quick": ReposeProfile("quick", scale=1.0, fill_time=0.5, fill_bottom=0.1,
+                           fill_top=0.96, lift_time=None, duration=4.0, early_end=True),
+}
+
+
+def repose_profile(profile) -> ReposeProfile:
+    """A :class:`ReposeProfile`, or the one ``PROFILES`` names; an unknown name lists them."""
+    if isinstance(profile, ReposeProfile):
+        return profile
+    if profile in PROFILES:
+        return PROFILES[profile]
+    raise InputError(f"unknown repose profile {profile!r}; valid: {', '.join(PROFILES)}")
+
+
+# ----------------------------------------------------------------------------------------------
+# the run
+
+
+@dataclass
+class HeapRun:
+    """What :func:`fill_lift_settle` did: its steps, kinetic energy, and when the wall moved.
+
+    Attributes
+    ----------
+    tally : RunTally
+    ke_t, ke : list of float
+        Kinetic-energy history: time [s], energy [J].
+    t_lift, t_clear : float
+        Time the wall started rising and time its lower edge cleared the fill [s].
+    notes : list of str
+        What did not go as planned (a fill that did not fit, a run that ended early).
+    """
+
+    tally: RunTally = field(default_factory=RunTally)
+    ke_t: list = field(default_factory=list)
+    ke: list = field(default_factory=list)
+    t_lift: float = math.nan
+    t_clear: float = math.nan
+    notes: list = field(default_factory=list)
+
+
+def rms_speed(sim) -> float:
+    """rms speed of the active bodies [m/s] (0 with none)."""
+    act = sim.active()
+    m = sim.masses()[act].sum()
+    return math.sqrt(2.0 * sim.kinetic_energy() / m) if m > 0 else 0.0
+
+
+def fill_lift_settle(sim, wall: int, lift_speed: float, prof: ReposeProfile, clearance: float,
+                     fill_count: int, *, callback=None) -> HeapRun:
+    """Fill ``sim`` from its factories, lift wall ``wall`` at ``lift_speed`` [m/s] and let the
+    heap settle, as ``prof`` says (module docstring).
+
+    The wall counts as clear once its lower edge is ``clearance`` [m] (a particle's width) above
+    the highest sphere of the fill; ``fill_count`` is what the factories were asked to insert
+    (a shortfall is noted). ``callback(sim, t_end, final)`` as in ``simulate.rigs``.
+    """
+    run = HeapRun()
+    dt = sim.dt
+
+    def advance(seconds):
+        n = int(round(seconds / dt))
+        if n < 1:
+            return False
+        run.tally.add(sim.run(n_steps=n))
+        run.ke_t.append(sim.time)
+        run.ke.append(sim.kinetic_energy())
+        if callback is not None:
+            callback(sim, prof.duration, False)
+        return True
+
+    # fill, then (quick) wait for the fill to settle
+    while advance(min(CHUNK_S, min(prof.fill_time, prof.duration) - sim.time)):
+        pass
+    if prof.lift_time is None:
+        while sim.time < 0.5 * prof.duration and (rms_speed(sim) > SETTLED_SPEED or any(
+                f.inserted < f.n_total for f in sim.factories)):
+            advance(CHUNK_S)
+        run.t_lift = sim.time
+    else:
+        run.t_lift = prof.lift_time
+        while advance(min(CHUNK_S, min(prof.lift_time, prof.duration) - sim.time)):
+            pass
+    z_top = float((sim.sphere_positions()[:, 2] + sim.sphere_radii()).max()) if sim.n_spheres else 0.0
+    run.t_clear = run.t_lift + (z_top + clearance) / lift_speed
+    stop = run.t_clear if prof.early_end else math.inf
+    sim.set_wall_motion(wall, (0.0, 0.0, lift_speed), run.t_lift, stop)
+    # flow and settle
+    while advance(min(CHUNK_S, prof.duration - sim.time)):
+        if prof.early_end and sim.time > run.t_clear + 0.2 and rms_speed(sim) < SETTLED_SPEED:
+            break
+    if callback is not None:
+        callback(sim, prof.duration, True)
+    inserted = sum(f.inserted for f in sim.factories)
+    if inserted < fill_count:
+        run.notes.append(f"only {inserted} of {fill_count} particles found room in the container")
+    if sim.time < run.t_clear:
+        run.notes.append(f"the run ended at {sim.time:.2f} s, before the wall was clear ({run.t_clear:.2f} s)")
+    return run
+
+
+# ----------------------------------------------------------------------------------------------
+# measuring a heap
+
+
+def top_profile(centres, radii, x_min: float, x_max: float, step: float = PROFILE_STEP):
+    """Upper envelope over y of the spheres seen from the side: z(x) = max over spheres of
+    z_i + sqrt(r_i^2 - (x - x_i)^2), 0 (the floor) where no sphere covers x.
+
+    Parameters
+    ----------
+    centres : array (n, 3)
+        Sphere centres [m].
+    radii : array (n,)
+        Sphere radii [m].
+    x_min, x_max : float
+        Range of the profile [m].
+    step : float
+        Spacing [m].
+
+    Returns
+    -------
+    x, z : numpy.ndarray
+    """
+    c = np.asarray(centres, dtype=float).reshape(-1, 3)
+    r = np.broadcast_to(np.asarray(radii, dtype=float), (c.shape[0],))
+    x = np.arange(x_min, x_max + 0.5 * step, step)
+    z = np.zeros_like(x)
+    if c.shape[0] == 0:
+        return x, z
+    lo = np.searchsorted(x, c[:, 0] - r)
+    hi = np.searchsorted(x, c[:, 0] + r, side="right")
+    for i in range(c.shape[0]):
+        if hi[i] <= lo[i]:
+            continue
+        xs = x[lo[i]:hi[i]]
+        top = c[i, 2] + np.sqrt(np.clip(r[i] ** 2 - (xs - c[i, 0]) ** 2, 0.0, None))
+        np.maximum(z[lo[i]:hi[i]], top, out=z[lo[i]:hi[i]])
+    return x, z
+
+
+@dataclass(frozen=True)
+class SideView:
+    """A heap seen from the side and measured like the lab's photos.
+
+    Attributes
+    ----------
+    angle_deg : float
+        Photo method on the rendered side view, mean of the flanks measured [deg] (NaN if not
+        measurable or not rendered).
+    flanks_deg : dict
+        ``{"left"/"right": deg}`` of the photo method's flanks.
+    angle_profile_deg : float
+        Profile fit of the same flanks [deg] (NaN if not measurable).
+    crest_height : float
+        Crest height of the profile fit [m].
+    profile_x, profile_z : numpy.ndarray
+        Top profile [m].
+    notes : tuple of str
+        Why an angle is NaN.
+    """
+
+    angle_deg: float
+    flanks_deg: dict
+    angle_profile_deg: float
+    crest_height: float
+    profile_x: np.ndarray
+    profile_z: np.ndarray
+    notes: tuple = ()
+
+
+def side_view_angles(centres, radii, side: str, *, x_min: float | None = None,
+                     px_per_m: float = PX_PER_M, annotate_to=None, band=None,
+                     photo: bool = True) -> SideView:
+    """Measure a heap from its spheres as the lab measures its photos.
+
+    The spheres are projected along y onto the x-z plane; the top profile is fitted
+    (``measure.repose.angle_from_profile``) and, with ``photo``, the rendered side view
+    (``simulate.render.silhouette``, floor visible on both sides) is measured by the photo
+    estimator (``measure.repose.angle_from_photo``), on the flank(s) ``side`` names.
+
+    Parameters
+    ----------
+    centres : array (n, 3)
+        Sphere centres [m], floor z = 0.
+    radii : array (n,)
+        Sphere radii [m].
+    side : {"right", "left", "both"}
+        Flank(s) to measure (a carton's heap has one, a cone two).
+    x_min : float, optional
+        Left end of the view before its margin [m] (default: the leftmost sphere).
+    px_per_m : float
+        Scale of the rendered side view [px/m].
+    annotate_to : path, optional
+        Write the annotated side view there.
+    band : (float, float), optional
+        Fitting band of the flank (default ``measure.repose.FLANK_BAND``).
+    photo : bool
+        Render the side view and run the photo method (else ``angle_deg`` is NaN).
+    """
+    from demcal.measure.repose import angle_from_photo, angle_from_profile
+    from demcal.simulate.render import silhouette
+
+    c = np.asarray(centres, dtype=float).reshape(-1, 3)
+    r = np.broadcast_to(np.asarray(radii, dtype=float), (c.shape[0],))
+    if c.shape[0] < 3:
+        raise InputError(f"too few spheres ({c.shape[0]}) to make a heap")
+    notes = []
+    r_max = float(r.max())
+    x_lo = float((c[:, 0] - r).min()) if x_min is None else min(x_min, float((c[:, 0] - r).min()))
+    x_hi = float((c[:, 0] + r).max())
+    margin = max(0.15 * (x_hi - x_lo), 0.02)      # floor visible on both sides
+    x_lo, x_hi = x_lo - margin, x_hi + margin
+    x, z = top_profile(c, r, x_lo, x_hi)
+    try:
+        fit = angle_from_profile(x, z, side=side, band=band)
+        angle_profile, crest = fit.angle_deg, fit.crest_height
+    except InputError as exc:
+        notes.append(f"profile: {exc}")
+        angle_profile, crest = math.nan, math.nan
+    angle_photo, flanks = math.nan, {}
+    if photo:
+        # the floor fills the bottom 15 % of the image, a margin above the crest
+        top = float(z.max())
+        z_lo = -0.15 / 0.85 * (top + 2.0 * r_max)
+        img = silhouette(c[:, [0, 2]], r, px_per_m=px_per_m, extent=(x_lo, x_hi, z_lo, top + 2.0 * r_max),
+                         floor_z_m=0.0)
+        try:
+            res = angle_from_photo(img, side=side, annotate_to=annotate_to, band=band,
+                                   scale_mm_per_px=1e3 / px_per_m)
+            angle_photo = res.angle_deg
+            flanks = {k: float(v) for k, v in res.flanks.items() if v is not None}
+        except InputError as exc:
+            notes.append(f"photo method: {exc}")
+    return SideView(float(angle_photo), flanks, float(angle_profile), float(crest), x, z, tuple(notes))
+
+
+__all__ = ["CHUNK_S", "HeapRun", "PROFILES", "PROFILE_STEP", "PX_PER_M", "ReposeProfile", "SETTLED_SPEED",
+           "SideView", "fill_lift_settle", "repose_profile", "rms_speed", "side_view_angles", "top_profile"]
