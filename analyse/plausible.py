@@ -111,11 +111,10 @@ def _noise_variances(groups, pooled) -> np.ndarray:
     return np.array(out)
 
 
-def derive_plausible(measurement, config, execute, *, factors, base, geometry, responses, run_refs) -> dict:
+def derive_plausible(measurement, config, execute, *, factors, base, setup, responses, run_refs) -> dict:
     """The workflow of the module docstring; ``execute(stage, tasks) -> records`` supplies the
-    DEM runs (the run store, or a replay from it). Returns what ``results.json`` holds."""
-    from demcal.simulate.rigs import repose
-
+    DEM runs (the run store, or a replay from it); ``setup`` the workbook's repose rig
+    (``simulate.rigs.ReposeSetup``). Returns what ``results.json`` holds."""
     est = measurement.quantities["repose_angle_deg"]
     target = float(est.value)
     lab_sd = float(est.sd) if est.n >= 2 and math.isfinite(est.sd) else None
@@ -137,8 +136,7 @@ def derive_plausible(measurement, config, execute, *, factors, base, geometry, r
     box_low, box_high = np.minimum(prior.low, heap_prior.low), np.maximum(prior.high, heap_prior.high)
 
     def task(x, seed):
-        return repose.task(base.with_(**{n: float(v) for n, v in zip(names, x)}), seed, profile=config.profile,
-                           geometry=geometry)
+        return setup.task(base.with_(**{n: float(v) for n, v in zip(names, x)}), seed, profile=config.profile)
 
     def run(stage, points, seed_lists):
         tasks = [task(x, s) for x, ss in zip(points, seed_lists) for s in ss]

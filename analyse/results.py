@@ -581,7 +581,10 @@ class CampaignResult(Record):
         ``Measurement.to_dict()`` of the workbook the campaign started from.
     factors, base_parameters, geometry : dict
         The seven factors with their levels, the DEM parameters before calibration, the
-        repose twin's box.
+        repose twin's dimensions.
+    repose_rig : str
+        The repose rig (the workbook's meta ``repose_rig``: ``lifted_plate``,
+        ``lifting_cylinder``).
     validation : Validation
     calibrated_parameters : dict
         The DEM parameters after calibration (``DEMParameters.to_dict()``).
@@ -627,6 +630,7 @@ class CampaignResult(Record):
     optimisation: Optimisation | None = None
     runner: str | None = None
     wall_s: float | None = None
+    repose_rig: str = "lifted_plate"
     schema_version: int = SCHEMA_VERSION
 
     _omit_if_none = ("calibration", "prior", "noise", "design", "surrogate", "plackett_burman",

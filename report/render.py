@@ -24,7 +24,7 @@ import jinja2
 from markupsafe import Markup
 
 from demcal.analyse.results import CampaignResult
-from demcal.errors import InputError
+from demcal.errors import DemcalError, InputError
 from demcal.jsonio import read_json, write_json
 from demcal.provenance import sha256_file
 from demcal.report.figures import DPI, make_figures
@@ -216,9 +216,11 @@ def _runner_text(r: CampaignResult) -> tuple[str, bool]:
     # first ones ran their heaps by analyse.campaign.repose_runner.
     if runner.removeprefix("demcal.") in ("analyse.campaign.campaign_runner",
                                           "analyse.campaign.repose_runner"):
+        from demcal.simulate.rigs import repose_rig_named
+
         return ("Every DEM run was made by demcal's own DEM (numba; Hertz-Mindlin contacts, "
-                "constant-torque rolling friction, multi-sphere clumps) on its twin of the plate-"
-                "withdrawal repose test; the paper used EDEM 2018."), False
+                "constant-torque rolling friction, multi-sphere clumps) on its twin of the lab's "
+                f"repose test ({repose_rig_named(r.repose_rig).lab_test}); the paper used EDEM 2018."), False
     return (f"The DEM runs of this campaign were made by {runner}, not by demcal's repose rig: the "
             "numbers below exercise the analysis, they are not a DEM calibration of the material."), True
 
@@ -420,19 +422,21 @@ def differences_plausible(c: Campaign) -> list[str]:
 
 
 def rig_text(c: Campaign) -> str:
-    """The repose rig as the workbook meta describes it."""
-    meta = c.measurement.get("meta", {})
-    dims = [meta.get(k) for k in ("box_length_mm", "box_width_mm", "box_height_mm")]
-    parts = []
-    if all(d not in (None, "") for d in dims):
-        parts.append("the carton is " + " mm × ".join(f"{float(d):g}" for d in dims) + " mm inside")
-    if meta.get("fill_count") not in (None, ""):
-        nouns = particle_noun(c.measurement, plural=True)
-        parts.append(f"{int(float(meta['fill_count']))} {nouns} are poured in")
-    if meta.get("plate_lift_speed_mm_s") not in (None, ""):
-        parts.append(f"the side plate is lifted at {float(meta['plate_lift_speed_mm_s']):g} mm/s")
-    profile = c.results.config.get("profile") if c.results else None
-    text = "; ".join(parts) + " (workbook meta)" if parts else "the rig geometry comes from the workbook meta"
+    """The repose rig of the campaign (its results, else the workbook meta) in words."""
+    from demcal.simulate.rigs import ReposeSetup, repose_rig_named, repose_setup
+
+    nouns = particle_noun(c.measurement, plural=True)
+    r = c.results
+    try:
+        if r is not None and r.geometry:
+            setup = ReposeSetup(repose_rig_named(r.repose_rig).name, r.geometry)
+        else:
+            setup = repose_setup(c.measurement.get("meta", {}))
+        text = setup.describe(nouns)
+        text = text[0].upper() + text[1:] + " (workbook meta)"
+    except (DemcalError, TypeError):
+        text = "The rig's dimensions come from the workbook meta"
+    profile = r.config.get("profile") if r else None
     return text + (f"; rig profile '{profile}'." if profile else ".")
 
 

@@ -27,7 +27,7 @@ from pathlib import Path
 from demcal.analyse.critique.diagnosis import TIER_SHARES
 from demcal.analyse.critique.loop import Critique, load_critique
 from demcal.analyse.results import CampaignResult, Validation, read_campaign_results
-from demcal.errors import InputError
+from demcal.errors import DemcalError, InputError
 from demcal.jsonio import read_json, to_jsonable
 from demcal.provenance import sha256_file
 
@@ -61,8 +61,6 @@ INSTRUMENTS = {
             "track (paper: high-speed camera and TEMA)",
     "incline": "tilting-plane inclinometer (paper: CNY-1)",
     "compression": "texture analyser, compression to about 30 % (paper: 5 mm/s)",
-    "repose": "plate withdrawal (pumping plate) heap, side photograph (paper: Matlab and "
-              "Origin 2018)",
     "meta": "given in the workbook meta sheet",
 }
 
@@ -508,6 +506,17 @@ def table_physical(c: Campaign) -> Table:
                  formats=("", "", "", "d", ".4g", ".3g", ".4g", ".4g", ".4g", ".3g"))
 
 
+def _instrument(sheet: str, measurement: dict) -> str:
+    """The instrument behind a sheet; for the heap photos the workbook's repose rig."""
+    if sheet == "repose":
+        from demcal.simulate.rigs import repose_rig
+        try:
+            return repose_rig(measurement.get("meta", {})).lab_test
+        except DemcalError:
+            return "heap, side photograph"
+    return INSTRUMENTS.get(sheet, "")
+
+
 def table_methods(c: Campaign) -> Table:
     """Table 2a: instrument, formula and rows of every measured quantity (the estimates' own
     ``method`` text)."""
@@ -517,7 +526,7 @@ def table_methods(c: Campaign) -> Table:
     for name, e in m["quantities"].items():
         sheet = _get(e, "source", "sheet", default="")
         rejected = [f"{r['row']}: {r['reason']}" for r in e.get("rows_rejected", [])]
-        rows.append((quantity_label(name, noun), sheet, INSTRUMENTS.get(sheet, ""), e.get("method", ""),
+        rows.append((quantity_label(name, noun), sheet, _instrument(sheet, m), e.get("method", ""),
                      row_ranges(e.get("rows_used", [])), "; ".join(rejected) or "none",
                      _get(e, "extra", "outlier_rule", default="")))
         src = _get(e, "source", default={})

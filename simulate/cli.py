@@ -124,18 +124,23 @@ def _surface_options(items, label) -> dict:
             "surface_contact": {k: v for k, v in values.items() if k in CONTACT_KEYS}}
 
 
-def rig_options(args) -> tuple[dict, dict]:
-    """Keyword options of the rig and the input files they came from (path -> SHA-256)."""
+def rig_options(args) -> tuple[str, dict, dict]:
+    """The registered rig to run (``repose``: the workbook's repose rig, meta ``repose_rig``),
+    its keyword options and the input files they came from (path -> SHA-256)."""
     inputs = {}
     if args.rig == "repose":
         opts = {"profile": args.profile, "annotate_to": args.annotate}
+        name = "repose"
         if args.workbook:
             from demcal.measure.workbook import read_workbook
-            from demcal.simulate.rigs.repose import ReposeGeometry
+            from demcal.simulate.rigs import repose_setup, rig
+
             wb = read_workbook(args.workbook, read_options(args))
-            opts["geometry"] = ReposeGeometry.from_meta(wb.meta, file=str(wb.source))
+            setup = repose_setup(wb.meta, file=str(wb.source))
+            name = setup.rig
+            opts["geometry"] = rig(name).geometry(**setup.geometry)
             inputs.update(wb.files)
-        return opts, inputs
+        return name, opts, inputs
     if args.rig == "drop":
         if not (math.isfinite(args.height) and args.height > 0):
             raise InputError(f"--height must be a positive drop height [mm], got {args.height!r}")
@@ -150,10 +155,10 @@ def rig_options(args) -> tuple[dict, dict]:
                                  f"got {args.orientation!r}") from None
         opts = {"height": args.height * 1e-3, "orientation_deg": orientation, "pair": args.pair}
         opts.update(_surface_options(args.surface_values, "pair"))
-        return opts, inputs
+        return "drop", opts, inputs
     opts = {"mode": args.mode, "surface": args.surface, "tilt_rate_deg_s": args.tilt_rate}
     opts.update(_surface_options(args.surface_values, "surface"))
-    return opts, inputs
+    return "incline", opts, inputs
 
 
 class _Monitor:
@@ -229,11 +234,11 @@ def run(args) -> int:
     params = parameters(args.sets, base)
     if args.seed < 0:
         raise InputError(f"--seed must be >= 0, got {args.seed}")
-    opts, inputs = rig_options(args)
+    name, opts, inputs = rig_options(args)
     if particle is not None:
         inputs.update(particle.provenance.inputs)
     monitor = _Monitor(args.vtk)
-    result = run_rig(args.rig, params, args.seed, callback=monitor, **opts)
+    result = run_rig(name, params, args.seed, callback=monitor, **opts)
     if inputs:
         result = dataclasses.replace(result, provenance=dataclasses.replace(
             result.provenance, inputs=dict(result.provenance.inputs, **inputs)))
@@ -241,7 +246,7 @@ def run(args) -> int:
     if args.json_out:
         write_json(args.json_out, doc)
     shown = ", ".join(f"{k} = {_fmt(v)}" for k, v in result.observable.items())
-    print(f"{args.rig}: {shown}")
+    print(f"{name}: {shown}")
     print(f"  {doc['steps']} steps, {doc['spheres']} spheres, {doc['wall_s']:.1f} s wall, "
           f"{doc['sphere_steps_per_s']:.3g} sphere-steps/s, seed {args.seed}")
     for note in doc["notes"]:

@@ -89,7 +89,7 @@ def build_paper_repose_case(params: DEMParameters, seed, n_clumps: int = 500, *,
                      domain_lo=(-0.05, -outside_width, -0.02),
                      domain_hi=(L + outside_length, W + outside_width, H + 0.05),
                      dt=dt, rolling_lever=params.rolling_lever, force=force, chunk_steps=chunk_steps)
-    templates, weights = _particle_templates(sim, params, size_distribution)
+    templates, weights = particle_templates(sim, params, size_distribution)
     sim.add_wall(Plane((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), material="steel", name="floor"))
     x_axis, y_axis, z_axis = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
     sim.add_wall(Rectangle((0.0, W / 2, H / 2), y_axis, z_axis, W / 2, H / 2, "steel", name="carton x-"))
@@ -106,7 +106,7 @@ def build_paper_repose_case(params: DEMParameters, seed, n_clumps: int = 500, *,
     return sim
 
 
-def _particle_templates(sim: Simulation, params: DEMParameters, size_distribution):
+def particle_templates(sim: Simulation, params: DEMParameters, size_distribution):
     """Add the particle template(s) to ``sim``; returns their ids and weights (None for one)."""
     sizes = size_distribution.sizes if size_distribution is not None else params.particle_sizes
     if sizes is None:

@@ -13,6 +13,11 @@ Layout (every key optional; data/virtual_lab/truth.yaml is a commented example):
       drop_heights_mm: [200, 400, 600]
       n_drop: 10
       photos: analytic
+      repose_rig:            # the heap's rig, as workbook meta rows (default: the lifted plate)
+        repose_rig: lifting_cylinder
+        cylinder_diameter_mm: 60
+        cylinder_height_mm: 120
+        lift_speed_mm_s: 10
 
 Omitted keys take the defaults of ``Truth``, ``DEMParameters`` and ``write_virtual_workbook``.
 An unknown key, or a value of the wrong type or out of range, is refused with the file, the key
@@ -54,7 +59,7 @@ SURFACES = ("particle", "steel")
 #: Keys of the ``design`` section: the options of ``write_virtual_workbook`` that shape the workbook.
 DESIGN_KEYS = ("photos", "n_specimens", "n_density", "pairs", "drop_heights_mm", "n_drop",
                "orientation_range_deg", "n_tracks", "surfaces", "n_incline", "n_compression",
-               "n_photos", "trials_per_specimen", "interleaved")
+               "n_photos", "trials_per_specimen", "interleaved", "repose_rig")
 
 #: Smallest count of each integer design option (those of ``write_virtual_workbook``).
 DESIGN_MIN_COUNTS = {"n_specimens": 3, "n_density": 2, "n_drop": 1, "n_incline": 2, "n_compression": 0,
@@ -181,6 +186,12 @@ def parse_design(values, where: str = "design") -> dict:
                 raise InputError(f"{at}: must be one of {', '.join(PHOTO_MODES)}, got {value!r}")
         elif key == "trials_per_specimen" and value is None:
             pass
+        elif key == "repose_rig":
+            from demcal.simulate.virtual_lab import repose_geometry
+            try:
+                repose_geometry(value)              # checked now, used by write_virtual_workbook
+            except InputError as exc:
+                raise InputError(f"{at}: {exc}") from None
         elif key == "interleaved":
             if not isinstance(value, bool):
                 raise InputError(f"{at}: must be true or false, got {value!r}")

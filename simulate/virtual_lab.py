@@ -787,11 +787,11 @@ def _dem_heap_photo(truth: Truth, rng, roll, light, seeds, discarded: list, geom
 
     from demcal.measure.repose import angle_from_photo
     from demcal.simulate.render import heap_photo
-    from demcal.simulate.rigs import run_rig
 
+    rig = rig_of_geometry(geometry)
     for _ in range(MAX_POURS):
         seed = next(seeds)
-        res = run_rig("repose", truth.params, seed, profile="quick", geometry=geometry)
+        res = rig.run(truth.params, seed, profile="quick", geometry=geometry)
         x = np.asarray(res.record["profile_x"], float)
         z = np.asarray(res.record["profile_z"], float)
         img = heap_photo(x, z, rng=rng, camera_roll_deg=float(np.clip(roll, -15, 15)), light=light,
@@ -800,14 +800,38 @@ def _dem_heap_photo(truth: Truth, rng, roll, light, seeds, discarded: list, geom
         # read it back as the workbook will hold it (the JPEG written by _photos)
         stored = cv2.imdecode(cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 95])[1], cv2.IMREAD_COLOR)
         try:
-            angle_from_photo(stored, side="right")
+            angle_from_photo(stored, side=rig.flanks)
         except DemcalError as exc:
             discarded.append({"seed": seed, "reason": str(exc)})
             continue
-        return img, "right"
+        return img, rig.flanks
     raise SimulationError(f"{MAX_POURS} repose-twin heaps in a row could not be read from their photos "
-                          f"(last: {discarded[-1]['reason']}); the carton geometry or the truth gives no "
+                          f"(last: {discarded[-1]['reason']}); the rig's dimensions or the truth give no "
                           "measurable flank")
+
+
+def rig_of_geometry(geometry):
+    """The registered repose rig whose dimensions ``geometry`` is (``simulate.rigs.Rig``)."""
+    from demcal.simulate.rigs import rigs_of_sheet
+
+    for rig in rigs_of_sheet("repose"):
+        if isinstance(geometry, rig.geometry):
+            return rig
+    raise InputError(f"geometry must be the dimensions of a repose rig, got {type(geometry).__name__}")
+
+
+def repose_geometry(meta: dict):
+    """The repose rig's dimensions from meta rows (``repose_rig`` and the rig's keys), as an
+    object of the rig's geometry class; a bad row refused naming its key."""
+    from demcal.simulate.rigs import repose_setup, rig
+
+    if not isinstance(meta, dict):
+        raise InputError(f"repose_rig must be a mapping of workbook meta keys, got {meta!r}")
+    try:
+        setup = repose_setup(meta)
+    except DemcalError as exc:
+        raise InputError(f"repose_rig: {exc}") from None
+    return rig(setup.rig).geometry(**setup.geometry)
 
 
 def _meta(truth: Truth, effects, geometry=None) -> pd.DataFrame:
@@ -820,9 +844,7 @@ def _meta(truth: Truth, effects, geometry=None) -> pd.DataFrame:
             ("contact_density_kg_m3", p.wall_density_kg_m3), ("contact_poisson", p.wall_poisson_ratio),
             ("contact_shear_modulus_pa", p.wall_shear_modulus_pa),
             ("particle_shear_modulus_pa", p.shear_modulus_pa),
-            ("box_length_mm", round(g.box_length * 1e3, 6)), ("box_width_mm", round(g.box_width * 1e3, 6)),
-            ("box_height_mm", round(g.box_height * 1e3, 6)),
-            ("plate_lift_speed_mm_s", round(g.lift_speed * 1e3, 6)), ("fill_count", g.fill_count),
+            ("repose_rig", rig_of_geometry(g).workbook_name), *g.meta_rows(),
             ("shape", p.shape.name)] + ([("time_step_s", p.dt)] if p.dt is not None else []) + (
             [("spheres_per_particle", p.shape.n_spheres)] if hasattr(p.shape, "n_spheres") else []) + [
             ("virtual_lab", "made by simulate.virtual_lab from a known truth (truth.json); planted: "
@@ -868,7 +890,8 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
                            surfaces=("particle", "steel"), n_incline: int = 30,
                            n_compression: int = 10, n_photos: int = 4,
                            cache_dir=None, geometry=None, trials_per_specimen: int | None = None,
-                           interleaved: bool = False, photo_size=None) -> VirtualWorkbook:
+                           interleaved: bool = False, photo_size=None,
+                           repose_rig: dict | None = None) -> VirtualWorkbook:
     """Write a complete lab workbook from ``truth``, with ``effects`` planted.
 
     Parameters
@@ -901,11 +924,16 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
         Compression tests (with curves); heap photos.
     cache_dir : path, optional
         Disk cache of the drop-twin table (default ``$DEMCAL_CACHE``, else memory only).
-    geometry : simulate.rigs.repose.ReposeGeometry, optional
-        The repose rig's carton and fill (written to the meta sheet, and used for the heaps of
-        ``photos="dem"``); default the carton in proportion to the truth's particle
-        (``ReposeGeometry.for_particle``: for the paper's segments, its 200 x 100 x 250 mm carton
-        of 500).
+    geometry : ReposeGeometry or CylinderGeometry, optional
+        The repose rig's dimensions (``simulate.rigs.repose.ReposeGeometry`` for the lifted
+        plate, ``simulate.rigs.lifting_cylinder.CylinderGeometry``), written to the meta sheet
+        with the rig's name (``repose_rig``) and used for the heaps of ``photos="dem"``; default
+        the carton in proportion to the truth's particle (``ReposeGeometry.for_particle``: for
+        the paper's segments, its 200 x 100 x 250 mm carton of 500).
+    repose_rig : dict, optional
+        The same as workbook meta rows instead (``repose_rig`` and the rig's dimensions, e.g.
+        ``{"repose_rig": "lifting_cylinder", "cylinder_diameter_mm": 60, ...}``); not with
+        ``geometry``.
     trials_per_specimen : int, optional
         Drop and incline trials per specimen: each sheet's trials go to that many trials on
         each of a random subset of the specimens (with ``Truth.icc`` a clustered design);
@@ -939,10 +967,15 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
         raise InputError(f"photo_size must be (height, width) in whole pixels, each >= 120, got {photo_size!r}")
     lo, hi = (float(v) for v in orientation_range_deg)
 
+    if repose_rig is not None:
+        if geometry is not None:
+            raise InputError("give the repose rig as geometry or as repose_rig meta rows, not both")
+        geometry = repose_geometry(repose_rig)
     stated_geometry = geometry
     if geometry is None:
         from demcal.simulate.rigs.repose import ReposeGeometry
         geometry = ReposeGeometry.for_particle(truth.params.shape)
+    rig_of_geometry(geometry).geometry.check_for(geometry, truth.params.shape)
 
     path = Path(path)
     xlsx = path.suffix.lower() == ".xlsx"

@@ -399,7 +399,7 @@ def _incline_twins(runner, measurement, workbook, params, wall, discrepancies):
 
 
 def _repose_twins(runner, measurement, results, campaign, params, repose_seeds, discrepancies):
-    from demcal.simulate.rigs import repose, run_task
+    from demcal.simulate.rigs import repose_setup, run_task
 
     est = measurement.quantities.get("repose_angle_deg")
     if est is None:
@@ -409,9 +409,8 @@ def _repose_twins(runner, measurement, results, campaign, params, repose_seeds, 
     if results is not None:
         angles, note = repose_validation_angles(campaign, results)
     elif repose_seeds > 0:
-        from demcal.analyse.campaign import repose_geometry
-        tasks = [repose.task(params, 9000 + i, profile="quick", geometry=repose_geometry(measurement))
-                 for i in range(repose_seeds)]
+        setup = repose_setup(measurement.meta, file=measurement.workbook.get("source"))
+        tasks = [setup.task(params, 9000 + i, profile="quick") for i in range(repose_seeds)]
         angles = [r["observable"]["angle_deg"] for r in runner(run_task, tasks, "repose twins")]
         note = f"{repose_seeds} quick-profile repose runs"
     else:

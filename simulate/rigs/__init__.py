@@ -1,21 +1,27 @@
 """Rigs: the twins of the lab tests, each measuring its observable the way the lab does.
 
-========  ==========================================  ============================================
-rig       lab test                                    observable
-========  ==========================================  ============================================
-repose    plate withdrawal ("pumping plate") heap     ``angle_deg`` (photo method), profile and
-          (``simulate.rigs.repose``)                  outside-heap angles, escapes
-drop      free fall onto a plate, rebound filmed      ``apparent_restitution`` = sqrt(h_rebound /
-          (``simulate.rigs.drop``)                    h_drop) of the centre of mass
-incline   inclinometer, plate tilted slowly           ``slide_angle_deg``, ``roll_angle_deg``
-          (``simulate.rigs.incline``)
-========  ==========================================  ============================================
+================  ==================================  ============================================
+rig               lab test                            observable
+================  ==================================  ============================================
+repose            plate withdrawal ("pumping plate")  ``angle_deg`` (photo method, one flank),
+                  heap (``simulate.rigs.repose``)     profile and outside-heap angles, escapes
+lifting_cylinder  cylinder lifted off its fill: a     ``angle_deg`` (photo method, both flanks),
+                  cone (``...rigs.lifting_cylinder``) each flank, profile angle, crest height
+drop              free fall onto a plate, rebound     ``apparent_restitution`` = sqrt(h_rebound /
+                  filmed (``simulate.rigs.drop``)     h_drop) of the centre of mass
+incline           inclinometer, plate tilted slowly   ``slide_angle_deg``, ``roll_angle_deg``
+                  (``simulate.rigs.incline``)
+================  ==================================  ============================================
 
-Every rig returns a :class:`RigResult`; :func:`run_rig` runs one by name. Each rig module
-also has ``task(params, ...)``, the inputs of one run as a plain dict naming its rig (what a run
-store keys, ``analyse.runs.run_key``), and ``run_task(inputs)``, which runs it;
-:func:`run_task` runs any task on the rig it names, so the stages above never dispatch on a
-rig's name.
+A rig is one module plus one line in :data:`RIGS`: the module declares ``RIG = Rig(...)``
+(:class:`Rig`: its workbook sheet, its dimensions, its observables, how it runs), so the
+stages above loop over the registered rigs and never dispatch on a rig's name. Every rig
+returns a :class:`RigResult`; :func:`run_rig` runs one by name. A rig's ``task(params, seed,
+...)`` gives the inputs of one run as a plain dict naming its rig (what a run store keys,
+``analyse.runs.run_key``), and :func:`run_task` runs any task on the rig it names.
+
+The repose rigs (the workbook's ``repose`` sheet) are chosen by the meta key ``repose_rig``
+(:func:`repose_rig`): ``lifted_plate`` (the default) or ``lifting_cylinder``.
 
 >>> from simulate.params import DEMParameters
 >>> result = run_rig("drop", DEMParameters(), seed=1, height=0.4, orientation_deg=0.0)
@@ -31,14 +37,117 @@ from __future__ import annotations
 import importlib
 import operator
 from dataclasses import dataclass
+from typing import Callable
 
-from demcal.errors import InputError
+from demcal.errors import InputError, WorkbookError
 from demcal.provenance import Provenance
 
-#: Rig name -> "module:function".
-RIGS = {"repose": "demcal.simulate.rigs.repose:run_repose",
-        "drop": "demcal.simulate.rigs.drop:run_drop",
-        "incline": "demcal.simulate.rigs.incline:run_incline"}
+#: Rig name -> the module that declares it (``RIG``): the one registration line of a rig.
+RIGS = {"repose": "demcal.simulate.rigs.repose",
+        "lifting_cylinder": "demcal.simulate.rigs.lifting_cylinder",
+        "drop": "demcal.simulate.rigs.drop",
+        "incline": "demcal.simulate.rigs.incline"}
+
+#: Repose rigs labs use that have no twin yet, with the prefix of their meta keys: their
+#: workbooks are refused by name instead of being simulated as another rig.
+UNBUILT_REPOSE_RIGS = {"funnel": "funnel_", "drum": "drum_"}
+
+
+@dataclass(frozen=True)
+class Rig:
+    """One twin of a lab test, as its module declares it (``RIG = Rig(...)``).
+
+    Attributes
+    ----------
+    name : str
+        Registry name: tasks, run keys and ``demcal simulate NAME`` use it.
+    sheet : str
+        The workbook sheet whose rows it mirrors (``repose``, ``drop``, ``incline``).
+    run : callable
+        ``run(params, seed, **options) -> RigResult``.
+    task : callable
+        ``task(params, seed, **options) -> dict``, the inputs of one run (naming ``name``).
+    run_task : callable
+        ``run_task(task) -> dict``, the run's ``RigResult.to_dict()``.
+    observables : dict
+        Observable name -> unit, as ``RigResult.observable`` holds them.
+    compared : str or None
+        The observable compared with the lab's reading.
+    geometry : type or None
+        Its dimensions from the workbook's meta: ``from_meta(meta, file)``, ``META_KEYS``,
+        ``meta_rows()``, ``to_dict()``, ``describe()``.
+    workbook_name : str or None
+        The value of the meta key ``repose_rig`` that chooses it (repose rigs).
+    flanks : str
+        Flank(s) of its heap the photos show: ``right`` (one) or ``both`` (a cone).
+    lab_test : str
+        The lab test it is the twin of, in the report's words.
+    """
+
+    name: str
+    sheet: str
+    run: Callable
+    task: Callable
+    run_task: Callable
+    observables: dict
+    compared: str | None = None
+    geometry: type | None = None
+    workbook_name: str | None = None
+    flanks: str = "both"
+    lab_test: str = ""
+
+
+def rig(name: str) -> Rig:
+    """The registered rig ``name``; an unknown name lists the valid ones."""
+    if name not in RIGS:
+        raise InputError(f"unknown rig {name!r}; valid rigs: {', '.join(RIGS)}")
+    return importlib.import_module(RIGS[name]).RIG
+
+
+def rigs_of_sheet(sheet: str) -> list:
+    """The registered rigs that mirror the workbook sheet ``sheet``."""
+    return [r for r in map(rig, RIGS) if r.sheet == sheet]
+
+
+def repose_rig_named(workbook_name: str) -> Rig:
+    """The repose rig whose workbook name (meta ``repose_rig``) is ``workbook_name``."""
+    for r in rigs_of_sheet("repose"):
+        if r.workbook_name == workbook_name:
+            return r
+    raise InputError(f"no repose rig is named {workbook_name!r}; valid: "
+                     f"{', '.join(r.workbook_name for r in rigs_of_sheet('repose'))}")
+
+
+def repose_rig(meta: dict, file=None) -> Rig:
+    """The repose rig a workbook's ``meta`` names (key ``repose_rig``, default
+    ``lifted_plate``).
+
+    An unknown name, a rig with no twin yet, and a dimension of another repose rig than the one
+    named raise ``WorkbookError`` naming the key: the twin must never simulate another heap than
+    the one the lab photographed.
+    """
+    meta = meta or {}
+    rigs = {r.workbook_name: r for r in rigs_of_sheet("repose")}
+    raw = meta.get("repose_rig")
+    name = str(raw).strip().lower() if raw is not None and str(raw).strip() else "lifted_plate"
+    if name not in rigs:
+        why = ("has no twin yet" if name in UNBUILT_REPOSE_RIGS else "is not a repose rig")
+        raise WorkbookError(f"meta repose_rig: {name!r} {why}, so its heaps cannot be calibrated against "
+                            f"(its photos still measure with demcal measure); repose rigs with a twin: "
+                            f"{', '.join(rigs)}", file=file, sheet="meta", column="value", value=raw)
+    chosen = rigs[name]
+    own = set(chosen.geometry.META_KEYS)
+    others = {key: r.workbook_name for r in rigs.values() if r is not chosen for key in r.geometry.META_KEYS}
+    for key, value in meta.items():
+        if value is None or (isinstance(value, str) and not value.strip()) or key in own:
+            continue                              # a blank row of a template says nothing
+        other = others.get(key) or next((r for r, prefix in UNBUILT_REPOSE_RIGS.items()
+                                          if str(key).startswith(prefix)), None)
+        if other is not None:
+            raise WorkbookError(f"meta {key}: a dimension of the {other} rig, but the workbook's heap is "
+                                f"the {name} rig's (meta repose_rig); its dimensions: {', '.join(chosen.geometry.META_KEYS)}",
+                                file=file, sheet="meta", column="key", value=key)
+    return chosen
 
 
 @dataclass(frozen=True)
@@ -78,12 +187,49 @@ class RigResult:
                 "provenance": self.provenance.to_dict()}
 
 
+@dataclass(frozen=True)
+class ReposeSetup:
+    """The workbook's repose rig and its dimensions: what a campaign's repose runs are.
+
+    Attributes
+    ----------
+    rig : str
+        The registered rig (``RIGS``).
+    geometry : dict
+        Its dimensions, the ``to_dict()`` of its ``geometry`` class.
+    """
+
+    rig: str
+    geometry: dict
+
+    @property
+    def workbook_name(self) -> str:
+        """The rig's name in the workbook (meta ``repose_rig``)."""
+        return rig(self.rig).workbook_name
+
+    def task(self, params, seed: int, *, profile: str) -> dict:
+        """The inputs of one run of the rig (what a run store keys)."""
+        return rig(self.rig).task(params, seed, profile=profile, geometry=self.geometry)
+
+    def check_for(self, shape) -> None:
+        """Refuse, before any run, a rig whose heap of ``shape`` could not be read."""
+        rig(self.rig).geometry(**self.geometry).check_for(shape)
+
+    def describe(self, noun: str = "particles") -> str:
+        """What the report says of the rig (``noun``: the particles' name, plural)."""
+        return rig(self.rig).geometry(**self.geometry).describe(noun)
+
+
+def repose_setup(meta: dict, file=None) -> ReposeSetup:
+    """The repose rig a workbook's ``meta`` names (:func:`repose_rig`) with its dimensions
+    read from the same meta (a missing or bad one refused naming its key)."""
+    chosen = repose_rig(meta, file)
+    return ReposeSetup(chosen.name, chosen.geometry.from_meta(meta, file).to_dict())
+
+
 def rig_function(name: str):
     """The run function of rig ``name``; an unknown name lists the valid ones."""
-    if name not in RIGS:
-        raise InputError(f"unknown rig {name!r}; valid rigs: {', '.join(RIGS)}")
-    module, func = RIGS[name].split(":")
-    return getattr(importlib.import_module(module), func)
+    return rig(name).run
 
 
 def run_rig(name: str, params, seed: int = 0, **opts) -> RigResult:
@@ -100,8 +246,7 @@ def run_task(inputs: dict) -> dict:
     name = inputs.get("rig", "repose")
     if name not in RIGS:
         raise InputError(f"unknown rig {name!r} in a run's task; valid rigs: {', '.join(RIGS)}")
-    module = importlib.import_module(RIGS[name].split(":")[0])
-    return module.run_task(inputs)
+    return rig(name).run_task(inputs)
 
 
 def run_meta(seed, dt, tally, spheres, simulated_s, profile=None, **extra) -> dict:
@@ -139,4 +284,5 @@ def check_seed(seed) -> int:
     return value
 
 
-__all__ = ["RIGS", "RigResult", "RunTally", "check_seed", "rig_function", "run_meta", "run_rig", "run_task"]
+__all__ = ["RIGS", "ReposeSetup", "Rig", "RigResult", "RunTally", "check_seed", "repose_rig", "repose_rig_named", "repose_setup", "rig", "rig_function", "rigs_of_sheet",
+           "run_meta", "run_rig", "run_task"]

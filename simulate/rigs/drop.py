@@ -82,7 +82,7 @@ from demcal.simulate.contact.hertz_mindlin import contact_duration_elastic, effe
 from demcal.simulate.engine import Simulation
 from demcal.simulate.integrate import axis_angle_quat, matrix_from_quat, quat_multiply
 from demcal.simulate.params import DEMParameters
-from demcal.simulate.rigs import RigResult, RunTally, check_seed, run_meta
+from demcal.simulate.rigs import Rig, RigResult, RunTally, check_seed, run_meta
 from demcal.simulate.rigs.surfaces import PARTICLE, make_surface, surface_from_pair
 from demcal.simulate.walls import Plane
 from demcal.units import GRAVITY
@@ -410,3 +410,8 @@ def run_task(inputs: dict) -> dict:
                    orientation_deg=inputs.get("orientation_deg"), pair=inputs["pair"], **opts)
     return {"rig": "drop", "observable": res.observable, "notes": res.meta.get("notes", []),
             "dt": res.meta["dt"], "steps": res.meta["steps"], "wall_s": res.meta["wall_s"]}
+
+
+RIG = Rig("drop", sheet="drop", run=run_drop, task=task, run_task=run_task, compared="apparent_restitution",
+          observables={"apparent_restitution": "-", "velocity_ratio": "-", "rotational_energy_share": "-",
+                       "orientation_deg": "deg", "drop_height_m": "m", "rebound_height_m": "m"})

@@ -98,6 +98,54 @@ def repose_profile(profile) -> ReposeProfile:
 
 
 # ----------------------------------------------------------------------------------------------
+# a rig's dimensions in the workbook's meta
+
+
+def meta_values(keys: dict, meta: dict, file=None, *, whole=(), required=()) -> dict:
+    """Field values from a workbook ``meta`` dict: ``keys`` maps each meta key to (field,
+    factor to SI). A missing or blank key is left out (the field keeps its default) unless it
+    is ``required``; a value that is not a positive number (a whole number for the fields in
+    ``whole``) raises ``WorkbookError`` naming the sheet, the key and the value."""
+    from demcal.errors import WorkbookError
+
+    values = {}
+    for key, (name, factor) in keys.items():
+        raw = meta.get(key) if meta else None
+
+        def bad(why):
+            return WorkbookError(f"meta {key}: {why}", file=file, sheet="meta", column="value", value=raw)
+
+        if raw is None or (isinstance(raw, str) and not raw.strip()):
+            if key in required:
+                raise bad(f"missing: the rig needs {', '.join(required)}")
+            continue
+        try:
+            number = float(raw)
+        except (TypeError, ValueError):
+            raise bad("needs a number") from None
+        if not (math.isfinite(number) and number > 0):
+            raise bad("must be positive")
+        if name in whole:
+            if number != int(number):
+                raise bad("needs a whole number")
+            values[name] = int(number)
+        else:
+            values[name] = number * factor
+    return values
+
+
+def meta_rows(geometry, keys: dict) -> list:
+    """The workbook meta rows (key, value) of ``geometry``'s fields named in ``keys`` (as for
+    :func:`meta_values`), in the workbook's units; a field that is None is left out."""
+    rows = []
+    for key, (name, factor) in keys.items():
+        value = getattr(geometry, name)
+        if value is not None:
+            rows.append((key, value if factor == 1 else round(value / factor, 6)))
+    return rows
+
+
+# ----------------------------------------------------------------------------------------------
 # the run
 
 
@@ -321,4 +369,5 @@ def side_view_angles(centres, radii, side: str, *, x_min: float | None = None,
 
 
 __all__ = ["CHUNK_S", "HeapRun", "PROFILES", "PROFILE_STEP", "PX_PER_M", "ReposeProfile", "SETTLED_SPEED",
-           "SideView", "fill_lift_settle", "repose_profile", "rms_speed", "side_view_angles", "top_profile"]
+           "SideView", "fill_lift_settle", "meta_rows", "meta_values", "repose_profile", "rms_speed",
+           "side_view_angles", "top_profile"]

@@ -51,7 +51,7 @@ from demcal.simulate.clump import ClumpTemplate
 from demcal.simulate.engine import Simulation
 from demcal.simulate.integrate import axis_angle_quat, matrix_from_quat
 from demcal.simulate.params import DEMParameters
-from demcal.simulate.rigs import RigResult, RunTally, check_seed, run_meta
+from demcal.simulate.rigs import Rig, RigResult, RunTally, check_seed, run_meta
 from demcal.simulate.rigs.surfaces import PARTICLE, make_surface
 from demcal.simulate.timestep import material_time_step
 from demcal.simulate.walls import Plane
@@ -269,3 +269,8 @@ def run_task(inputs: dict) -> dict:
     res = run_incline(params, int(inputs["seed"]), mode=inputs["mode"], surface=inputs["surface"])
     return {"rig": "incline", "observable": res.observable, "notes": res.meta.get("notes", []),
             "dt": res.meta["dt"], "steps": res.meta["steps"], "wall_s": res.meta["wall_s"]}
+
+
+RIG = Rig("incline", sheet="incline", run=run_incline, task=task, run_task=run_task, compared="slide_angle_deg",
+          observables={"slide_angle_deg": "deg", "roll_angle_deg": "deg", "static_friction_apparent": "-",
+                       "rolling_friction_apparent": "-"})

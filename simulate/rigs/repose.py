@@ -43,11 +43,12 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from demcal.errors import InputError, WorkbookError
+from demcal.errors import InputError
 from demcal.provenance import Provenance
 from demcal.simulate.params import DEMParameters
-from demcal.simulate.rigs import RigResult, check_seed, run_meta
-from demcal.simulate.rigs.heap import PX_PER_M, fill_lift_settle, repose_profile, side_view_angles
+from demcal.simulate.rigs import Rig, RigResult, check_seed, run_meta
+from demcal.simulate.rigs.heap import (PX_PER_M, fill_lift_settle, meta_rows, meta_values, repose_profile,
+                                       side_view_angles)
 from demcal.simulate.scenes import build_paper_repose_case
 from demcal.simulate.timestep import material_time_step
 from demcal.units import MM
@@ -95,32 +96,9 @@ class ReposeGeometry:
         """From a workbook ``meta`` dict (keys ``box_length_mm``, ``box_width_mm``,
         ``box_height_mm``, ``plate_lift_speed_mm_s``, ``fill_count``; docs/workbook.md); a
         missing or empty key keeps the default (200, 100, 250 mm, 100 mm/s, 500). A bad value
-        raises ``WorkbookError`` naming the sheet, the key and the value (and ``file``), and so
-        does a heap of another rig (``repose_rig``, or that rig's dimensions): the twin would
-        simulate the carton while the lab photographed another heap."""
-        _refuse_other_rigs(meta or {}, file)
-        values = {}
-        for key, (name, factor) in cls.META_KEYS.items():
-            raw = meta.get(key) if meta else None
-            if raw is None or (isinstance(raw, str) and not raw.strip()):
-                continue
-
-            def bad(why):
-                return WorkbookError(f"meta {key}: {why}", file=file, sheet="meta", column="value", value=raw)
-
-            try:
-                number = float(raw)
-            except (TypeError, ValueError):
-                raise bad("needs a number") from None
-            if not (math.isfinite(number) and number > 0):
-                raise bad("must be positive")
-            if name == "fill_count":
-                if number != int(number):
-                    raise bad("needs a whole number")
-                values[name] = int(number)
-            else:
-                values[name] = number * factor
-        return cls(**values)
+        raises ``WorkbookError`` naming the sheet, the key and the value (and ``file``).
+        Which repose rig a workbook has is ``simulate.rigs.repose_rig``'s to say."""
+        return cls(**meta_values(cls.META_KEYS, meta, file, whole=("fill_count",)))
 
     @classmethod
     def for_particle(cls, shape) -> "ReposeGeometry":
@@ -145,35 +123,19 @@ class ReposeGeometry:
     def to_dict(self) -> dict:
         return asdict(self)
 
+    def check_for(self, shape) -> None:
+        """The carton's heap is read on its slope from the crest, inside the carton too, so any
+        fill that flows out under the plate leaves a slope to read: nothing to refuse."""
 
-#: The repose rig this twin is (meta ``repose_rig``, the default when it is not given).
-REPOSE_RIG = "lifted_plate"
-#: Repose rigs labs use that the twin does not simulate, with the prefix of their meta keys.
-OTHER_REPOSE_RIGS = {"lifting_cylinder": "cylinder_", "funnel": "funnel_", "drum": "drum_"}
+    def meta_rows(self) -> list:
+        """The workbook meta rows (key, value) that describe this carton."""
+        return meta_rows(self, self.META_KEYS)
 
-
-def _refuse_other_rigs(meta: dict, file) -> None:
-    """Refuse a workbook whose heap is not the lifted plate's, by its ``repose_rig`` or a
-    dimension of another rig, naming the key."""
-    rig = meta.get("repose_rig")
-    if rig is not None and str(rig).strip() and str(rig).strip().lower() != REPOSE_RIG:
-        raise WorkbookError(f"meta repose_rig: the repose twin simulates the carton with a lifted end plate "
-                            f"({REPOSE_RIG}) only, so a heap of another rig cannot be calibrated against "
-                            f"(its photos still measure with demcal measure); rigs labs use: "
-                            f"{', '.join((REPOSE_RIG, *OTHER_REPOSE_RIGS))}",
-                            file=file, sheet="meta", column="value", value=rig)
-    for key, value in meta.items():
-        if value is None or (isinstance(value, str) and not value.strip()):
-            continue                              # a blank row of a template says nothing
-        other = next((r for r, prefix in OTHER_REPOSE_RIGS.items() if str(key).startswith(prefix)), None)
-        if other is not None:
-            raise WorkbookError(f"meta {key}: a dimension of the {other} rig, which the repose twin does not "
-                                f"simulate (it simulates the lifted plate: {', '.join(ReposeGeometry.META_KEYS)})",
-                                file=file, sheet="meta", column="key", value=key)
-
-
-# ----------------------------------------------------------------------------------------------
-# measuring a heap
+    def describe(self, noun: str = "particles") -> str:
+        """What the report says of the rig (``noun``: the particles' name, plural)."""
+        return (f"a carton of {self.box_length * 1e3:g} × {self.box_width * 1e3:g} × {self.box_height * 1e3:g} mm "
+                f"inside, filled with {self.fill_count} {noun}, its end plate lifted at "
+                f"{self.lift_speed * 1e3:g} mm/s")
 
 
 @dataclass(frozen=True)
@@ -366,3 +328,10 @@ def run_task(inputs: dict) -> dict:
     params = DEMParameters.from_names(inputs["params"])
     return run_repose(params, inputs["seed"], profile=inputs["profile"],
                       geometry=ReposeGeometry(**inputs["geometry"])).to_dict()
+
+
+RIG = Rig("repose", sheet="repose", run=run_repose, task=task, run_task=run_task, compared="angle_deg",
+          observables={"angle_deg": "deg", "angle_profile_deg": "deg", "angle_outside_deg": "deg",
+                       "escaped": "-", "outside_fraction": "-"},
+          geometry=ReposeGeometry, workbook_name="lifted_plate", flanks="right",
+          lab_test="plate withdrawal (pumping plate) heap, side photograph of its flank")

@@ -90,20 +90,29 @@ def test_simulate_bad_input_exits_2_with_one_line(argv, needle, capsys):
 
 
 @pytest.mark.parametrize("command", ["simulate", "calibrate"])
-def test_a_lifting_cylinder_workbook_is_refused_before_any_run(command, tmp_path, capsys):
-    """A lab whose heap came from a lifting cylinder is told the twin simulates the lifted plate
-    only, naming the file, the sheet and the key, instead of having the carton simulated."""
+@pytest.mark.parametrize("rows, needles", [
+    (["repose_rig,drum\n"], ["repose_rig", "'drum' has no twin yet", "lifted_plate, lifting_cylinder"]),
+    (["repose_rig,pile\n"], ["repose_rig", "'pile' is not a repose rig"]),
+    (["repose_rig,lifting_cylinder\n", "lift_speed_mm_s,10\n"], ["cylinder_diameter_mm", "missing"]),
+    (["drum_speed_rpm,5\n"], ["drum_speed_rpm", "a dimension of the drum rig"]),
+])
+def test_a_heap_the_twin_cannot_simulate_is_refused_before_any_run(command, rows, needles, tmp_path, capsys):
+    """A lab whose heap came from a rig without a twin, from an unknown rig, or from a lifting
+    cylinder whose dimensions are not all given, is refused naming the file, the sheet and the
+    key, instead of having another heap simulated."""
     from demcal.simulate.virtual_lab import Truth, write_virtual_workbook
 
     vw = write_virtual_workbook(Truth(), tmp_path / "lab", rng=1, photos="analytic", n_photos=3, n_drop=2,
                                 n_incline=3, n_tracks=0, n_specimens=5, n_compression=3)
     wb = vw.path                                  # a folder of CSV sheets
-    with open(wb / "meta.csv", "a", encoding="utf-8") as f:
-        f.write("repose_rig,lifting_cylinder\n")
+    meta = (wb / "meta.csv").read_text(encoding="utf-8").splitlines(keepends=True)
+    # the lifted plate's rows go: each test names its own rig
+    keep = [line for line in meta if not line.startswith(("repose_rig,", "box_", "plate_lift", "fill_count"))]
+    (wb / "meta.csv").write_text("".join(keep + rows), encoding="utf-8")
     argv = (["simulate", "repose", "--workbook", str(wb), "--json", str(tmp_path / "r.json")] if command == "simulate"
             else ["calibrate", str(wb), "--out", str(tmp_path / "out"), "--profile", "quick"])
     rc = main(argv)
     err = capsys.readouterr().err
     assert rc == 2 and "Traceback" not in err and err.count("\n") == 1
-    assert "sheet 'meta'" in err and "repose_rig" in err and "lifted_plate" in err
+    assert "sheet 'meta'" in err and all(n in err for n in needles), err
     assert not (tmp_path / "r.json").exists() and not list((tmp_path / "out").glob("runs/*.json"))
