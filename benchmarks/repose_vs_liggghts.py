@@ -137,40 +137,49 @@ def warm_up(params) -> None:
     build_paper_repose_case(params, seed=0, n_clumps=5).run(n_steps=2)
 
 
-def run_demcal(seed: int, duration: float, params, geometry=None) -> dict:
-    """The case by demcal's repose rig (``paper`` profile, ``duration`` simulated; the paper's
-    carton unless ``geometry``)."""
-    from demcal.simulate.rigs import run_rig
+#: Observables both codes report (NaN where a rig has none).
+OBSERVABLES = ("angle_deg", "angle_profile_deg", "angle_outside_deg", "outside_fraction")
+
+
+def _rig(geometry):
+    """The repose rig of ``geometry`` (default the lifted plate)."""
+    from demcal.simulate.rigs import rig
+    from demcal.simulate.virtual_lab import rig_of_geometry
+
+    return rig("repose") if geometry is None else rig_of_geometry(geometry)
+
+
+def run_demcal(seed: int, duration: float, params, geometry=None, lift_time: float = 4.0) -> dict:
+    """The case by demcal's repose rig (the ``paper`` profile with the wall lifted at
+    ``lift_time``, ``duration`` simulated; the paper's carton unless ``geometry``)."""
     from demcal.simulate.rigs.heap import PROFILES
 
-    profile = dataclasses.replace(PROFILES["paper"], duration=float(duration))
+    profile = dataclasses.replace(PROFILES["paper"], duration=float(duration), lift_time=float(lift_time))
     t0 = time.perf_counter()
-    res = run_rig("repose", params, seed, profile=profile, geometry=geometry)
+    res = _rig(geometry).run(params, seed, profile=profile, geometry=geometry)
     meta = res.meta
     sphere_steps = meta["spheres"] * meta["steps"]          # LIGGGHTS' convention: final spheres
     return {"code": "demcal", "seed": seed, "wall_s": meta["wall_s"], "elapsed_s": time.perf_counter() - t0,
             "steps": meta["steps"], "spheres": meta["spheres"], "sphere_steps": sphere_steps,
             "sphere_steps_per_s": sphere_steps / meta["wall_s"],
             "sphere_steps_present_per_s": meta["sphere_steps_per_s"],
-            **{k: res.observable[k] for k in ("angle_deg", "angle_profile_deg", "angle_outside_deg",
-                                              "outside_fraction")},
+            **{k: res.observable.get(k, math.nan) for k in OBSERVABLES},
             "escaped": res.observable["escaped"], "notes": meta["notes"]}
 
 
-def run_reference(seed: int, duration: float, workdir: Path, case=None) -> dict:
-    """The same case by LIGGGHTS on one core; its final spheres measured by ``heap_angles``."""
+def run_reference(seed: int, duration: float, workdir: Path, case=None, geometry=None) -> dict:
+    """The same case by LIGGGHTS on one core; its final spheres measured by the rig's own
+    ``measure`` (for the carton ``heap_angles``)."""
     from benchmarks.liggghts.run import heap_summary, run_liggghts
-    from demcal.simulate.rigs.repose import heap_angles
 
     res = run_liggghts(seed, workdir / f"seed{seed}", duration=duration, case=case, nice=0)
-    heap = heap_angles(res["positions"], res["radii"], res["deck"]["case"]["box_length"])
-    summary = heap_summary(res)
+    heap = _rig(geometry).measure(res["positions"], res["radii"], res["deck"]["case"])
+    outside = heap_summary(res)["outside_fraction"] if "angle_outside_deg" in heap else math.nan
     return {"code": "liggghts", "seed": seed, "wall_s": res["wall_s"], "cpu_s": res["cpu_s"],
             "elapsed_s": res["elapsed_s"], "steps": res["steps"], "spheres": res["spheres"],
             "sphere_steps_per_s": res["sphere_steps_per_s"], "sphere_steps": res["spheres"] * res["steps"],
-            "angle_deg": heap.angle_deg, "angle_profile_deg": heap.angle_profile_deg,
-            "angle_outside_deg": heap.angle_outside_deg, "outside_fraction": summary["outside_fraction"],
-            "lost_spheres": res["lost_spheres"], "notes": list(heap.notes),
+            **{k: heap.get(k, math.nan) for k in OBSERVABLES[:3]}, "outside_fraction": outside,
+            "lost_spheres": res["lost_spheres"], "notes": list(heap["notes"]),
             "version": res["version"], "package_version": res["package_version"]}
 
 
@@ -221,6 +230,8 @@ def main(argv=None) -> int:
                                                  "one core each, sequentially.")
     parser.add_argument("--seeds", type=int, default=5, help="seeds per code (default 5)")
     parser.add_argument("--duration", type=float, default=10.0, help="simulated time [s] (default 10)")
+    parser.add_argument("--lift-time", type=float, default=4.0,
+                        help="time the plate or tube starts to rise [s] (default 4, the paper's)")
     parser.add_argument("--skip-liggghts", action="store_true", help="run demcal only")
     parser.add_argument("--truth", type=Path, help="a virtual-lab truth file: that material's case instead "
                                                    "of the paper's (LIGGGHTS from demcal's export)")
@@ -246,28 +257,37 @@ def main(argv=None) -> int:
 
     geometry = case = None
     if args.truth is not None:
-        from benchmarks.liggghts.deck import ReposeCase
+        from benchmarks.liggghts.deck import CylinderCase, ReposeCase
+        from demcal.simulate.rigs.lifting_cylinder import CylinderGeometry
         from demcal.simulate.rigs.repose import ReposeGeometry
         from demcal.simulate.truth_file import read_truth_file
+        from demcal.simulate.virtual_lab import repose_geometry
 
         try:
-            params = read_truth_file(args.truth).truth.params
+            truth_file = read_truth_file(args.truth)
         except DemcalError as exc:
             parser.error(str(exc))
-        geometry = ReposeGeometry.for_particle(params.shape)
-        case = ReposeCase.for_params(params, geometry)
+        params = truth_file.truth.params
+        stated = truth_file.design.get("repose_rig")
+        geometry = repose_geometry(stated) if stated else ReposeGeometry.for_particle(params.shape)
+        if isinstance(geometry, CylinderGeometry):
+            geometry = geometry.filled_for(params.shape)
+            case = CylinderCase.for_cylinder(params, geometry, lift_start=args.lift_time)
+        else:
+            case = dataclasses.replace(ReposeCase.for_params(params, geometry), plate_lift_start=args.lift_time)
         doc["material"] = {"truth": str(args.truth), "shape": params.shape.describe(),
-                           "geometry": geometry.to_dict()}
-        print(f"material: {params.shape.describe()}; {geometry.fill_count} particles in a "
-              f"{geometry.box_length * 1e3:.0f} x {geometry.box_width * 1e3:.0f} x "
-              f"{geometry.box_height * 1e3:.0f} mm carton", flush=True)
+                           "rig": _rig(geometry).workbook_name, "geometry": geometry.to_dict()}
+        print(f"material: {params.shape.describe()}; {geometry.describe()}", flush=True)
     else:
+        from benchmarks.liggghts.deck import ReposeCase
+
         params = benchmark_parameters()
+        case = ReposeCase(plate_lift_start=args.lift_time)
     doc["params"] = params.to_dict()
     warm_up(params)
     seeds = list(range(1, args.seeds + 1))
     for seed in seeds:
-        r = run_demcal(seed, args.duration, params, geometry)
+        r = run_demcal(seed, args.duration, params, geometry, args.lift_time)
         doc["runs"].append(r)
         print(f"demcal   seed {seed}: {r['wall_s']:.1f} s, {r['sphere_steps_per_s']:.3g} sphere-steps/s, "
               f"angle {r['angle_deg']:.1f} deg (profile {r['angle_profile_deg']:.1f}, outside "
@@ -279,7 +299,7 @@ def main(argv=None) -> int:
         workdir = args.results / "tmp" / "liggghts"
         for seed in seeds:
             try:
-                r = run_reference(seed, args.duration, workdir, case)
+                r = run_reference(seed, args.duration, workdir, case, geometry)
             except LiggghtsUnavailable as exc:
                 skipped = str(exc)
                 print(f"LIGGGHTS skipped: {exc}", flush=True)

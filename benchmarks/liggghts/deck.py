@@ -210,6 +210,15 @@ class ReposeCase:
     def spheres_per_particle(self) -> int:
         return len(self.sphere_offsets)
 
+    #: The mesh that is lifted, and a line saying what the walls are.
+    lifted_mesh = "plate"
+    walls_comment = "carton: back wall, two side walls, end plate (meshes), infinite steel floor z = 0"
+    title = "Angle of repose, plate withdrawal (source paper, Fig. 11), LIGGGHTS-PUBLIC 3.8"
+
+    def meshes(self) -> dict:
+        """Mesh name -> triangles (n, 3, 3) [m] of the walls (:func:`carton_meshes`)."""
+        return carton_meshes(self)
+
     def __post_init__(self):
         positive = ("box_length", "box_width", "box_height", "plate_lift_speed",
                     "sphere_radius", "segment_diameter", "segment_length", "particle_density",
@@ -342,6 +351,59 @@ def carton_meshes(case: ReposeCase) -> dict:
     }
 
 
+@dataclass(frozen=True)
+class CylinderCase(ReposeCase):
+    """The lifting-cylinder repose test (``simulate.rigs.lifting_cylinder``): a tube of inside
+    diameter ``box_length`` (= ``box_width``) and height ``box_height``, its axis at
+    x = y = D/2, standing on the steel floor, filled, then lifted at ``plate_lift_speed`` from
+    ``plate_lift_start`` until its rim is ``plate_clearance`` above its own height. The tube is
+    a mesh of ``facets`` flat strips, inscribed in the circle (a 64-gon's radius at its flats is
+    0.12 % short of the circle's)."""
+
+    facets: int = 64
+
+    lifted_mesh = "tube"
+    walls_comment = "lifting cylinder: the tube (mesh), infinite steel floor z = 0"
+    title = "Angle of repose, lifting cylinder, LIGGGHTS-PUBLIC 3.8"
+
+    @classmethod
+    def for_cylinder(cls, params, geometry, *, lift_start: float) -> "CylinderCase":
+        """The case of any parameter set in the tube ``geometry``
+        (``simulate.rigs.lifting_cylinder.CylinderGeometry``), filled as demcal fills it (the
+        square inscribed in the tube, z 40-96 % of its height, over the first second), lifted
+        from ``lift_start``."""
+        from demcal.simulate.rigs.lifting_cylinder import CylinderGeometry
+
+        if not isinstance(geometry, CylinderGeometry):
+            raise InputError(f"geometry must be a CylinderGeometry, got {type(geometry).__name__}")
+        g = geometry.filled_for(params.shape)
+        base = ReposeCase.for_params(params)
+        D, H = g.diameter, g.height
+        half = (D / 2 - min(0.005, 0.05 * D)) / math.sqrt(2.0)
+        fields = {f: getattr(base, f) for f in ReposeCase.__dataclass_fields__}
+        fields.update(box_length=D, box_width=D, box_height=H, plate_lift_speed=g.lift_speed,
+                      plate_lift_start=lift_start, n_segments=g.fill_count,
+                      fill_region=(D / 2 - half, D / 2 + half, D / 2 - half, D / 2 + half, 0.4 * H, 0.96 * H))
+        return cls(**fields)
+
+    def meshes(self) -> dict:
+        """The tube as ``facets`` strips of two triangles each, normals pointing inwards."""
+        D, H = self.box_length, self.box_height
+        phi = np.linspace(0.0, 2.0 * np.pi, self.facets + 1)
+        x, y = D / 2 * (1 + np.cos(phi)), D / 2 * (1 + np.sin(phi))
+        strips = [_rectangle((x[k], y[k], 0), (x[k], y[k], H), (x[k + 1], y[k + 1], H), (x[k + 1], y[k + 1], 0))
+                  for k in range(self.facets)]
+        return {"tube": np.concatenate(strips)}
+
+    @property
+    def domain(self) -> tuple:
+        """Room for the cone on the floor around the tube and for the raised tube above."""
+        D, H = self.box_length, self.box_height
+        reach = 3.0 * D
+        return (D / 2 - reach, D / 2 + reach, D / 2 - reach, D / 2 + reach, -0.01,
+                2.0 * H + self.plate_clearance + 0.02)
+
+
 def write_ascii_stl(path, triangles, name: str) -> Path:
     """Write triangles (n, 3, 3) [m] as an ASCII STL file; normals from the vertex order."""
     path = Path(path)
@@ -437,8 +499,9 @@ def render_script(case: ReposeCase, seed: int, duration: float = 10.0,
     clump = case.spheres_per_particle > 1
     columns = POSITION_COLUMNS if clump else SPHERE_POSITION_COLUMNS
 
+    names = tuple(case.meshes())
     out = [
-        "# Angle of repose, plate withdrawal (source paper, Fig. 11), LIGGGHTS-PUBLIC 3.8",
+        f"# {case.title}",
         f"# seed {seed}: LIGGGHTS seeds {p_template} {p_distribution} {p_insert}; duration {_g(duration)} s",
         "units           si",
         "atom_style      granular",
@@ -461,11 +524,11 @@ def render_script(case: ReposeCase, seed: int, duration: float = 10.0,
         f"timestep        {_g(case.time_step)}",
         f"fix gravi all gravity {_g(case.gravity)} vector 0.0 0.0 -1.0",
         "",
-        "# carton: back wall, two side walls, end plate (meshes), infinite steel floor z = 0",
+        f"# {case.walls_comment}",
     ]
-    out += [f"fix {name} all mesh/surface file {name}.stl type 2" for name in MESH_NAMES]
+    out += [f"fix {name} all mesh/surface file {name}.stl type 2" for name in names]
     out += [
-        f"fix carton all wall/gran ${{demcal_model}} mesh n_meshes {len(MESH_NAMES)} meshes {' '.join(MESH_NAMES)}",
+        f"fix carton all wall/gran ${{demcal_model}} mesh n_meshes {len(names)} meshes {' '.join(names)}",
         "fix floor all wall/gran ${demcal_model} primitive type 2 zplane 0.0",
         "",
         f"region fill block {_g(fx0)} {_g(fx1)} {_g(fy0)} {_g(fy1)} {_g(fz0)} {_g(fz1)} units box",
@@ -487,7 +550,7 @@ def render_script(case: ReposeCase, seed: int, duration: float = 10.0,
     for label, n in case.phase_steps(duration):
         out.append("")
         if label == "plate_lift":
-            out.append(f"fix lift all move/mesh mesh plate linear 0.0 0.0 {_g(case.plate_lift_speed)}")
+            out.append(f"fix lift all move/mesh mesh {case.lifted_mesh} linear 0.0 0.0 {_g(case.plate_lift_speed)}")
         out.append(f"# phase {label}")
         out.append(f"run             {n}")
         if label == "plate_lift":
@@ -571,7 +634,7 @@ def write_deck(workdir, seed: int, duration: float = 10.0, case: ReposeCase | No
     if dump_interval:
         (workdir / "post").mkdir(exist_ok=True)
     meshes = {name: write_ascii_stl(workdir / f"{name}.stl", tri, name)
-              for name, tri in carton_meshes(case).items()}
+              for name, tri in case.meshes().items()}
     script = workdir / SCRIPT_NAME
     script.write_text(render_script(case, seed, duration, POSITIONS_NAME, dump_interval))
     phases = case.phase_steps(duration)

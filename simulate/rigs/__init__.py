@@ -82,6 +82,9 @@ class Rig:
         Flank(s) of its heap the photos show: ``right`` (one) or ``both`` (a cone).
     lab_test : str
         The lab test it is the twin of, in the report's words.
+    measure : callable or None
+        ``measure(centres, radii, geometry) -> dict``: the angle observables of a settled heap
+        of spheres in the rig (demcal's or another code's), measured as the lab's photos are.
     """
 
     name: str
@@ -95,6 +98,7 @@ class Rig:
     workbook_name: str | None = None
     flanks: str = "both"
     lab_test: str = ""
+    measure: Callable | None = None
 
 
 def rig(name: str) -> Rig:

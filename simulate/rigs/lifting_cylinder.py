@@ -220,14 +220,7 @@ def run_lifting_cylinder(params: DEMParameters, seed: int = 0, *, geometry: Cyli
     keep = act[sim.sphere_body()]
     pos, rad = sim.sphere_positions()[keep], sim.sphere_radii()[keep]
     view = side_view_angles(pos, rad, "both", annotate_to=annotate_to)
-    observable = {
-        "angle_deg": view.angle_deg,
-        "angle_left_deg": view.flanks_deg.get("left", math.nan),
-        "angle_right_deg": view.flanks_deg.get("right", math.nan),
-        "angle_profile_deg": view.angle_profile_deg,
-        "crest_height_m": view.crest_height,
-        "escaped": len(sim.escaped),
-    }
+    observable = {**cone_observables(view), "escaped": len(sim.escaped)}
     rec = {"profile_x": view.profile_x, "profile_z": view.profile_z, "crest_height": view.crest_height,
            "sphere_positions": pos, "sphere_radii": rad, "sphere_body": sim.sphere_body()[keep],
            "body_positions": sim.positions()[act], "geometry": geo.to_dict(), "t_lift": run.t_lift,
@@ -244,6 +237,20 @@ def run_lifting_cylinder(params: DEMParameters, seed: int = 0, *, geometry: Cyli
                     inserted=sum(f.inserted for f in sim.factories))
     return RigResult("lifting_cylinder", observable, rec, meta, params.to_dict(),
                      Provenance(seed=seed, options=options))
+
+
+def cone_observables(view) -> dict:
+    """The observables of a cone seen from the side (``heap.SideView``)."""
+    return {"angle_deg": view.angle_deg, "angle_left_deg": view.flanks_deg.get("left", math.nan),
+            "angle_right_deg": view.flanks_deg.get("right", math.nan),
+            "angle_profile_deg": view.angle_profile_deg, "crest_height_m": view.crest_height}
+
+
+def measure_heap(centres, radii, geometry=None) -> dict:
+    """The observables of a settled cone of spheres (e.g. LIGGGHTS' final positions), seen
+    along y and measured on both flanks; the tube's position does not matter."""
+    view = side_view_angles(centres, radii, "both")
+    return {**cone_observables(view), "notes": list(view.notes)}
 
 
 def task(params: DEMParameters, seed: int, *, profile: str, geometry) -> dict:
@@ -267,4 +274,4 @@ RIG = Rig("lifting_cylinder", sheet="repose", run=run_lifting_cylinder, task=tas
           observables={"angle_deg": "deg", "angle_left_deg": "deg", "angle_right_deg": "deg",
                        "angle_profile_deg": "deg", "crest_height_m": "m", "escaped": "-"},
           geometry=CylinderGeometry, workbook_name="lifting_cylinder", flanks="both",
-          lab_test="lifting cylinder cone, side photograph of both flanks")
+          lab_test="lifting cylinder cone, side photograph of both flanks", measure=measure_heap)

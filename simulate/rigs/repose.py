@@ -330,8 +330,17 @@ def run_task(inputs: dict) -> dict:
                       geometry=ReposeGeometry(**inputs["geometry"])).to_dict()
 
 
+def measure_heap(centres, radii, geometry) -> dict:
+    """The angle observables of a settled heap of spheres in the carton ``geometry`` (a
+    :class:`ReposeGeometry` or its dict), e.g. LIGGGHTS' final positions."""
+    box_length = geometry["box_length"] if isinstance(geometry, dict) else geometry.box_length
+    heap = heap_angles(centres, radii, box_length)
+    return {"angle_deg": heap.angle_deg, "angle_profile_deg": heap.angle_profile_deg,
+            "angle_outside_deg": heap.angle_outside_deg, "notes": list(heap.notes)}
+
+
 RIG = Rig("repose", sheet="repose", run=run_repose, task=task, run_task=run_task, compared="angle_deg",
           observables={"angle_deg": "deg", "angle_profile_deg": "deg", "angle_outside_deg": "deg",
                        "escaped": "-", "outside_fraction": "-"},
           geometry=ReposeGeometry, workbook_name="lifted_plate", flanks="right",
-          lab_test="plate withdrawal (pumping plate) heap, side photograph of its flank")
+          lab_test="plate withdrawal (pumping plate) heap, side photograph of its flank", measure=measure_heap)

@@ -341,3 +341,35 @@ def test_any_shape_runs_in_liggghts_from_demcals_export(shape, tmp_path):
     assert result["spheres"] == result["bodies"] * template.n_spheres
     np.testing.assert_allclose(np.sort(np.unique(np.round(result["radii"], 9))),
                                np.sort(np.unique(np.round(template.radii, 9))), rtol=1e-6)
+
+
+def test_lifting_cylinder_deck_is_a_tube_mesh_lifted_between_runs(tmp_path):
+    """The lifting cylinder's deck: a 64-gon tube around x = y = D/2 whose flats lie within
+    0.12 % of the circle, lifted by move/mesh between the fill and the settle, filled inside it."""
+    from demcal.simulate.params import DEMParameters
+    from demcal.simulate.rigs.lifting_cylinder import CylinderGeometry
+    from demcal.simulate.shapes.sphere import Sphere
+
+    params = DEMParameters(shape=Sphere(0.00646), particle_density_kg_m3=1200, shear_modulus_pa=1.04e6, dt=None)
+    case = dk.CylinderCase.for_cylinder(params, CylinderGeometry(0.06, 0.12, 0.01), lift_start=2.0)
+    assert case.n_segments == 721 and case.box_length == case.box_width == 0.06
+    deck = dk.write_deck(tmp_path, seed=2, duration=20.0, case=case)
+    tube = dk.read_ascii_stl(deck.meshes["tube"])
+    assert set(deck.meshes) == {"tube"} and tube.shape == (128, 3, 3)
+    rho = np.hypot(tube[..., 0] - 0.03, tube[..., 1] - 0.03)
+    np.testing.assert_allclose(rho, 0.03, rtol=1e-8)          # vertices on the circle (9 digits in the STL)
+    mid = tube.mean(axis=1)                                             # flats inside it by 1 - cos(pi/64)
+    assert np.hypot(mid[:, 0] - 0.03, mid[:, 1] - 0.03).min() > 0.03 * math.cos(math.pi / 64) * 0.999
+    # the fill region lies inside the tube: its corners within the radius
+    x0, x1, y0, y1, z0, z1 = case.fill_region
+    assert max(math.hypot(x - 0.03, y - 0.03) for x in (x0, x1) for y in (y0, y1)) < 0.03
+    commands = _commands(deck.script.read_text())
+    runs = [i for i, c in enumerate(commands) if c[0] == "run"]
+    lift = _find(commands, "fix", "lift")
+    assert lift[2:] == ["all", "move/mesh", "mesh", "tube", "linear", "0.0", "0.0", "0.01"]
+    assert runs[0] < commands.index(lift) < runs[1]
+    assert _find(commands, "fix", "carton")[-1] == "tube"
+    # lifted from 2 s until its rim is the clearance above its height
+    steps = dict(deck.phases)
+    assert steps["fill_and_settle"] * case.time_step == pytest.approx(2.0, abs=case.time_step)
+    assert steps["plate_lift"] * case.time_step * 0.01 == pytest.approx(0.12 + case.plate_clearance, abs=1e-5)
