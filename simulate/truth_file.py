@@ -191,7 +191,7 @@ def parse_design(values, where: str = "design") -> dict:
             try:
                 repose_geometry(value)              # checked now, used by write_virtual_workbook
             except InputError as exc:
-                raise InputError(f"{at}: {exc}") from None
+                raise InputError(f"{where}.{exc}") from None
         elif key == "interleaved":
             if not isinstance(value, bool):
                 raise InputError(f"{at}: must be true or false, got {value!r}")

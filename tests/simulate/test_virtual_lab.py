@@ -100,3 +100,27 @@ def test_errors_name_the_problem(tmp_path):
         write_virtual_workbook(Truth(), tmp_path / "b", effects=("camera_tilt",), rng=1, photos="none")
     with pytest.raises(InputError, match="e_sd"):
         Truth(e_sd=-0.1)
+
+
+def test_a_lifting_cylinder_lab_writes_its_rig_and_reads_back(tmp_path):
+    """The virtual lab writes the lifting cylinder's meta rows, which read back to the same tube,
+    and refuses a tube the truth's particles could not make a readable cone in."""
+    from demcal.simulate.rigs import repose_setup
+    from demcal.simulate.rigs.lifting_cylinder import CylinderGeometry
+    from demcal.simulate.shapes.sphere import Sphere
+
+    rig = {"repose_rig": "lifting_cylinder", "cylinder_diameter_mm": 60, "cylinder_height_mm": 120,
+           "lift_speed_mm_s": 10}
+    seeds = Truth(params=DEMParameters(shape=Sphere(0.00646), particle_density_kg_m3=1200, dt=None))
+    vw = write_virtual_workbook(seeds, tmp_path / "lab", rng=3, n_photos=3, n_drop=2, n_incline=3, n_tracks=0,
+                                n_specimens=5, n_compression=3, repose_rig=rig)
+    meta = read_workbook(vw.path).meta
+    assert meta["repose_rig"] == "lifting_cylinder" and "box_length_mm" not in meta
+    setup = repose_setup(meta)
+    assert setup.rig == "lifting_cylinder" and CylinderGeometry(**setup.geometry) == CylinderGeometry(0.06, 0.12, 0.01)
+    # the paper's 25 mm segments would arch in a 60 mm tube
+    with pytest.raises(InputError, match="under 4 particle lengths"):
+        write_virtual_workbook(Truth(), tmp_path / "segments", rng=3, n_photos=3, repose_rig=rig)
+    with pytest.raises(InputError, match="repose_rig: .*cylinder_height_mm: missing"):
+        write_virtual_workbook(seeds, tmp_path / "bad", rng=3, n_photos=3,
+                               repose_rig={k: v for k, v in rig.items() if k != "cylinder_height_mm"})
