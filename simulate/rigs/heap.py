@@ -232,6 +232,38 @@ def fill_lift_settle(sim, wall: int, lift_speed: float, prof: ReposeProfile, cle
     return run
 
 
+def run_options(prof: ReposeProfile, geometry, force: bool, params) -> dict:
+    """The provenance options of a heap run: profile, the rig's dimensions as given, the flank
+    band of the photo estimator and the engine hooks in use."""
+    from demcal.measure.repose import FLANK_BAND
+    from demcal.simulate.extensions import engine_hooks
+
+    options = {"profile": prof.name, "geometry": geometry.to_dict(), "force": force,
+               "flank_band": list(FLANK_BAND)}
+    hooks = engine_hooks(params)
+    if hooks:
+        options["extensions"] = hooks
+    return options
+
+
+def heap_task(rig: str, params, seed: int, *, profile: str, geometry) -> dict:
+    """The inputs of one run of the repose rig ``rig`` (``analyse.runs.run_key`` keys its
+    record); ``geometry`` the rig's dimensions or their ``to_dict()``."""
+    if not isinstance(geometry, dict):
+        geometry = geometry.to_dict()
+    return {"rig": rig, "profile": profile, "params": params.to_dict(), "geometry": geometry, "seed": int(seed)}
+
+
+def run_heap_task(run, geometry_class, inputs: dict) -> dict:
+    """One run from its :func:`heap_task` by the rig's ``run``: the whole ``RigResult`` as a
+    dict."""
+    from demcal.simulate.params import DEMParameters
+
+    params = DEMParameters.from_names(inputs["params"])
+    return run(params, inputs["seed"], profile=inputs["profile"],
+               geometry=geometry_class(**inputs["geometry"])).to_dict()
+
+
 # ----------------------------------------------------------------------------------------------
 # measuring a heap
 
@@ -369,5 +401,5 @@ def side_view_angles(centres, radii, side: str, *, x_min: float | None = None,
 
 
 __all__ = ["CHUNK_S", "HeapRun", "PROFILES", "PROFILE_STEP", "PX_PER_M", "ReposeProfile", "SETTLED_SPEED",
-           "SideView", "fill_lift_settle", "meta_rows", "meta_values", "repose_profile", "rms_speed",
-           "side_view_angles", "top_profile"]
+           "SideView", "fill_lift_settle", "heap_task", "meta_rows", "meta_values", "repose_profile", "rms_speed",
+           "run_heap_task", "run_options", "side_view_angles", "top_profile"]

@@ -33,7 +33,8 @@ from demcal.errors import InputError
 from demcal.provenance import Provenance
 from demcal.simulate.params import DEMParameters
 from demcal.simulate.rigs import Rig, RigResult, check_seed, run_meta
-from demcal.simulate.rigs.heap import (fill_lift_settle, meta_rows, meta_values, repose_profile,
+from demcal.simulate.rigs.heap import (fill_lift_settle, heap_task, meta_rows, meta_values,
+                                       repose_profile, run_heap_task, run_options,
                                        side_view_angles)
 from demcal.simulate.timestep import material_time_step
 from demcal.units import MM
@@ -196,7 +197,7 @@ def run_lifting_cylinder(params: DEMParameters, seed: int = 0, *, geometry: Cyli
         ``geometry`` (the tube and the fill simulated), ``t_lift``, ``t_clear``, ``t_end`` [s],
         ``ke_t`` [s], ``ke`` [J].
     """
-    from demcal.simulate.extensions import engine_hooks, with_size_distribution  # scipy: only when running
+    from demcal.simulate.extensions import with_size_distribution  # scipy: only when running
 
     seed = check_seed(seed)
     if not isinstance(params, DEMParameters):
@@ -226,12 +227,7 @@ def run_lifting_cylinder(params: DEMParameters, seed: int = 0, *, geometry: Cyli
            "body_positions": sim.positions()[act], "geometry": geo.to_dict(), "t_lift": run.t_lift,
            "t_clear": run.t_clear, "t_end": sim.time, "ke_t": np.array(run.ke_t), "ke": np.array(run.ke),
            "escapes": [e.to_dict() for e in sim.escaped]}
-    from demcal.measure.repose import FLANK_BAND
-    options = {"profile": prof.name, "geometry": geometry.to_dict(), "force": force,
-               "flank_band": list(FLANK_BAND)}
-    hooks = engine_hooks(params)
-    if hooks:
-        options["extensions"] = hooks
+    options = run_options(prof, geometry, force, params)
     meta = run_meta(seed, dt, run.tally, sim.n_spheres, sim.time, profile=prof.name,
                     notes=list(view.notes) + run.notes, profile_settings=prof.to_dict(), bodies=sim.n_bodies,
                     inserted=sum(f.inserted for f in sim.factories))
@@ -254,19 +250,14 @@ def measure_heap(centres, radii, geometry=None) -> dict:
 
 
 def task(params: DEMParameters, seed: int, *, profile: str, geometry) -> dict:
-    """The inputs of one lifting-cylinder run (``analyse.runs.run_key`` keys its record);
-    ``geometry`` a :class:`CylinderGeometry` or its ``to_dict()``."""
-    if isinstance(geometry, CylinderGeometry):
-        geometry = geometry.to_dict()
-    return {"rig": "lifting_cylinder", "profile": profile, "params": params.to_dict(), "geometry": geometry,
-            "seed": int(seed)}
+    """The inputs of one lifting-cylinder run (``heap.heap_task``); ``geometry`` a :class:`CylinderGeometry` or its
+    ``to_dict()``."""
+    return heap_task("lifting_cylinder", params, seed, profile=profile, geometry=geometry)
 
 
 def run_task(inputs: dict) -> dict:
     """One lifting-cylinder run from its :func:`task`: the whole :class:`RigResult` as a dict."""
-    params = DEMParameters.from_names(inputs["params"])
-    return run_lifting_cylinder(params, inputs["seed"], profile=inputs["profile"],
-                                geometry=CylinderGeometry(**inputs["geometry"])).to_dict()
+    return run_heap_task(run_lifting_cylinder, CylinderGeometry, inputs)
 
 
 RIG = Rig("lifting_cylinder", sheet="repose", run=run_lifting_cylinder, task=task, run_task=run_task,

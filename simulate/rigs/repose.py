@@ -47,7 +47,8 @@ from demcal.errors import InputError
 from demcal.provenance import Provenance
 from demcal.simulate.params import DEMParameters
 from demcal.simulate.rigs import Rig, RigResult, check_seed, run_meta
-from demcal.simulate.rigs.heap import (PX_PER_M, fill_lift_settle, meta_rows, meta_values, repose_profile,
+from demcal.simulate.rigs.heap import (PX_PER_M, fill_lift_settle, heap_task, meta_rows, meta_values,
+                                       repose_profile, run_heap_task, run_options,
                                        side_view_angles)
 from demcal.simulate.scenes import build_paper_repose_case
 from demcal.simulate.timestep import material_time_step
@@ -254,7 +255,7 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
         [m], ``geometry`` (the carton simulated), ``t_lift``, ``t_clear``, ``t_end`` [s], and
         the kinetic-energy history ``ke_t`` [s], ``ke`` [J].
     """
-    from demcal.simulate.extensions import engine_hooks, with_size_distribution  # scipy: only when running
+    from demcal.simulate.extensions import with_size_distribution  # scipy: only when running
 
     seed = check_seed(seed)
     if not isinstance(params, DEMParameters):
@@ -298,12 +299,7 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
            "body_positions": body[act], "geometry": geo.to_dict(), "t_lift": run.t_lift,
            "t_clear": run.t_clear, "t_end": sim.time, "ke_t": np.array(run.ke_t), "ke": np.array(run.ke),
            "escapes": [e.to_dict() for e in sim.escaped]}
-    from demcal.measure.repose import FLANK_BAND
-    options = {"profile": prof.name, "geometry": base.to_dict(), "force": force,
-               "flank_band": list(FLANK_BAND)}
-    hooks = engine_hooks(params)
-    if hooks:
-        options["extensions"] = hooks
+    options = run_options(prof, base, force, params)
     meta = run_meta(seed, dt, run.tally, sim.n_spheres, sim.time, profile=prof.name, notes=notes,
                     profile_settings=prof.to_dict(), bodies=sim.n_bodies,
                     inserted=inserted)
@@ -315,19 +311,14 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
 
 
 def task(params: DEMParameters, seed: int, *, profile: str, geometry) -> dict:
-    """The inputs of one repose run (``analyse.runs.run_key`` keys its record); ``geometry`` a
-    :class:`ReposeGeometry` or its ``to_dict()``."""
-    if isinstance(geometry, ReposeGeometry):
-        geometry = geometry.to_dict()
-    return {"rig": "repose", "profile": profile, "params": params.to_dict(), "geometry": geometry,
-            "seed": int(seed)}
+    """The inputs of one repose run (``heap.heap_task``); ``geometry`` a :class:`ReposeGeometry` or its
+    ``to_dict()``."""
+    return heap_task("repose", params, seed, profile=profile, geometry=geometry)
 
 
 def run_task(inputs: dict) -> dict:
     """One repose run from its :func:`task`: the whole :class:`RigResult` as a dict."""
-    params = DEMParameters.from_names(inputs["params"])
-    return run_repose(params, inputs["seed"], profile=inputs["profile"],
-                      geometry=ReposeGeometry(**inputs["geometry"])).to_dict()
+    return run_heap_task(run_repose, ReposeGeometry, inputs)
 
 
 def measure_heap(centres, radii, geometry) -> dict:
