@@ -364,25 +364,29 @@ class _StoredRuns:
         return records
 
 
-#: Used in this order when the photo method finds no slope (e.g. a frictionless floor spreads
-#: the heap flat): the direct profile fit of the full slope, then the heap beyond the carton.
-FALLBACK_RESPONSES = ("angle_profile_deg", "angle_outside_deg")
+def fallback_responses(rig_name: str) -> tuple:
+    """The observables used, in this order, when the photo method finds no slope in a heap of
+    rig ``rig_name`` (``simulate.rigs.Rig.fallbacks``)."""
+    from demcal.simulate.rigs import rig
+
+    return rig(rig_name).fallbacks
 
 
 def _responses(records, fallbacks: list | None = None) -> np.ndarray:
-    """The response of each run: the photo-method angle, else the first finite one of
-    ``FALLBACK_RESPONSES`` (``{"key", "used"}`` is then appended to ``fallbacks``); an error
-    when none is finite."""
+    """The response of each run: the photo-method angle, else the first finite one of its
+    rig's fallbacks (``{"key", "used"}`` is then appended to ``fallbacks``); an error when none
+    is finite."""
     y = []
     for r in records:
         obs = r["result"]["observable"]
-        for name in (RESPONSE,) + FALLBACK_RESPONSES:
+        names = (RESPONSE,) + fallback_responses(r["result"].get("rig", "repose"))
+        for name in names:
             value = obs.get(name)
             if value is not None and math.isfinite(value):
                 break
         else:
-            raise AnalysisError(f"DEM run {r['key']} gave none of {RESPONSE}, "
-                                f"{', '.join(FALLBACK_RESPONSES)} (run record runs/{r['key']}.json)")
+            raise AnalysisError(f"DEM run {r['key']} gave none of {', '.join(names)} "
+                                f"(run record runs/{r['key']}.json)")
         if name != RESPONSE and fallbacks is not None:
             fallbacks.append({"key": r["key"], "used": name})
         y.append(float(value))
@@ -498,7 +502,7 @@ def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
     # renamed key fails where the result is made
     return CampaignResult.from_dict(dict(
         workflow=config.workflow,
-        response={"name": RESPONSE, "fallbacks": list(FALLBACK_RESPONSES),
+        response={"name": RESPONSE, "fallbacks": list(fallback_responses(setup.rig)),
                   "fallback_runs": fallbacks,
                   "note": (f"{len(fallbacks)} run(s) left no slope for the photo method (e.g. the "
                            f"heap spread flat); their response is the fallback named per run"

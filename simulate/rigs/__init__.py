@@ -73,6 +73,9 @@ class Rig:
         Observable name -> unit, as ``RigResult.observable`` holds them.
     compared : str or None
         The observable compared with the lab's reading.
+    fallbacks : tuple of str
+        Observables used in this order when ``compared`` is not finite (a heap the photo method
+        finds no slope in), each a reading of the same quantity by another method.
     geometry : type or None
         Its dimensions from the workbook's meta: ``from_meta(meta, file)``, ``META_KEYS``,
         ``meta_rows()``, ``to_dict()``, ``describe()``.
@@ -94,6 +97,7 @@ class Rig:
     run_task: Callable
     observables: dict
     compared: str | None = None
+    fallbacks: tuple = ()
     geometry: type | None = None
     workbook_name: str | None = None
     flanks: str = "both"

@@ -19,7 +19,10 @@ high at ``LOWEST_ANGLE_DEG``) or a tube too narrow for the particles to flow out
 
 Observable keys: ``angle_deg`` (photo method, mean of the flanks), ``angle_left_deg``,
 ``angle_right_deg`` [deg], ``angle_profile_deg`` (profile fit, both flanks) [deg],
-``crest_height_m`` [m], ``escaped`` (bodies that left the simulation domain).
+``angle_cone_deg`` (the height-and-diameter method, atan(2 h / D) of the top profile's height h
+and the width D of the pile under it, stray particles apart [deg]; it reads a heap the flank
+fits cannot, e.g. seeds that spread into a layer or two), ``crest_height_m``,
+``base_diameter_m`` [m], ``escaped`` (bodies that left the simulation domain).
 """
 
 from __future__ import annotations
@@ -235,11 +238,32 @@ def run_lifting_cylinder(params: DEMParameters, seed: int = 0, *, geometry: Cyli
                      Provenance(seed=seed, options=options))
 
 
+def pile_height_and_diameter(x, z) -> tuple:
+    """Height [m] of a top profile ``z(x)`` and the width [m] of the pile under its highest
+    point: the run of ``x`` around it where the profile stands above the floor, so that stray
+    particles beyond a gap do not count."""
+    x, z = np.asarray(x, float), np.asarray(z, float)
+    if x.size == 0 or not np.any(z > 0):
+        return 0.0, 0.0
+    top = int(np.argmax(z))
+    covered = z > 0
+    lo = top
+    while lo > 0 and covered[lo - 1]:
+        lo -= 1
+    hi = top
+    while hi < x.size - 1 and covered[hi + 1]:
+        hi += 1
+    return float(z[top]), float(x[hi] - x[lo])
+
+
 def cone_observables(view) -> dict:
     """The observables of a cone seen from the side (``heap.SideView``)."""
+    h, d = pile_height_and_diameter(view.profile_x, view.profile_z)
     return {"angle_deg": view.angle_deg, "angle_left_deg": view.flanks_deg.get("left", math.nan),
             "angle_right_deg": view.flanks_deg.get("right", math.nan),
-            "angle_profile_deg": view.angle_profile_deg, "crest_height_m": view.crest_height}
+            "angle_profile_deg": view.angle_profile_deg,
+            "angle_cone_deg": math.degrees(math.atan2(2.0 * h, d)) if d > 0 else math.nan,
+            "crest_height_m": view.crest_height, "base_diameter_m": d}
 
 
 def measure_heap(centres, radii, geometry=None) -> dict:
@@ -261,8 +285,9 @@ def run_task(inputs: dict) -> dict:
 
 
 RIG = Rig("lifting_cylinder", sheet="repose", run=run_lifting_cylinder, task=task, run_task=run_task,
-          compared="angle_deg",
+          compared="angle_deg", fallbacks=("angle_profile_deg", "angle_cone_deg"),
           observables={"angle_deg": "deg", "angle_left_deg": "deg", "angle_right_deg": "deg",
-                       "angle_profile_deg": "deg", "crest_height_m": "m", "escaped": "-"},
+                       "angle_profile_deg": "deg", "angle_cone_deg": "deg", "crest_height_m": "m",
+                       "base_diameter_m": "m", "escaped": "-"},
           geometry=CylinderGeometry, workbook_name="lifting_cylinder", flanks="both",
           lab_test="lifting cylinder cone, side photograph of both flanks", measure=measure_heap)

@@ -331,6 +331,9 @@ def measure_heap(centres, radii, geometry) -> dict:
 
 
 RIG = Rig("repose", sheet="repose", run=run_repose, task=task, run_task=run_task, compared="angle_deg",
+          # a frictionless floor can spread the heap flat: the direct profile fit of the full
+          # slope, then the heap beyond the carton
+          fallbacks=("angle_profile_deg", "angle_outside_deg"),
           observables={"angle_deg": "deg", "angle_profile_deg": "deg", "angle_outside_deg": "deg",
                        "escaped": "-", "outside_fraction": "-"},
           geometry=ReposeGeometry, workbook_name="lifted_plate", flanks="right",

@@ -397,3 +397,19 @@ def test_lifting_cylinder_refuses_a_fill_whose_cone_it_could_not_read():
     # pi h^3 / (3 tan^2 20) = V is 27.8 mm high
     from demcal.simulate.rigs.lifting_cylinder import cone_height
     assert cone_height(721 * math.pi / 6 * 0.00646 ** 3 / 0.6, 20.0) == pytest.approx(0.0278, abs=2e-4)
+
+
+def test_height_and_diameter_method_reads_a_cone_and_ignores_strays():
+    from demcal.simulate.rigs.lifting_cylinder import pile_height_and_diameter
+
+    # a 30 deg cone 40 mm high on a 1 mm grid, and a stray seed 50 mm beyond its toe
+    x = np.arange(-0.2, 0.2001, 0.001)
+    r = 0.04 / math.tan(math.radians(30.0))
+    z = np.clip(0.04 - np.abs(x) * math.tan(math.radians(30.0)), 0.0, None)
+    z[np.abs(x - (r + 0.05)) < 0.003] = 0.006
+    h, d = pile_height_and_diameter(x, z)
+    assert h == pytest.approx(0.04)
+    assert d == pytest.approx(2 * r, abs=0.0021)             # to the grid on either toe
+    # the grid can only shorten the base, by up to a step at each toe
+    assert 30.0 <= math.degrees(math.atan2(2 * h, d)) <= math.degrees(math.atan2(2 * h, 2 * r - 0.002))
+    assert pile_height_and_diameter(x, np.zeros_like(x)) == (0.0, 0.0)
