@@ -29,7 +29,7 @@ from demcal.jsonio import read_json, write_json
 from demcal.provenance import sha256_file
 from demcal.report.figures import DPI, make_figures
 from demcal.report.runs_csv import RUNS_CSV, write_runs_csv
-from demcal.report.tables import (SIZES, Campaign, build_tables, load_campaign, load_paper, paper_material,
+from demcal.report.tables import (SIZES, Campaign, build_tables, instrument, load_campaign, load_paper, paper_material,
                                   parameter_label, particle_noun, quantity_label, tables_document,
                                   POWER_FILE, POWER_NAME)
 from demcal.text import one_line
@@ -591,6 +591,7 @@ def render_html(c: Campaign, tables: list[dict], figures: list) -> str:
         "critique_ids": [t["id"] for t in tables if t["id"].startswith("C")],
         "particle_model": particle_model(r.base_parameters) if r is not None and r.base_parameters else "",
         "particle": particle_noun(c.measurement), "particles": particle_noun(c.measurement, plural=True),
+        "repose_test": instrument("repose", c.measurement),
         "callipers": calliper_text(c.measurement), "paper_material": paper_material(c),
     }
     if r is not None:

@@ -506,7 +506,7 @@ def table_physical(c: Campaign) -> Table:
                  formats=("", "", "", "d", ".4g", ".3g", ".4g", ".4g", ".4g", ".3g"))
 
 
-def _instrument(sheet: str, measurement: dict) -> str:
+def instrument(sheet: str, measurement: dict) -> str:
     """The instrument behind a sheet; for the heap photos the workbook's repose rig."""
     if sheet == "repose":
         from demcal.simulate.rigs import repose_rig
@@ -526,7 +526,7 @@ def table_methods(c: Campaign) -> Table:
     for name, e in m["quantities"].items():
         sheet = _get(e, "source", "sheet", default="")
         rejected = [f"{r['row']}: {r['reason']}" for r in e.get("rows_rejected", [])]
-        rows.append((quantity_label(name, noun), sheet, _instrument(sheet, m), e.get("method", ""),
+        rows.append((quantity_label(name, noun), sheet, instrument(sheet, m), e.get("method", ""),
                      row_ranges(e.get("rows_used", [])), "; ".join(rejected) or "none",
                      _get(e, "extra", "outlier_rule", default="")))
         src = _get(e, "source", default={})
