@@ -89,22 +89,34 @@ def test_simulate_bad_input_exits_2_with_one_line(argv, needle, capsys):
     assert "Traceback" not in err and err.count("\n") == 1
 
 
-@pytest.mark.parametrize("command", ["simulate", "calibrate"])
-@pytest.mark.parametrize("rows, needles", [
-    (["repose_rig,drum\n"], ["repose_rig", "'drum' has no twin yet", "lifted_plate, lifting_cylinder"]),
-    (["repose_rig,pile\n"], ["repose_rig", "'pile' is not a repose rig"]),
-    (["repose_rig,lifting_cylinder\n", "lift_speed_mm_s,10\n"], ["cylinder_diameter_mm", "missing"]),
-    (["drum_speed_rpm,5\n"], ["drum_speed_rpm", "a dimension of the drum rig"]),
+@pytest.fixture(scope="module")
+def lab_folder(tmp_path_factory):
+    """A small virtual workbook as a folder of CSV sheets, written once for the module."""
+    from demcal.simulate.virtual_lab import Truth, write_virtual_workbook
+
+    return write_virtual_workbook(Truth(), tmp_path_factory.mktemp("lab") / "lab", rng=1, photos="analytic",
+                                  n_photos=3, n_drop=2, n_incline=3, n_tracks=0, n_specimens=5,
+                                  n_compression=3).path
+
+
+DRUM = (["repose_rig,drum\n"], ["repose_rig", "'drum' has no twin yet", "lifted_plate, lifting_cylinder"])
+NO_HEIGHT = (["repose_rig,lifting_cylinder\n", "lift_speed_mm_s,10\n"], ["cylinder_diameter_mm", "missing"])
+
+
+@pytest.mark.parametrize("command, rows, needles", [
+    ("simulate", *DRUM), ("calibrate", *DRUM),
+    ("simulate", ["repose_rig,pile\n"], ["repose_rig", "'pile' is not a repose rig"]),
+    ("simulate", *NO_HEIGHT), ("calibrate", *NO_HEIGHT),
+    ("simulate", ["drum_speed_rpm,5\n"], ["drum_speed_rpm", "a dimension of the drum rig"]),
 ])
-def test_a_heap_the_twin_cannot_simulate_is_refused_before_any_run(command, rows, needles, tmp_path, capsys):
+def test_a_heap_the_twin_cannot_simulate_is_refused_before_any_run(command, rows, needles, lab_folder, tmp_path,
+                                                                    capsys):
     """A lab whose heap came from a rig without a twin, from an unknown rig, or from a lifting
     cylinder whose dimensions are not all given, is refused naming the file, the sheet and the
     key, instead of having another heap simulated."""
-    from demcal.simulate.virtual_lab import Truth, write_virtual_workbook
+    import shutil
 
-    vw = write_virtual_workbook(Truth(), tmp_path / "lab", rng=1, photos="analytic", n_photos=3, n_drop=2,
-                                n_incline=3, n_tracks=0, n_specimens=5, n_compression=3)
-    wb = vw.path                                  # a folder of CSV sheets
+    wb = shutil.copytree(lab_folder, tmp_path / "lab")
     meta = (wb / "meta.csv").read_text(encoding="utf-8").splitlines(keepends=True)
     # the lifted plate's rows go: each test names its own rig
     keep = [line for line in meta if not line.startswith(("repose_rig,", "box_", "plate_lift", "fill_count"))]
