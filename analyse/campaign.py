@@ -488,7 +488,7 @@ def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
     base = base_parameters(measurement).with_(**config.model_extensions)
     material_time_step(base)          # a time step above the safe limit is refused before any run
     setup = repose_setup(measurement)
-    setup.check_for(base.shape)       # and so is a heap the photo method could not read
+    setup.check_for(base.shape, measurement.workbook.get("source"))   # and a heap no photo could read
     if config.workflow == "plausible":
         from demcal.analyse.plausible import derive_plausible
 

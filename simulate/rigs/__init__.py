@@ -219,9 +219,15 @@ class ReposeSetup:
         """The inputs of one run of the rig (what a run store keys)."""
         return rig(self.rig).task(params, seed, profile=profile, geometry=self.geometry)
 
-    def check_for(self, shape) -> None:
-        """Refuse, before any run, a rig whose heap of ``shape`` could not be read."""
-        rig(self.rig).geometry(**self.geometry).check_for(shape)
+    def check_for(self, shape, file=None) -> None:
+        """Refuse, before any run, a rig whose heap of ``shape`` could not be read (a
+        ``WorkbookError`` on the meta sheet of ``file``, whose dimensions say so)."""
+        try:
+            rig(self.rig).geometry(**self.geometry).check_for(shape)
+        except WorkbookError:
+            raise
+        except InputError as exc:
+            raise WorkbookError(str(exc), file=file, sheet="meta") from None
 
     def describe(self, noun: str = "particles") -> str:
         """What the report says of the rig (``noun``: the particles' name, plural)."""

@@ -108,12 +108,15 @@ NO_HEIGHT = (["repose_rig,lifting_cylinder\n", "lift_speed_mm_s,10\n"], ["cylind
     ("simulate", ["repose_rig,pile\n"], ["repose_rig", "'pile' is not a repose rig"]),
     ("simulate", *NO_HEIGHT), ("calibrate", *NO_HEIGHT),
     ("simulate", ["drum_speed_rpm,5\n"], ["drum_speed_rpm", "a dimension of the drum rig"]),
+    # the workbook's 25 mm segments would arch in a 60 mm tube
+    ("calibrate", ["repose_rig,lifting_cylinder\n", "cylinder_diameter_mm,60\n", "cylinder_height_mm,120\n",
+                   "lift_speed_mm_s,10\n"], ["under 4 particle lengths", "cylinder_diameter_mm"]),
 ])
 def test_a_heap_the_twin_cannot_simulate_is_refused_before_any_run(command, rows, needles, lab_folder, tmp_path,
                                                                     capsys):
     """A lab whose heap came from a rig without a twin, from an unknown rig, or from a lifting
-    cylinder whose dimensions are not all given, is refused naming the file, the sheet and the
-    key, instead of having another heap simulated."""
+    cylinder whose dimensions are not all given or too small for its particles, is refused naming
+    the file, the sheet and the key, instead of having another heap simulated."""
     import shutil
 
     wb = shutil.copytree(lab_folder, tmp_path / "lab")
