@@ -143,8 +143,7 @@ OBSERVABLES = ("angle_deg", "angle_profile_deg", "angle_outside_deg", "outside_f
 
 def _rig(geometry):
     """The repose rig of ``geometry`` (default the lifted plate)."""
-    from demcal.simulate.rigs import rig
-    from demcal.simulate.virtual_lab import rig_of_geometry
+    from demcal.simulate.rigs import rig, rig_of_geometry
 
     return rig("repose") if geometry is None else rig_of_geometry(geometry)
 

@@ -133,12 +133,12 @@ def rig_options(args) -> tuple[str, dict, dict]:
         name = "repose"
         if args.workbook:
             from demcal.measure.workbook import read_workbook
-            from demcal.simulate.rigs import repose_setup, rig
+            from demcal.simulate.rigs import repose_setup
 
             wb = read_workbook(args.workbook, read_options(args))
             setup = repose_setup(wb.meta, file=str(wb.source))
             name = setup.rig
-            opts["geometry"] = rig(name).geometry(**setup.geometry)
+            opts["geometry"] = setup.dimensions()
             inputs.update(wb.files)
         return name, opts, inputs
     if args.rig == "drop":

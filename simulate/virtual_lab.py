@@ -74,6 +74,7 @@ from demcal.jsonio import read_json, write_json
 from demcal.provenance import Provenance, run_key
 from demcal.simulate.materials import youngs_modulus
 from demcal.simulate.params import DEMParameters
+from demcal.simulate.rigs import rig_of_geometry
 from demcal.units import GRAVITY
 
 #: Effect kinds, the identifiers of the critique catalogue that a workbook can carry.
@@ -810,20 +811,10 @@ def _dem_heap_photo(truth: Truth, rng, roll, light, seeds, discarded: list, geom
                           "measurable flank")
 
 
-def rig_of_geometry(geometry):
-    """The registered repose rig whose dimensions ``geometry`` is (``simulate.rigs.Rig``)."""
-    from demcal.simulate.rigs import rigs_of_sheet
-
-    for rig in rigs_of_sheet("repose"):
-        if isinstance(geometry, rig.geometry):
-            return rig
-    raise InputError(f"geometry must be the dimensions of a repose rig, got {type(geometry).__name__}")
-
-
 def repose_geometry(meta: dict):
     """The repose rig's dimensions from meta rows (``repose_rig`` and the rig's keys), as an
     object of the rig's geometry class; a bad row refused naming its key."""
-    from demcal.simulate.rigs import repose_setup, rig
+    from demcal.simulate.rigs import repose_setup
 
     if not isinstance(meta, dict):
         raise InputError(f"repose_rig must be a mapping of workbook meta keys, got {meta!r}")
@@ -831,7 +822,7 @@ def repose_geometry(meta: dict):
         setup = repose_setup(meta)
     except DemcalError as exc:
         raise InputError(f"repose_rig: {exc}") from None
-    return rig(setup.rig).geometry(**setup.geometry)
+    return setup.dimensions()
 
 
 def _meta(truth: Truth, effects, geometry=None) -> pd.DataFrame:
@@ -975,7 +966,8 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
     if geometry is None:
         from demcal.simulate.rigs.repose import ReposeGeometry
         geometry = ReposeGeometry.for_particle(truth.params.shape)
-    rig_of_geometry(geometry).geometry.check_for(geometry, truth.params.shape)
+    rig_of_geometry(geometry)                     # a repose rig's dimensions, or refused
+    geometry.check_for(truth.params.shape)
 
     path = Path(path)
     xlsx = path.suffix.lower() == ".xlsx"

@@ -126,6 +126,14 @@ def repose_rig_named(workbook_name: str) -> Rig:
                      f"{', '.join(r.workbook_name for r in rigs_of_sheet('repose'))}")
 
 
+def rig_of_geometry(geometry) -> Rig:
+    """The registered repose rig whose dimensions ``geometry`` is."""
+    for r in rigs_of_sheet("repose"):
+        if isinstance(geometry, r.geometry):
+            return r
+    raise InputError(f"geometry must be the dimensions of a repose rig, got {type(geometry).__name__}")
+
+
 def repose_rig(meta: dict, file=None) -> Rig:
     """The repose rig a workbook's ``meta`` names (key ``repose_rig``, default
     ``lifted_plate``).
@@ -219,11 +227,15 @@ class ReposeSetup:
         """The inputs of one run of the rig (what a run store keys)."""
         return rig(self.rig).task(params, seed, profile=profile, geometry=self.geometry)
 
+    def dimensions(self):
+        """The rig's dimensions as an object of its geometry class."""
+        return rig(self.rig).geometry(**self.geometry)
+
     def check_for(self, shape, file=None) -> None:
         """Refuse, before any run, a rig whose heap of ``shape`` could not be read (a
         ``WorkbookError`` on the meta sheet of ``file``, whose dimensions say so)."""
         try:
-            rig(self.rig).geometry(**self.geometry).check_for(shape)
+            self.dimensions().check_for(shape)
         except WorkbookError:
             raise
         except InputError as exc:
@@ -231,7 +243,7 @@ class ReposeSetup:
 
     def describe(self, noun: str = "particles") -> str:
         """What the report says of the rig (``noun``: the particles' name, plural)."""
-        return rig(self.rig).geometry(**self.geometry).describe(noun)
+        return self.dimensions().describe(noun)
 
 
 def repose_setup(meta: dict, file=None) -> ReposeSetup:
@@ -298,5 +310,5 @@ def check_seed(seed) -> int:
     return value
 
 
-__all__ = ["RIGS", "ReposeSetup", "Rig", "RigResult", "RunTally", "check_seed", "repose_rig", "repose_rig_named", "repose_setup", "rig", "rig_function", "rigs_of_sheet",
+__all__ = ["RIGS", "ReposeSetup", "Rig", "RigResult", "RunTally", "check_seed", "repose_rig", "repose_rig_named", "repose_setup", "rig", "rig_of_geometry", "rig_function", "rigs_of_sheet",
            "run_meta", "run_rig", "run_task"]
