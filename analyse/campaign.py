@@ -48,6 +48,7 @@ import numpy as np
 
 from demcal.analyse.designs import box_behnken, plackett_burman, to_actual
 from demcal.analyse.equivalence import default_tolerance, equivalence_test
+from demcal.analyse.parameters import PARAMETER_BOUNDS, SCREENING_FACTORS, base_parameters, wall_of
 from demcal.analyse.optimise import (canonical_analysis, confirmation_interval, optimise_to_target,
                               steepest_climb_analysis, steepest_climb_plan, validate_repeats)
 from demcal.analyse.regression import fit_response_surface
@@ -59,28 +60,11 @@ from demcal.jsonio import write_json
 from demcal.provenance import Provenance
 from demcal.simulate.timestep import material_time_step
 
-#: Screening factors: letter, DEM parameter, measured quantity (``{wall}`` = the rig's plate
-#: material from the workbook meta), as the source paper's Plackett-Burman table.
-SCREENING_FACTORS = (
-    ("A", "poisson_ratio", "poisson_ratio"),
-    ("B", "e_pp", "restitution.particle-particle"),
-    ("C", "mu_s_pp", "static_friction.particle"),
-    ("D", "mu_r_pp", "rolling_friction.particle"),
-    ("E", "e_pw", "restitution.particle-{wall}"),
-    ("F", "mu_s_pw", "static_friction.{wall}"),
-    ("G", "mu_r_pw", "rolling_friction.{wall}"),
-)
-
 #: Seed offset between the replicates of one design point.
 REPLICATE_SEED_STRIDE = 10_000
 #: Default workflow by repose profile.
 DEFAULT_WORKFLOW = {"quick": "plausible", "paper": "design-expert"}
 WORKFLOWS = ("plausible", "design-expert")
-
-#: Admissible range of each DEM parameter; design levels are clipped into it.
-PARAMETER_BOUNDS = {"poisson_ratio": (0.0, 0.49), "e_pp": (0.01, 1.0), "e_pw": (0.01, 1.0),
-                    "mu_s_pp": (0.0, 5.0), "mu_s_pw": (0.0, 5.0), "mu_r_pp": (0.0, 5.0),
-                    "mu_r_pw": (0.0, 5.0)}
 
 RESPONSE = "angle_deg"
 
@@ -258,7 +242,7 @@ def factor_levels(measurement, levels: str = "minmax") -> dict:
 
     Returns ``{letter: {"parameter", "quantity", "low", "high", "mean"}}`` [parameter units].
     """
-    wall = str(measurement.meta.get("contact_material", "steel")).strip().lower() or "steel"
+    wall = wall_of(measurement.meta)
     table = {}
     for letter, parameter, quantity in SCREENING_FACTORS:
         name = quantity.format(wall=wall)
@@ -283,28 +267,6 @@ def factor_levels(measurement, levels: str = "minmax") -> dict:
         table[letter] = {"parameter": parameter, "quantity": name, "low": lo, "high": hi,
                          "mean": mean, "how": how}
     return table
-
-
-def base_parameters(measurement):
-    """DEM parameters from the measured shape, density and materials (meta), paper defaults
-    for the rest. The time step is the meta ``time_step_s`` when the workbook states one, else
-    the one that follows the material (``simulate.timestep.material_time_step``). Returns a
-    ``simulate.params.DEMParameters``."""
-    from demcal.simulate.params import DEMParameters
-
-    q, meta = measurement.quantities, measurement.meta
-    changes = {"dt": meta.get("time_step_s")}
-    if measurement.shape:
-        changes["shape"] = measurement.shape
-    if "particle_density_kg_m3" in q:
-        changes["particle_density_kg_m3"] = q["particle_density_kg_m3"].value
-    for key, name in (("particle_shear_modulus_pa", "shear_modulus_pa"),
-                      ("contact_density_kg_m3", "wall_density_kg_m3"),
-                      ("contact_poisson", "wall_poisson_ratio"),
-                      ("contact_shear_modulus_pa", "wall_shear_modulus_pa")):
-        if meta.get(key) not in (None, ""):
-            changes[name] = float(meta[key])
-    return DEMParameters().with_(**changes)
 
 
 def repose_setup(measurement):

@@ -81,7 +81,7 @@ def measured_prior(measurement, factors, constraints: dict | None = None) -> Pri
     """The prior of the seven contact parameters: each one's measured mean and sd, or, for a
     parameter in ``constraints`` (``analyse.twin_likelihood``), the mean and sd its lab test's
     twin gives it."""
-    from demcal.analyse.campaign import PARAMETER_BOUNDS
+    from demcal.analyse.parameters import PARAMETER_BOUNDS
 
     constraints = constraints or {}
     names, mean, sd, bounds, sources = [], [], [], [], []

@@ -34,10 +34,6 @@ import numpy as np
 
 from scipy import stats
 
-#: Grid points per parameter; drops are cheap (about 0.06 s each), the incline more so.
-GRID = {"drop": 9, "incline": 7}
-#: Grid of the contact restitution [-] (the apparent value can be far below the contact one).
-RESTITUTION_RANGE = (0.05, 0.95)
 #: Fine grid on which the interpolated likelihood is evaluated.
 FINE = 401
 
@@ -120,20 +116,21 @@ def _grid_posterior(grid, r_mean, r_se, n: int) -> tuple[float, float, bool]:
 
 
 def twin_constraints(measurement, base, factors: dict, execute, run_refs) -> dict:
-    """Run the drop and incline twins over each parameter's grid and return
-    ``{parameter: TwinConstraint}`` for every parameter a lab test's twin can constrain.
+    """Run the trial rigs' twins (``simulate.rigs.trial_rigs``: the drop, the incline) over
+    each parameter's grid and return ``{parameter: TwinConstraint}`` for every parameter a lab
+    test's twin can constrain.
 
     ``execute(stage, tasks) -> records`` runs the twins (the campaign's run store; the task's
     ``rig`` says which twin); ``factors`` is ``analyse.campaign.factor_levels``'s table. While
-    one parameter is varied the others stay at their measured means.
+    one parameter is varied the others stay at their measured means. A quantity measured in
+    several ways (a sled and single particles) is read from its rig's preferred group.
     """
-    from demcal.analyse.campaign import PARAMETER_BOUNDS
-    from demcal.analyse.critique.twins import drop_trials, incline_groups, wall_of
-    from demcal.simulate.rigs import drop, incline
+    from demcal.analyse.parameters import PARAMETER_BOUNDS, wall_of
+    from demcal.simulate.rigs import rig, trial_groups
 
-    wall = wall_of(measurement.meta)
-    trials = drop_trials(measurement)
-    groups = incline_groups(measurement)
+    groups = {}
+    for g in trial_groups(measurement.quantities, wall_of(measurement.meta)):
+        groups.setdefault(g.quantity, g)
     # every other contact parameter at its measured mean while one is varied
     base = base.with_(**{f["parameter"]: min(max(float(measurement.quantities[f["quantity"]].value),
                                                  PARAMETER_BOUNDS[f["parameter"]][0]),
@@ -142,48 +139,26 @@ def twin_constraints(measurement, base, factors: dict, execute, run_refs) -> dic
     out = {}
     for f in factors.values():
         name, quantity = f["parameter"], f["quantity"]
-        est = measurement.quantities[quantity]
-        family, _, surface = quantity.partition(".")
-        lo_b, hi_b = PARAMETER_BOUNDS[name]
-        if family == "restitution":
-            rows = trials.get(surface, [])
-            if len(rows) < 2:
-                continue
-            pair = "particle-particle" if surface == "particle-particle" else "particle-steel"
-            grid = np.linspace(*RESTITUTION_RANGE, GRID["drop"])
-            tasks = [drop.task(base.with_(**{name: float(g)}), pair, h, o, row)
-                     for g in grid for row, _, h, o, _, _ in rows]
-            records = execute(f"drop twins, {name}", tasks)
-            y = np.array([r[1] for r in rows])
-            sim = np.array([float(r["result"]["observable"]["apparent_restitution"]) for r in records])
-            sim = sim.reshape(len(grid), len(rows))
-            rig = "drop"
-        elif family in ("static_friction", "rolling_friction"):
-            modes = [m for (q, s, m) in groups if q == quantity and s == surface]
-            mode = "sled" if "sled" in modes else modes[0] if modes else "roll"
-            rows = groups.get((quantity, surface, mode), [])
-            rig_surface = "steel" if surface == wall else surface if surface == "particle" else None
-            if len(rows) < 2 or rig_surface is None:
-                continue
-            lo = max(lo_b, est.value - 4 * est.sd)
-            hi = min(hi_b, est.value + 4 * est.sd)
-            grid = np.linspace(lo, hi, GRID["incline"])
-            tasks = [incline.task(base.with_(**{name: float(g)}), mode, rig_surface, 0) for g in grid]
-            records = execute(f"incline twins, {name}", tasks)
-            key = "rolling_friction_apparent" if mode == "roll" else "static_friction_apparent"
-            onset = np.array([r["result"]["observable"].get(key) for r in records], dtype=float)
-            y = np.array([r[1] for r in rows])
-            sim = np.repeat(onset[:, None], len(rows), axis=1)
-            rig = "incline"
-        else:
+        group = groups.get(quantity)
+        if group is None or group.setting is None or len(group.trials) < 2:
             continue
+        twin = rig(group.rig)
+        est = measurement.quantities[quantity]
+        grid = np.asarray(twin.grid(float(est.value), float(est.sd), PARAMETER_BOUNDS[name]), dtype=float)
+        tasks = [twin.group_tasks(base.with_(**{name: float(g)}), group) for g in grid]
+        records = execute(f"{twin.name} twins, {name}", [t for ts in tasks for t in ts])
+        readings = np.array([twin.reading(t, r["result"]) for t, r in zip((t for ts in tasks for t in ts), records)])
+        y = np.array(group.measured)
+        sim = readings.reshape(len(grid), -1)
+        if sim.shape[1] == 1:        # one deterministic run stands for every trial of the group
+            sim = np.repeat(sim, len(y), axis=1)
         ok = np.all(np.isfinite(sim), axis=1)
         half = float(stats.t.ppf(0.975, len(y) - 1)) * float(np.std(y, ddof=1)) / math.sqrt(len(y))
         if ok.sum() < 3:
             out[name] = TwinConstraint(
-                name, quantity, rig, grid.tolist(), [], [], math.nan, math.nan, math.nan, float(est.value),
+                name, quantity, twin.name, grid.tolist(), [], [], math.nan, math.nan, math.nan, float(est.value),
                 float(est.sd), int(len(y)), False, run_refs(records), None, False,
-                f"the {rig} twin gave a reading at {int(ok.sum())} of {len(grid)} grid values of {name}; it "
+                f"the {twin.name} twin gave a reading at {int(ok.sum())} of {len(grid)} grid values of {name}; it "
                 f"does not constrain it, which keeps its measured prior")
             continue
         resid = y[None, :] - sim[ok]
@@ -193,10 +168,10 @@ def twin_constraints(measurement, base, factors: dict, execute, run_refs) -> dic
         response = _response(grid[ok], sim[ok].mean(axis=1))
         informative = bool(abs(response) > half)
         note = "" if informative else (
-            f"the {rig} twin's reading changes by {response:.3g} over {name} {grid[ok][0]:.3g}-{grid[ok][-1]:.3g}, "
+            f"the {twin.name} twin's reading changes by {response:.3g} over {name} {grid[ok][0]:.3g}-{grid[ok][-1]:.3g}, "
             f"less than the lab mean's 95 % half-width {half:.3g}: it does not respond to its parameter, "
             f"which keeps its measured prior")
-        out[name] = TwinConstraint(name, quantity, rig, grid[ok].tolist(), r_mean.tolist(), r_se.tolist(),
+        out[name] = TwinConstraint(name, quantity, twin.name, grid[ok].tolist(), r_mean.tolist(), r_se.tolist(),
                                    mean, sd, sd * math.sqrt(len(y)), float(est.value), float(est.sd),
                                    int(len(y)), edge, run_refs(records), response, informative, note)
     return out

@@ -1239,15 +1239,16 @@ def table_inputs(c: Campaign) -> Table:
 
 
 def run_observable(inputs: dict, response: str) -> str:
-    """The reading the campaign takes from a run: the response of a heap, the apparent
-    restitution of a drop twin, the apparent friction of an incline twin's mode
-    (``analyse.twin_likelihood``)."""
-    rig = inputs.get("rig")
-    if rig == "drop":
-        return "apparent_restitution"
-    if rig == "incline":
-        return "static_friction_apparent" if inputs.get("mode") == "slide" else "rolling_friction_apparent"
-    return response
+    """The reading the campaign takes from a run: the response of a heap, or the observable a
+    trial rig's task reads (``simulate.rigs.Rig.observed``: a drop's apparent restitution, an
+    incline's apparent friction in its mode)."""
+    from demcal.simulate.rigs import RIGS, rig
+
+    name = inputs.get("rig")
+    if name not in RIGS or rig(name).trial_groups is None:
+        return response
+    twin = rig(name)
+    return twin.observed(inputs) if twin.observed is not None else twin.compared
 
 
 def _finite(x) -> bool:

@@ -227,7 +227,7 @@ def run(args) -> int:
 
     base, particle = None, None
     if args.workbook:
-        from demcal.analyse.campaign import base_parameters
+        from demcal.analyse.parameters import base_parameters
         from demcal.measure.pipeline import measure_particle
         particle = measure_particle(args.workbook, read_options(args))
         base = base_parameters(particle)

@@ -51,20 +51,22 @@ import numpy as np
 from scipy import stats
 
 from demcal.analyse.critique.diagnosis import (CORRECTIONS, DEFAULT_ALPHA, POOLED, PRACTICAL_THRESHOLDS,
-                                        CovariateTest, Untestable, measured_series, run_tests)
+                                        CovariateTest, Untestable, measured_series, row_covariates, run_tests,
+                                        specimen_lookup)
 from demcal.analyse.critique.attribution import ModelFinding, attribute_drop_discrepancy, orientation_discrepancy
 from demcal.analyse.critique.gain import ExtensionGain
 from demcal.analyse.critique.heap_gain import HeapGain, with_unit
 from demcal.analyse.critique.mechanisms import CATALOGUE, Finding, ill_conditioned, judge
-from demcal.analyse.critique.twins import (Discrepancy, TwinRunner, constant_discrepancy, drop_trials,
-                                    incline_groups, independent_discrepancy, paired_discrepancy,
-                                    repose_validation_angles, rig_pair, run_drop_twins, twin_parameters,
-                                    wall_of)
+from demcal.analyse.critique.twins import (Discrepancy, TwinRunner, TwinTrial, constant_discrepancy,
+                                    independent_discrepancy, paired_discrepancy, repose_validation_angles,
+                                    twin_parameters)
+from demcal.analyse.parameters import wall_of
 from demcal.analyse.results import read_campaign_results
 from demcal.errors import InputError
 from demcal.jsonio import check_schema, read_json, to_jsonable
 from demcal.provenance import Provenance, sha256_file
 
+#: The sheets whose trials the critique compares with their twins.
 RIGS = ("drop", "incline", "repose")
 #: Extensions evaluated by default (the others need engine hooks or a new campaign).
 DEFAULT_EXTENSIONS = ("inverted_restitution", "velocity_dependent_restitution", "size_distribution")
@@ -293,10 +295,8 @@ def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EX
             store_dir = campaign / "critique_runs"
         runner = TwinRunner(store_dir, workers=workers, progress=progress)
     try:
-        if twins and "drop" in rigs:
-            _drop_twins(runner, measurement, workbook, params, wall, discrepancies, drop_state)
-        if twins and "incline" in rigs:
-            _incline_twins(runner, measurement, workbook, params, wall, discrepancies)
+        if twins:
+            _trial_twins(runner, measurement, workbook, params, wall, rigs, discrepancies, drop_state)
         if twins and "repose" in rigs:
             _repose_twins(runner, measurement, results, campaign, params, repose_seeds, discrepancies)
         # data effects: the lab's measurements against their covariates
@@ -334,68 +334,73 @@ def run_critique(source, *, twins: bool = True, rigs=RIGS, extensions=DEFAULT_EX
 # twins
 
 
-def _drop_twins(runner, measurement, workbook, params, wall, discrepancies, state) -> None:
+def _trial_twins(runner, measurement, workbook, params, wall, sheets, discrepancies, state) -> None:
+    """The twin of every group of the lab's trials (``simulate.rigs.trial_groups``), on the rigs
+    whose sheets ``sheets`` names: a per-trial twin against its trials in pairs, a deterministic
+    one against the group's mean. A restitution's twins are kept in ``state`` (by lab pair) for
+    the attribution of their discrepancy and the model extensions."""
+    from demcal.simulate.rigs import rig, run_task, trial_groups
+
+    specimens = specimen_lookup(workbook)
+    runs = {}
+    for group in trial_groups(measurement.quantities, wall):
+        twin = rig(group.rig)
+        if twin.sheet not in sheets:
+            continue
+        if group.setting is None or (twin.per_trial and len(group.trials) < 2):
+            why = group.why or "fewer than 2 trials"
+            discrepancies.append(constant_discrepancy(twin.label(group.quantity), twin.sheet, group.measured,
+                                                      None, f"not simulated: {why}"))
+            continue
+        runs.setdefault(twin.name, []).append((group, twin.group_tasks(params, group)))
+    for name, planned in runs.items():
+        twin = rig(name)
+        results = iter(runner(run_task, [t for _, tasks in planned for t in tasks], f"{name} twins"))
+        for group, tasks in planned:
+            done = [next(results) for _ in tasks]
+            readings = [twin.reading(t, r) for t, r in zip(tasks, done)]
+            note = twin.describe_twin(group, params, done) if twin.describe_twin else ""
+            if not twin.per_trial:
+                value = readings[0] if math.isfinite(readings[0]) else None
+                discrepancies.append(constant_discrepancy(twin.label(group.quantity), twin.sheet, group.measured,
+                                                          value, note))
+                continue
+            trials = [TwinTrial(twin.sheet, group.quantity, t.row, t.measured, y,
+                                row_covariates(t.record, twin.sheet, specimens), task)
+                      for t, y, task in zip(group.trials, readings, tasks)]
+            extra = []
+            if group.quantity.partition(".")[0] == "restitution":
+                note, extra = _restitution_twins(group, trials, params, specimens, note, state)
+            discrepancies.append(paired_discrepancy(twin.label(group.quantity), twin.sheet,
+                                                    [t.measured for t in trials], [t.simulated for t in trials],
+                                                    note))
+            discrepancies += extra
+
+
+def _restitution_twins(group, twins, params, specimens, note, state) -> tuple[str, list]:
+    """What the critique adds to a restitution's drop twins: whether sqrt(h2/h1) may feed the
+    DEM directly (to the ``note``), the twin's own slope against orientation (a model
+    discrepancy, never a data effect), and the pair's record in ``state`` for the attribution
+    and the extensions. Returns the note and the extra discrepancies."""
     from demcal.simulate.extensions import restitution_parameter
 
-    for pair, trials in drop_trials(measurement, workbook).items():
-        quantity = f"restitution.{pair}"
-        rp = rig_pair(pair, wall)
-        if rp is None or len(trials) < 2:
-            y = [t[1] for t in trials]
-            why = (f"no DEM contact parameters for {pair} (the DEM knows particle-particle and "
-                   f"particle-{wall})" if rp is None else "fewer than 2 drops")
-            discrepancies.append(constant_discrepancy(f"{quantity} (drop twin, apparent)", "drop", y, None,
-                                                      f"not simulated: {why}"))
-            continue
-        param = restitution_parameter(rp)
-        e_contact = float(getattr(params, param))
-        twin = run_drop_twins(runner, params, trials, rp, quantity=quantity, desc=f"drop twins ({pair})")
-        logged = sum(t[3] is not None for t in trials)
-        note = (f"contact {param} = {e_contact:.3g}; each drop at its height and "
-                f"{'logged' if logged == len(trials) else f'logged ({logged}) or random'} orientation")
-        direct = _direct_use(twin, e_contact)
-        if direct is not None:
-            note += (f"; twin apparent / contact = {direct['ratio']:.3g}: " +
-                     ("whether sqrt(h2/h1) may feed the DEM directly is undetermined with these drops"
-                      if direct["verdict"] == "undetermined" else
-                      f"sqrt(h2/h1) {direct['verdict']} feed the DEM directly"))
-        discrepancies.append(paired_discrepancy(f"{quantity} (drop twin, apparent sqrt(h2/h1))", "drop",
-                                                [t.measured for t in twin], [t.simulated for t in twin], note))
-        # the twin's own dependence on orientation is a model discrepancy, never a data effect
-        slope = orientation_discrepancy(quantity, twin)
-        if slope is not None:
-            discrepancies.append(slope)
-        state[pair] = {"rig_pair": rp, "trials": trials, "twins": {t.row: t for t in twin},
-                       "parameter": param, "contact": e_contact}
-
-
-def _incline_twins(runner, measurement, workbook, params, wall, discrepancies):
-    from demcal.simulate.rigs import incline, run_task
-
-    groups = incline_groups(measurement, workbook)
-    tasks, keys = [], []
-    for (quantity, surface, mode), rows in groups.items():
-        rig_surface = "steel" if surface == wall else surface if surface == "particle" else None
-        if rig_surface is None:
-            discrepancies.append(constant_discrepancy(f"{quantity} (incline twin)", "incline",
-                                                      [r[1] for r in rows], None,
-                                                      f"not simulated: no DEM parameters for surface {surface}"))
-            continue
-        tasks.append(incline.task(params, mode, rig_surface, 0))
-        keys.append((quantity, surface, mode))
-    results = runner(run_task, tasks, "incline twins")
-    for key, res in zip(keys, results):
-        quantity, surface, mode = key
-        ob = res["observable"]
-        value = ob["rolling_friction_apparent" if mode == "roll" else "static_friction_apparent"]
-        note = f"tan(onset angle) of the {mode} twin on {surface}"
-        if value is None or not math.isfinite(value):
-            other = ob.get("slide_angle_deg") if mode == "roll" else ob.get("roll_angle_deg")
-            note += (f"; no {mode} onset" + (f" (it {'slid' if mode == 'roll' else 'rolled'} first, at "
-                                             f"{other:.3g} deg)" if other is not None and math.isfinite(other) else ""))
-            value = None
-        discrepancies.append(constant_discrepancy(f"{quantity} (incline twin)", "incline",
-                                                  [r[1] for r in groups[key]], value, note))
+    rig_pair = group.setting["pair"]
+    param = restitution_parameter(rig_pair)
+    e_contact = float(getattr(params, param))
+    note = f"contact {param} = {e_contact:.3g}; {note}" if note else f"contact {param} = {e_contact:.3g}"
+    direct = _direct_use(twins, e_contact)
+    if direct is not None:
+        note += (f"; twin apparent / contact = {direct['ratio']:.3g}: " +
+                 ("whether sqrt(h2/h1) may feed the DEM directly is undetermined with these drops"
+                  if direct["verdict"] == "undetermined" else
+                  f"sqrt(h2/h1) {direct['verdict']} feed the DEM directly"))
+    slope = orientation_discrepancy(group.quantity, twins)
+    trials = [(t.row, t.measured, t.settings["height"], t.settings["orientation_deg"],
+               row_covariates(t.record, "drop", specimens), t.record) for t in group.trials]
+    state[group.quantity.partition(".")[2]] = {"rig_pair": rig_pair, "trials": trials,
+                                               "twins": {t.row: t for t in twins},
+                                               "parameter": param, "contact": e_contact}
+    return note, [] if slope is None else [slope]
 
 
 def _repose_twins(runner, measurement, results, campaign, params, repose_seeds, discrepancies):

@@ -43,12 +43,6 @@ from scipy import stats
 from demcal.analyse.runs import RunStore, run_all, run_key
 from demcal.errors import SimulationError
 from demcal.jsonio import restore_nan
-from demcal.units import GRAVITY
-
-
-def wall_of(meta: dict) -> str:
-    """The rig's plate material from the workbook meta (default ``steel``)."""
-    return str(meta.get("contact_material") or "steel").strip().lower() or "steel"
 
 
 def twin_parameters(measurement, results=None):
@@ -56,14 +50,14 @@ def twin_parameters(measurement, results=None):
 
     With a campaign's result (``analyse.results.CampaignResult``): its ``calibrated_parameters``. Otherwise the measured
     means fed directly to the DEM, as the paper's first step does: measured shape, density and
-    materials (``analyse.campaign.base_parameters``) and each contact parameter at the mean of
+    materials (``analyse.parameters.base_parameters``) and each contact parameter at the mean of
     its test.
 
     Returns
     -------
     (simulate.params.DEMParameters, str)
     """
-    from demcal.analyse.campaign import PARAMETER_BOUNDS, SCREENING_FACTORS, base_parameters
+    from demcal.analyse.parameters import PARAMETER_BOUNDS, SCREENING_FACTORS, base_parameters, wall_of
     from demcal.simulate.params import DEMParameters
 
     if results and results.calibrated_parameters:
@@ -165,44 +159,12 @@ class TwinTrial:
                 "simulated": self.simulated, "residual": self.residual, "run_key": run_key(self.task)}
 
 
-def rig_pair(pair: str, wall: str) -> str | None:
-    """The drop rig's pair for a lab pair, or None when the DEM has no parameters for it."""
-    if pair == "particle-particle":
-        return "particle-particle"
-    if pair == f"particle-{wall}":
-        return "particle-steel"
-    return None
-
-
-def drop_trials(measurement, workbook=None) -> dict:
-    """Per pair: the used drop rows as ``(row, measured e, height [m], orientation or None,
-    covariates, record)``."""
-    from demcal.analyse.critique.diagnosis import row_covariates, specimen_lookup
-
-    specimens = specimen_lookup(workbook)
-    out = {}
-    for name, est in measurement.quantities.items():
-        if not name.startswith("restitution."):
-            continue
-        rows = []
-        for rec in est.per_row:
-            if not rec.get("used", True) or rec.get("value") is None:
-                continue
-            h = rec.get("drop_height_m")
-            if h is None and rec.get("track"):
-                h = rec["track"]["v_before"] ** 2 / (2.0 * GRAVITY)
-            cov = row_covariates(rec, "drop", specimens)
-            o = cov.get("orientation_deg")
-            o = float(o) if isinstance(o, (int, float)) and 0.0 <= float(o) <= 90.0 else None
-            rows.append((int(rec["row"]), float(rec["value"]), float(h), o, cov, rec))
-        out[name.split(".", 1)[1]] = rows
-    return out
-
-
 def run_drop_twins(runner: TwinRunner, params, trials, rig_pair_name: str, *, quantity: str,
                    sizes=None, extension=None, desc="drop twins") -> list:
-    """Twin of each drop trial (``drop_trials`` rows) with ``params``; ``sizes`` maps a row to
-    its specimen's sizes [m] (``Shape.size_values``) for per-trial templates."""
+    """Twin of each drop trial with ``params``: ``trials`` are the critique's drop records
+    ``(row, measured e, height [m], orientation or None, covariates, record)``
+    (``loop._restitution_twins``); ``sizes`` maps a row to its specimen's sizes [m]
+    (``Shape.size_values``) for per-trial templates."""
     from demcal.simulate.rigs import drop, run_task
 
     tasks = [drop.task(params, rig_pair_name, h, o, row,
@@ -213,27 +175,6 @@ def run_drop_twins(runner: TwinRunner, params, trials, rig_pair_name: str, *, qu
     for (row, y, h, o, cov, _), task, res in zip(trials, tasks, results):
         out.append(TwinTrial("drop", quantity, row, y, float(res["observable"]["apparent_restitution"]),
                              cov, task))
-    return out
-
-
-def incline_groups(measurement, workbook=None) -> dict:
-    """``(quantity, surface, mode)`` -> used rows ``(row, measured mu, covariates)``; ``mode``
-    is the incline twin's: ``slide`` or ``roll``, or ``sled`` for static friction measured with a
-    sled of glued particles (the rows' ``carrier``)."""
-    from demcal.analyse.critique.diagnosis import row_covariates, specimen_lookup
-
-    specimens = specimen_lookup(workbook)
-    out = {}
-    for name, est in measurement.quantities.items():
-        family, _, surface = name.partition(".")
-        if family not in ("static_friction", "rolling_friction"):
-            continue
-        for r in est.per_row:
-            if r.get("used", True) and r.get("value") is not None:
-                mode = "roll" if family == "rolling_friction" else \
-                    "sled" if r.get("carrier") == "sled" else "slide"
-                out.setdefault((name, surface, mode), []).append(
-                    (int(r["row"]), float(r["value"]), row_covariates(r, "incline", specimens)))
     return out
 
 

@@ -88,6 +88,31 @@ class Rig:
     measure : callable or None
         ``measure(centres, radii, geometry) -> dict``: the angle observables of a settled heap
         of spheres in the rig (demcal's or another code's), measured as the lab's photos are.
+
+    A rig whose sheet holds single trials (a drop, a tilt) also says how the lab's rows become
+    twin runs and readings:
+
+    trial_groups : callable or None
+        ``trial_groups(quantities, wall) -> list of TrialGroup``: the used rows of the measured
+        quantities it mirrors (``quantities``: name -> estimate with ``per_row`` records;
+        ``wall``: the workbook's plate material), grouped by twin setting, the preferred group
+        of a quantity first.
+    group_tasks : callable or None
+        ``group_tasks(params, group, **options) -> list of task``: one run per trial
+        (``per_trial``) or one for the whole group (a deterministic twin).
+    observed : callable or None
+        ``observed(task) -> str``: the observable that is a task's reading of the lab quantity.
+    grid : callable or None
+        ``grid(value, sd, bounds) -> array``: the parameter values the joint calibration runs
+        the twin at (``analyse.twin_likelihood``), from the lab's mean and sd and the
+        parameter's bounds.
+    per_trial : bool
+        Each trial has its own twin run (its own settings, e.g. height and orientation).
+    reading_label : str
+        How the report names the twin's reading (e.g. ``apparent sqrt(h2/h1)``).
+    describe_twin : callable or None
+        ``describe_twin(group, params, results) -> str``: what the discrepancy table notes of a
+        group's twin runs (their settings; why a reading is missing).
     """
 
     name: str
@@ -103,6 +128,91 @@ class Rig:
     flanks: str = "both"
     lab_test: str = ""
     measure: Callable | None = None
+    trial_groups: Callable | None = None
+    group_tasks: Callable | None = None
+    observed: Callable | None = None
+    grid: Callable | None = None
+    per_trial: bool = False
+    reading_label: str = ""
+    describe_twin: Callable | None = None
+
+    def reading(self, task: dict, result: dict) -> float:
+        """A run's reading of the lab quantity (NaN when the twin could not measure it):
+        ``result`` is the task's ``run_task`` result."""
+        name = self.observed(task) if self.observed is not None else self.compared
+        value = result["observable"].get(name)
+        return float(value) if value is not None else float("nan")
+
+    def label(self, quantity: str) -> str:
+        """The discrepancy table's name of the twin's reading of ``quantity``."""
+        return f"{quantity} ({self.name} twin{', ' + self.reading_label if self.reading_label else ''})"
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One lab row a twin mirrors.
+
+    Attributes
+    ----------
+    row : int
+        The row's number in its sheet (as the measurement's records give it).
+    measured : float
+        The lab's reading of the row, in its quantity's unit.
+    settings : dict
+        The twin's settings of this row (e.g. a drop's ``height`` [m] and ``orientation_deg``).
+    record : dict
+        The measurement's record of the row (its covariates included).
+    """
+
+    row: int
+    measured: float
+    settings: dict
+    record: dict
+
+
+@dataclass(frozen=True)
+class TrialGroup:
+    """The lab trials of one quantity that one twin setting mirrors.
+
+    Attributes
+    ----------
+    rig : str
+        The registered rig whose twin runs them.
+    quantity : str
+        The measured quantity (``restitution.particle-steel``, ``static_friction.particle``).
+    setting : dict or None
+        The twin's settings shared by the group (a drop's ``pair``; an incline's ``mode`` and
+        ``surface``); None when the DEM has no parameters for the lab's setting.
+    trials : tuple of Trial
+    why : str
+        Why the group is not simulated (``setting`` None).
+    """
+
+    rig: str
+    quantity: str
+    setting: dict | None
+    trials: tuple
+    why: str = ""
+
+    @property
+    def measured(self) -> list:
+        """The lab's readings, trial by trial."""
+        return [t.measured for t in self.trials]
+
+
+def used_rows(estimate) -> list:
+    """The used per-row records of a measured quantity that carry a value."""
+    return [r for r in estimate.per_row if r.get("used", True) and r.get("value") is not None]
+
+
+def trial_rigs() -> list:
+    """The registered rigs whose sheets hold single trials (``Rig.trial_groups``)."""
+    return [r for r in map(rig, RIGS) if r.trial_groups is not None]
+
+
+def trial_groups(quantities: dict, wall: str) -> list:
+    """Every trial rig's groups of the lab's rows (:class:`TrialGroup`), rig by rig."""
+    return [g for r in trial_rigs() for g in r.trial_groups(quantities, wall)]
 
 
 def rig(name: str) -> Rig:
@@ -310,5 +420,5 @@ def check_seed(seed) -> int:
     return value
 
 
-__all__ = ["RIGS", "ReposeSetup", "Rig", "RigResult", "RunTally", "check_seed", "repose_rig", "repose_rig_named", "repose_setup", "rig", "rig_of_geometry", "rig_function", "rigs_of_sheet",
-           "run_meta", "run_rig", "run_task"]
+__all__ = ["RIGS", "ReposeSetup", "Rig", "RigResult", "RunTally", "Trial", "TrialGroup", "check_seed", "repose_rig", "repose_rig_named", "repose_setup", "rig", "rig_of_geometry", "rig_function", "rigs_of_sheet",
+           "run_meta", "run_rig", "run_task", "trial_groups", "trial_rigs", "used_rows"]

@@ -82,7 +82,7 @@ from demcal.simulate.contact.hertz_mindlin import contact_duration_elastic, effe
 from demcal.simulate.engine import Simulation
 from demcal.simulate.integrate import axis_angle_quat, matrix_from_quat, quat_multiply
 from demcal.simulate.params import DEMParameters
-from demcal.simulate.rigs import Rig, RigResult, RunTally, check_seed, run_meta
+from demcal.simulate.rigs import Rig, RigResult, RunTally, Trial, TrialGroup, check_seed, run_meta, used_rows
 from demcal.simulate.rigs.surfaces import PARTICLE, make_surface, surface_from_pair
 from demcal.simulate.walls import Plane
 from demcal.units import GRAVITY
@@ -412,6 +412,72 @@ def run_task(inputs: dict) -> dict:
             "dt": res.meta["dt"], "steps": res.meta["steps"], "wall_s": res.meta["wall_s"]}
 
 
+# ----------------------------------------------------------------------------------------------
+# the lab's drops as twin runs
+
+#: Contact restitutions the joint calibration runs the twin at: the whole admissible range,
+#: since the apparent value can lie far below the contact one.
+LIKELIHOOD_GRID = (0.05, 0.95, 9)
+
+
+def twin_pair(pair: str, wall: str) -> str | None:
+    """The rig's pair for a lab pair (the workbook's plate is the DEM's wall material), or None
+    when the DEM has no parameters for it (e.g. ``particle-rubber``)."""
+    if pair == "particle-particle":
+        return "particle-particle"
+    if pair == f"particle-{wall}":
+        return "particle-steel"
+    return None
+
+
+def trial_groups(quantities: dict, wall: str) -> list:
+    """One group per drop pair (``restitution.<pair>``): each used row at its drop height (the
+    track's impact speed when the sheet gives none) and its logged orientation (random from the
+    row's seed when the sheet logs none)."""
+    groups = []
+    for name, est in quantities.items():
+        family, _, pair = name.partition(".")
+        if family != "restitution":
+            continue
+        trials = []
+        for rec in used_rows(est):
+            h = rec.get("drop_height_m")
+            if h is None and rec.get("track"):
+                h = rec["track"]["v_before"] ** 2 / (2.0 * GRAVITY)
+            o = (rec.get("covariates") or {}).get("orientation_deg")
+            o = float(o) if isinstance(o, (int, float)) and 0.0 <= float(o) <= 90.0 else None
+            trials.append(Trial(int(rec["row"]), float(rec["value"]), {"height": float(h), "orientation_deg": o},
+                                rec))
+        rig_pair = twin_pair(pair, wall)
+        groups.append(TrialGroup("drop", name, None if rig_pair is None else {"pair": rig_pair}, tuple(trials),
+                                 "" if rig_pair else f"no DEM contact parameters for {pair} (the DEM knows "
+                                                     f"particle-particle and particle-{wall})"))
+    return groups
+
+
+def group_tasks(params: DEMParameters, group, *, sizes=None, extension=None) -> list:
+    """One drop per trial, at its height and orientation, seeded by its row; ``sizes`` maps a
+    row to its specimen's sizes [m] for a particle of its own size."""
+    return [task(params, group.setting["pair"], t.settings["height"], t.settings["orientation_deg"], t.row,
+                 template=None if sizes is None else sizes.get(t.row), extension=extension)
+            for t in group.trials]
+
+
+def describe_twin(group, params: DEMParameters, results: list) -> str:
+    """How the group's drops were released."""
+    logged = sum(t.settings["orientation_deg"] is not None for t in group.trials)
+    n = len(group.trials)
+    return f"each drop at its height and {'logged' if logged == n else f'logged ({logged}) or random'} orientation"
+
+
+def likelihood_grid(value: float, sd: float, bounds: tuple) -> np.ndarray:
+    """The contact restitutions the joint calibration runs the twin at (``LIKELIHOOD_GRID``)."""
+    return np.linspace(*LIKELIHOOD_GRID)
+
+
 RIG = Rig("drop", sheet="drop", run=run_drop, task=task, run_task=run_task, compared="apparent_restitution",
           observables={"apparent_restitution": "-", "velocity_ratio": "-", "rotational_energy_share": "-",
-                       "orientation_deg": "deg", "drop_height_m": "m", "rebound_height_m": "m"})
+                       "orientation_deg": "deg", "drop_height_m": "m", "rebound_height_m": "m"},
+          lab_test="free-fall drop onto a plate, rebound filmed",
+          trial_groups=trial_groups, group_tasks=group_tasks, grid=likelihood_grid, per_trial=True,
+          reading_label="apparent sqrt(h2/h1)", describe_twin=describe_twin)

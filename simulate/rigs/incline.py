@@ -51,7 +51,7 @@ from demcal.simulate.clump import ClumpTemplate
 from demcal.simulate.engine import Simulation
 from demcal.simulate.integrate import axis_angle_quat, matrix_from_quat
 from demcal.simulate.params import DEMParameters
-from demcal.simulate.rigs import Rig, RigResult, RunTally, check_seed, run_meta
+from demcal.simulate.rigs import Rig, RigResult, RunTally, Trial, TrialGroup, check_seed, run_meta, used_rows
 from demcal.simulate.rigs.surfaces import PARTICLE, make_surface
 from demcal.simulate.timestep import material_time_step
 from demcal.simulate.walls import Plane
@@ -271,6 +271,75 @@ def run_task(inputs: dict) -> dict:
             "dt": res.meta["dt"], "steps": res.meta["steps"], "wall_s": res.meta["wall_s"]}
 
 
+# ----------------------------------------------------------------------------------------------
+# the lab's tilts as twin runs
+
+#: Points of the joint calibration's grid, over the lab's mean -+ ``LIKELIHOOD_SDS`` sd.
+LIKELIHOOD_POINTS = 7
+LIKELIHOOD_SDS = 4.0
+#: The twin's mode for a measured friction, and the preferred one first: a sled's reading
+#: (the rows' ``carrier``) before a single particle's.
+FAMILY_MODES = {"static_friction": ("sled", "slide"), "rolling_friction": ("roll",)}
+
+
+def trial_groups(quantities: dict, wall: str) -> list:
+    """One group per measured friction and mode (``static_friction.<surface>``: ``sled`` rows,
+    those whose ``carrier`` is a sled, then ``slide``; ``rolling_friction.<surface>``:
+    ``roll``). The twin is deterministic, so one run serves every trial of a group."""
+    groups = []
+    for name, est in quantities.items():
+        family, _, surface = name.partition(".")
+        if family not in FAMILY_MODES:
+            continue
+        rig_surface = "steel" if surface == wall else surface if surface == "particle" else None
+        by_mode = {}
+        for rec in used_rows(est):
+            mode = "sled" if family == "static_friction" and rec.get("carrier") == "sled" else FAMILY_MODES[family][-1]
+            by_mode.setdefault(mode, []).append(Trial(int(rec["row"]), float(rec["value"]), {}, rec))
+        for mode in FAMILY_MODES[family]:
+            if mode in by_mode:
+                groups.append(TrialGroup("incline", name, None if rig_surface is None else
+                                         {"mode": mode, "surface": rig_surface}, tuple(by_mode[mode]),
+                                         "" if rig_surface else f"no DEM parameters for surface {surface}"))
+    return groups
+
+
+def group_tasks(params: DEMParameters, group) -> list:
+    """The group's one twin run (the rig is deterministic)."""
+    return [task(params, group.setting["mode"], group.setting["surface"], 0)]
+
+
+def observed(inputs: dict) -> str:
+    """The observable a task reads: tan of the onset its mode reads."""
+    return "rolling_friction_apparent" if ONSET[inputs["mode"]] == "roll" else "static_friction_apparent"
+
+
+def describe_twin(group, params: DEMParameters, results: list) -> str:
+    """What the group's run read, and why it read nothing (the particle rolled before it slid,
+    or slid before it rolled)."""
+    mode, surface = group.setting["mode"], group.setting["surface"]
+    ob = results[0]["observable"]
+    note = f"tan(onset angle) of the {mode} twin on {surface}"
+    value = ob.get(observed(group.setting))
+    if value is None or not math.isfinite(value):
+        rolls = ONSET[mode] == "roll"
+        other = ob.get("slide_angle_deg" if rolls else "roll_angle_deg")
+        note += f"; no {mode} onset" + (f" (it {'slid' if rolls else 'rolled'} first, at {other:.3g} deg)"
+                                        if other is not None and math.isfinite(other) else "")
+    return note
+
+
+def likelihood_grid(value: float, sd: float, bounds: tuple) -> np.ndarray:
+    """The frictions the joint calibration runs the twin at: the lab's mean -+ 4 sd, inside
+    the parameter's bounds."""
+    lo = max(bounds[0], value - LIKELIHOOD_SDS * sd)
+    hi = min(bounds[1], value + LIKELIHOOD_SDS * sd)
+    return np.linspace(lo, hi, LIKELIHOOD_POINTS)
+
+
 RIG = Rig("incline", sheet="incline", run=run_incline, task=task, run_task=run_task, compared="slide_angle_deg",
           observables={"slide_angle_deg": "deg", "roll_angle_deg": "deg", "static_friction_apparent": "-",
-                       "rolling_friction_apparent": "-"})
+                       "rolling_friction_apparent": "-"},
+          lab_test="inclinometer, plate tilted slowly",
+          trial_groups=trial_groups, group_tasks=group_tasks, observed=observed, grid=likelihood_grid,
+          describe_twin=describe_twin)

@@ -52,10 +52,11 @@ def test_the_twin_posterior_covers_the_parameter_at_any_number_of_trials(n):
     normal one covered 71 % at n = 2, 81 % at 3 and 89 % at 5."""
     from scipy import stats
 
-    from demcal.analyse.twin_likelihood import GRID, RESTITUTION_RANGE, _grid_posterior
+    from demcal.analyse.twin_likelihood import _grid_posterior
+    from demcal.simulate.rigs import rig
 
     rng = np.random.default_rng(n)
-    grid = np.linspace(*RESTITUTION_RANGE, GRID["drop"])
+    grid = rig("drop").grid(0.5, 0.03, (0.01, 1.0))
     reps, covered = 2000, 0
     for _ in range(reps):
         resid = 0.45 + 0.03 * rng.standard_normal(n) - 0.9 * grid[:, None]
