@@ -18,7 +18,7 @@ What it measures, on one core each and sequentially (never both codes at once):
   sphere positions (``simulate.rigs.repose.heap_angles``: rendered side view + photo
   estimator, profile fit of the full slope, outside heap alone): mean and standard deviation.
 
-The case is the LIGGGHTS deck's (``benchmarks.liggghts.deck.ReposeCase``): 500 five-sphere
+The case is the LIGGGHTS deck's (``demcal.simulate.liggghts.deck.ReposeCase``): 500 five-sphere
 segments, carton 200 x 100 x 250 mm, plate lifted at 0.1 m/s from 4 s, 10 s at
 7.43678e-5 s, the paper's calibrated contact parameters. demcal runs it with LIGGGHTS'
 conventions: rolling friction lever ``liggghts_reff`` and the cylinder mass model.
@@ -82,7 +82,7 @@ print(time.perf_counter() - t0)
 
 def benchmark_parameters(case=None):
     """``DEMParameters`` of the LIGGGHTS deck's case, with LIGGGHTS' lever and mass model."""
-    from benchmarks.liggghts.deck import ReposeCase
+    from demcal.simulate.liggghts.deck import ReposeCase
     from demcal.simulate.params import DEMParameters
     from demcal.simulate.shapes.segment import Segment
 
@@ -169,7 +169,7 @@ def run_demcal(seed: int, duration: float, params, geometry=None, lift_time: flo
 def run_reference(seed: int, duration: float, workdir: Path, case=None, geometry=None) -> dict:
     """The same case by LIGGGHTS on one core; its final spheres measured by the rig's own
     ``measure`` (for the carton ``heap_angles``)."""
-    from benchmarks.liggghts.run import heap_summary, run_liggghts
+    from demcal.simulate.liggghts.run import heap_summary, run_liggghts
 
     res = run_liggghts(seed, workdir / f"seed{seed}", duration=duration, case=case, nice=0)
     heap = _rig(geometry).measure(res["positions"], res["radii"], res["deck"]["case"])
@@ -256,7 +256,6 @@ def main(argv=None) -> int:
 
     geometry = case = None
     if args.truth is not None:
-        from benchmarks.liggghts.deck import CylinderCase, ReposeCase
         from demcal.simulate.rigs.lifting_cylinder import CylinderGeometry
         from demcal.simulate.rigs.repose import ReposeGeometry
         from demcal.simulate.truth_file import read_truth_file
@@ -270,15 +269,13 @@ def main(argv=None) -> int:
         stated = truth_file.design.get("repose_rig")
         geometry = repose_geometry(stated) if stated else ReposeGeometry.for_particle(params.shape)
         if isinstance(geometry, CylinderGeometry):
-            geometry = geometry.filled_for(params.shape)
-            case = CylinderCase.for_cylinder(params, geometry, lift_start=args.lift_time)
-        else:
-            case = dataclasses.replace(ReposeCase.for_params(params, geometry), plate_lift_start=args.lift_time)
+            geometry = geometry.filled_for(params.shape)       # the twin runs the same fill
+        case = _rig(geometry).liggghts_case(params, geometry, args.lift_time)
         doc["material"] = {"truth": str(args.truth), "shape": params.shape.describe(),
                            "rig": _rig(geometry).workbook_name, "geometry": geometry.to_dict()}
         print(f"material: {params.shape.describe()}; {geometry.describe()}", flush=True)
     else:
-        from benchmarks.liggghts.deck import ReposeCase
+        from demcal.simulate.liggghts.deck import ReposeCase
 
         params = benchmark_parameters()
         case = ReposeCase(plate_lift_start=args.lift_time)
@@ -294,7 +291,7 @@ def main(argv=None) -> int:
 
     skipped = None
     if not args.skip_liggghts:
-        from benchmarks.liggghts.run import LiggghtsUnavailable
+        from demcal.simulate.liggghts.run import LiggghtsUnavailable
         workdir = args.results / "tmp" / "liggghts"
         for seed in seeds:
             try:

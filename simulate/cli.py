@@ -21,7 +21,6 @@ from demcal.errors import InputError
 from demcal.jsonio import write_json
 from demcal.measure.cli import add_workbook_options, read_options
 
-RIG_NAMES = ("repose", "drop", "incline")
 #: Frames written by --vtk over a run (besides the last).
 VTK_FRAMES = 50
 #: Arrays longer than this are summarised in the JSON unless --full-record.
@@ -29,13 +28,15 @@ RECORD_INLINE_MAX = 2000
 
 
 def register(subparsers) -> None:
-    """Add the ``simulate`` sub-command."""
+    """Add the ``simulate`` sub-command: the options of every registered rig, by sheet."""
+    from demcal.simulate.rigs import RIGS, rig
+
     p = subparsers.add_parser(
         "simulate", help="run a lab-rig twin (repose, drop, incline) with given DEM parameters",
         description="Run the DEM twin of one lab test and print its observable; --json writes "
                     "the observable, the run metadata, the parameters, a summary of the record "
                     "and the provenance.")
-    p.add_argument("rig", choices=RIG_NAMES, help="the lab test to simulate")
+    p.add_argument("rig", choices=rig_sheets(), help="the lab test to simulate")
     p.add_argument("--set", dest="sets", action="append", default=[], metavar="NAME=VALUE",
                    help="set a DEM parameter (repeatable), e.g. --set e_pp=0.32")
     p.add_argument("--seed", type=int, default=0, help="run seed (default 0)")
@@ -49,30 +50,13 @@ def register(subparsers) -> None:
                    help="simulate the workbook's particle: its shape and sizes, densities and moduli "
                         "(and for the repose rig the carton, lift speed and fill count of its meta); "
                         "--set changes them further")
-    g = p.add_argument_group("repose rig")
-    g.add_argument("--profile", choices=("paper", "quick"), default="quick",
-                   help="paper: the source paper's case (10 s simulated); quick: the same carton and "
-                        "fill with the idle time cut (about 2.5 s), for calibration campaigns (default)")
-    g.add_argument("--annotate", metavar="PNG", help="write the annotated side view of the heap")
     add_workbook_options(p)
-    g = p.add_argument_group("drop and incline rigs")
-    g.add_argument("--height", type=float, default=400.0, metavar="MM",
-                   help="drop: gap between the plate and the segment's lowest point at release [mm] "
-                        "(default 400, the paper's)")
-    g.add_argument("--orientation", default="random", metavar="DEG|random",
-                   help="drop: angle of the long axis to the horizontal at release [deg], or "
-                        "'random' (uniform on the sphere, from --seed; default)")
-    g.add_argument("--pair", default="particle-steel",
-                   help="drop: material pair, particle-steel (default), particle-particle or "
-                        "particle-<material> (needs --surface-material)")
-    g.add_argument("--surface", default="steel",
-                   help="incline: plate surface, steel (default), particle or another material "
-                        "(needs --surface-material)")
-    g.add_argument("--mode", choices=("slide", "roll", "sled"), default="slide",
-                   help="incline: slide (the particle along the slope), roll (across it) or sled (a sled of "
-                        "glued particles, for round particles that roll first)")
-    g.add_argument("--tilt-rate", type=float, default=1.0, metavar="DEG_S",
-                   help="incline: tilt rate [deg/s] (default 1)")
+    added = set()
+    for r in map(rig, RIGS):
+        if r.cli_arguments is not None and r.cli_arguments not in added:
+            r.cli_arguments(p.add_argument_group(f"{r.sheet} rig"))
+            added.add(r.cli_arguments)
+    g = p.add_argument_group("another plate material (drop and incline rigs)")
     g.add_argument("--surface-material", dest="surface_values", action="append", default=[],
                    metavar="KEY=VALUE",
                    help="another plate material: density [kg/m3], poisson_ratio, shear_modulus [Pa], "
@@ -105,60 +89,38 @@ def parameters(items, base=None):
         raise InputError(f"--set: {exc}") from None
 
 
-def _surface_options(items, label) -> dict:
-    from demcal.simulate.rigs.surfaces import CONTACT_KEYS, MATERIAL_KEYS
-    if not items:
-        return {}
-    values = {}
-    for item in items:
-        key, sep, value = str(item).partition("=")
-        key = key.strip()
-        if not sep or key not in MATERIAL_KEYS + CONTACT_KEYS:
-            raise InputError(f"--surface-material {item!r}: expected KEY=VALUE with KEY one of "
-                             f"{', '.join(MATERIAL_KEYS + CONTACT_KEYS)}")
-        try:
-            values[key] = float(value)
-        except ValueError:
-            raise InputError(f"--surface-material {key}: needs a number, got {value!r}") from None
-    return {"surface_material": {k: v for k, v in values.items() if k in MATERIAL_KEYS},
-            "surface_contact": {k: v for k, v in values.items() if k in CONTACT_KEYS}}
+def rig_sheets() -> tuple:
+    """The lab tests ``demcal simulate`` runs: the sheets of the registered rigs."""
+    from demcal.simulate.rigs import RIGS, rig
+
+    return tuple(dict.fromkeys(r.sheet for r in map(rig, RIGS) if r.cli_options is not None))
 
 
 def rig_options(args) -> tuple[str, dict, dict]:
-    """The registered rig to run (``repose``: the workbook's repose rig, meta ``repose_rig``),
-    its keyword options and the input files they came from (path -> SHA-256)."""
-    inputs = {}
-    if args.rig == "repose":
-        opts = {"profile": args.profile, "annotate_to": args.annotate}
-        name = "repose"
+    """The registered rig to run for the sheet ``args.rig`` (for ``repose``, the workbook's
+    repose rig, meta ``repose_rig``, with its dimensions), its keyword options and the input
+    files they came from (path -> SHA-256)."""
+    from demcal.simulate.rigs import repose_rig, repose_setup, rig, rigs_of_sheet
+
+    inputs, geometry = {}, None
+    sheet_rigs = rigs_of_sheet(args.rig)
+    if any(r.geometry is not None for r in sheet_rigs):      # the rig and its size: the workbook's
+        meta = {}
         if args.workbook:
             from demcal.measure.workbook import read_workbook
-            from demcal.simulate.rigs import repose_setup
 
             wb = read_workbook(args.workbook, read_options(args))
-            setup = repose_setup(wb.meta, file=str(wb.source))
-            name = setup.rig
-            opts["geometry"] = setup.dimensions()
+            meta = wb.meta
+            setup = repose_setup(meta, file=str(wb.source))
+            geometry = setup.dimensions()
             inputs.update(wb.files)
-        return name, opts, inputs
-    if args.rig == "drop":
-        if not (math.isfinite(args.height) and args.height > 0):
-            raise InputError(f"--height must be a positive drop height [mm], got {args.height!r}")
-        text = str(args.orientation).strip().lower()
-        if text == "random":
-            orientation = None
-        else:
-            try:
-                orientation = float(text)
-            except ValueError:
-                raise InputError(f"--orientation must be an angle in [0, 90] deg or 'random', "
-                                 f"got {args.orientation!r}") from None
-        opts = {"height": args.height * 1e-3, "orientation_deg": orientation, "pair": args.pair}
-        opts.update(_surface_options(args.surface_values, "pair"))
-        return "drop", opts, inputs
-    opts = {"mode": args.mode, "surface": args.surface, "tilt_rate_deg_s": args.tilt_rate}
-    opts.update(_surface_options(args.surface_values, "surface"))
-    return "incline", opts, inputs
+        chosen = rig(setup.rig) if geometry is not None else repose_rig(meta)
+    else:
+        chosen = sheet_rigs[0]
+    opts = chosen.cli_options(args)
+    if geometry is not None:
+        opts["geometry"] = geometry
+    return chosen.name, opts, inputs
 
 
 class _Monitor:

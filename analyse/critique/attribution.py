@@ -241,11 +241,11 @@ def _rigid_body_signature(runner, params, on_params, rig_pair: str, trials, twin
         off, on = (float(np.mean([twins[row][k] for row, _, _ in logged])) for k in (0, 1))
         return f"at the {len(logged)} drops' logged orientations", reference, off, on
     height = float(np.median([t[2] for t in trials]))
-    from demcal.simulate.rigs import drop, run_task
+    from demcal.simulate.rigs import drop, rig, run_task
 
-    flat = runner(run_task, [drop.task(params, rig_pair, height, FLAT_DEG, 0),
-                             drop.task(on_params, rig_pair, height, FLAT_DEG, 0)], "flat landing")
-    off, on = (float(r["observable"]["apparent_restitution"]) for r in flat)
+    tasks = [drop.task(params, rig_pair, height, FLAT_DEG, 0), drop.task(on_params, rig_pair, height, FLAT_DEG, 0)]
+    flat = runner(run_task, tasks, "flat landing")
+    off, on = (rig("drop").reading(t, r) for t, r in zip(tasks, flat))
     return "landing flat", rigid_drop(body, FLAT_DEG, e_c, height).apparent_restitution, off, on
 
 

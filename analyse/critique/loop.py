@@ -404,7 +404,7 @@ def _restitution_twins(group, twins, params, specimens, note, state) -> tuple[st
 
 
 def _repose_twins(runner, measurement, results, campaign, params, repose_seeds, discrepancies):
-    from demcal.simulate.rigs import repose_setup, run_task
+    from demcal.simulate.rigs import repose_setup, rig, run_task
 
     est = measurement.quantities.get("repose_angle_deg")
     if est is None:
@@ -416,7 +416,8 @@ def _repose_twins(runner, measurement, results, campaign, params, repose_seeds, 
     elif repose_seeds > 0:
         setup = repose_setup(measurement.meta, file=measurement.workbook.get("source"))
         tasks = [setup.task(params, 9000 + i, profile="quick") for i in range(repose_seeds)]
-        angles = [r["observable"]["angle_deg"] for r in runner(run_task, tasks, "repose twins")]
+        twin = rig(setup.rig)
+        angles = [twin.reading(t, r) for t, r in zip(tasks, runner(run_task, tasks, "repose twins"))]
         note = f"{repose_seeds} quick-profile repose runs"
     else:
         discrepancies.append(independent_discrepancy("repose_angle_deg (photo method)", "repose", measured, [],

@@ -802,7 +802,7 @@ def orientation_design(params, pairs, height_m: float, *, grid=ORIENTATION_GRID,
         One per pair and orientation, in the order given.
     """
     from demcal.simulate.extensions import restitution_parameter
-    from demcal.simulate.rigs import run_rig
+    from demcal.simulate.rigs import rig, run_rig
 
     out = []
     for pair in pairs:
@@ -812,7 +812,7 @@ def orientation_design(params, pairs, height_m: float, *, grid=ORIENTATION_GRID,
 
         def apparent(value, angle):
             return float(run_rig("drop", params.with_(**{name: value}), 0, height=height_m, pair=pair,
-                                 orientation_deg=float(angle)).observable["apparent_restitution"])
+                                 orientation_deg=float(angle)).observable[rig("drop").compared])
 
         for angle in grid:
             out.append(OrientationSensitivity(pair, float(angle), apparent(e, angle),

@@ -165,7 +165,7 @@ def run_drop_twins(runner: TwinRunner, params, trials, rig_pair_name: str, *, qu
     ``(row, measured e, height [m], orientation or None, covariates, record)``
     (``loop._restitution_twins``); ``sizes`` maps a row to its specimen's sizes [m]
     (``Shape.size_values``) for per-trial templates."""
-    from demcal.simulate.rigs import drop, run_task
+    from demcal.simulate.rigs import drop, rig, run_task
 
     tasks = [drop.task(params, rig_pair_name, h, o, row,
                        template=None if sizes is None else sizes.get(row), extension=extension)
@@ -173,8 +173,7 @@ def run_drop_twins(runner: TwinRunner, params, trials, rig_pair_name: str, *, qu
     results = runner(run_task, tasks, desc)
     out = []
     for (row, y, h, o, cov, _), task, res in zip(trials, tasks, results):
-        out.append(TwinTrial("drop", quantity, row, y, float(res["observable"]["apparent_restitution"]),
-                             cov, task))
+        out.append(TwinTrial("drop", quantity, row, y, rig("drop").reading(task, res), cov, task))
     return out
 
 
@@ -298,7 +297,11 @@ def constant_discrepancy(observable: str, sheet: str, measured, simulated: float
 
 
 def repose_validation_angles(campaign_dir, results) -> tuple[list, str]:
-    """Angles (``angle_deg``) of the campaign's validation runs (``CampaignResult``), from ``DIR/runs``."""
+    """Angles of the campaign's validation runs (``CampaignResult``), from ``DIR/runs``: the
+    campaign's response (``results.response``), as the calibration read it."""
+    from demcal.simulate.rigs import repose_rig_named
+
+    response = (results.response or {}).get("name") or repose_rig_named(results.repose_rig).compared
     runs = results.validation.runs
     store = RunStore(Path(campaign_dir) / "runs")
     angles, missing = [], []
@@ -307,7 +310,7 @@ def repose_validation_angles(campaign_dir, results) -> tuple[list, str]:
         if rec is None or rec.get("status") != "ok":
             missing.append(ref["key"])
             continue
-        angles.append(float(rec["result"]["observable"]["angle_deg"]))
+        angles.append(float(rec["result"]["observable"][response]))
     if not angles:
         responses = results.validation.responses
         note = "validation responses from results.json (run records not found)" if responses else \

@@ -88,6 +88,10 @@ class Rig:
     measure : callable or None
         ``measure(centres, radii, geometry) -> dict``: the angle observables of a settled heap
         of spheres in the rig (demcal's or another code's), measured as the lab's photos are.
+    liggghts_case : callable or None
+        ``liggghts_case(params, geometry, lift_time) -> case``: the rig in LIGGGHTS-PUBLIC
+        (``simulate.liggghts.deck``), its particle and contact model from demcal's export, the
+        wall lifted at ``lift_time`` [s].
 
     A rig whose sheet holds single trials (a drop, a tilt) also says how the lab's rows become
     twin runs and readings:
@@ -113,6 +117,14 @@ class Rig:
     describe_twin : callable or None
         ``describe_twin(group, params, results) -> str``: what the discrepancy table notes of a
         group's twin runs (their settings; why a reading is missing).
+
+    And what ``demcal simulate SHEET`` offers (the rigs of one sheet share them):
+
+    cli_arguments : callable or None
+        ``cli_arguments(group)``: adds its options to an ``argparse`` argument group.
+    cli_options : callable or None
+        ``cli_options(args) -> dict``: the run's keyword options from the parsed arguments (a
+        bad value raises ``InputError`` naming the option).
     """
 
     name: str
@@ -128,6 +140,7 @@ class Rig:
     flanks: str = "both"
     lab_test: str = ""
     measure: Callable | None = None
+    liggghts_case: Callable | None = None
     trial_groups: Callable | None = None
     group_tasks: Callable | None = None
     observed: Callable | None = None
@@ -135,6 +148,8 @@ class Rig:
     per_trial: bool = False
     reading_label: str = ""
     describe_twin: Callable | None = None
+    cli_arguments: Callable | None = None
+    cli_options: Callable | None = None
 
     def reading(self, task: dict, result: dict) -> float:
         """A run's reading of the lab quantity (NaN when the twin could not measure it):

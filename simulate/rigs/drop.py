@@ -83,7 +83,7 @@ from demcal.simulate.engine import Simulation
 from demcal.simulate.integrate import axis_angle_quat, matrix_from_quat, quat_multiply
 from demcal.simulate.params import DEMParameters
 from demcal.simulate.rigs import Rig, RigResult, RunTally, Trial, TrialGroup, check_seed, run_meta, used_rows
-from demcal.simulate.rigs.surfaces import PARTICLE, make_surface, surface_from_pair
+from demcal.simulate.rigs.surfaces import PARTICLE, make_surface, surface_from_pair, surface_options
 from demcal.simulate.walls import Plane
 from demcal.units import GRAVITY
 
@@ -475,9 +475,40 @@ def likelihood_grid(value: float, sd: float, bounds: tuple) -> np.ndarray:
     return np.linspace(*LIKELIHOOD_GRID)
 
 
+def cli_arguments(group) -> None:
+    """``demcal simulate drop``'s options."""
+    group.add_argument("--height", type=float, default=PAPER_DROP_HEIGHT * 1e3, metavar="MM",
+                       help="drop: gap between the plate and the particle's lowest point at release [mm] "
+                            "(default 400, the paper's)")
+    group.add_argument("--orientation", default="random", metavar="DEG|random",
+                       help="drop: angle of the long axis to the horizontal at release [deg], or "
+                            "'random' (uniform on the sphere, from --seed; default)")
+    group.add_argument("--pair", default="particle-steel",
+                       help="drop: material pair, particle-steel (default), particle-particle or "
+                            "particle-<material> (needs --surface-material)")
+
+
+def cli_options(args) -> dict:
+    """The drop's options from ``demcal simulate drop``'s arguments (lengths in mm there)."""
+    if not (math.isfinite(args.height) and args.height > 0):
+        raise InputError(f"--height must be a positive drop height [mm], got {args.height!r}")
+    text = str(args.orientation).strip().lower()
+    if text == "random":
+        orientation = None
+    else:
+        try:
+            orientation = float(text)
+        except ValueError:
+            raise InputError(f"--orientation must be an angle in [0, 90] deg or 'random', "
+                             f"got {args.orientation!r}") from None
+    return {"height": args.height * 1e-3, "orientation_deg": orientation, "pair": args.pair,
+            **surface_options(args.surface_values)}
+
+
 RIG = Rig("drop", sheet="drop", run=run_drop, task=task, run_task=run_task, compared="apparent_restitution",
           observables={"apparent_restitution": "-", "velocity_ratio": "-", "rotational_energy_share": "-",
                        "orientation_deg": "deg", "drop_height_m": "m", "rebound_height_m": "m"},
           lab_test="free-fall drop onto a plate, rebound filmed",
           trial_groups=trial_groups, group_tasks=group_tasks, grid=likelihood_grid, per_trial=True,
-          reading_label="apparent sqrt(h2/h1)", describe_twin=describe_twin)
+          reading_label="apparent sqrt(h2/h1)", describe_twin=describe_twin,
+          cli_arguments=cli_arguments, cli_options=cli_options)

@@ -403,3 +403,16 @@ def side_view_angles(centres, radii, side: str, *, x_min: float | None = None,
 __all__ = ["CHUNK_S", "HeapRun", "PROFILES", "PROFILE_STEP", "PX_PER_M", "ReposeProfile", "SETTLED_SPEED",
            "SideView", "fill_lift_settle", "heap_task", "meta_rows", "meta_values", "repose_profile", "rms_speed",
            "run_heap_task", "run_options", "side_view_angles", "top_profile"]
+
+
+def cli_arguments(group) -> None:
+    """``demcal simulate repose``'s options (every repose rig's)."""
+    group.add_argument("--profile", choices=tuple(PROFILES), default="quick",
+                       help="paper: the source paper's schedule (10 s simulated); quick: the same rig and "
+                            "fill with the idle time cut, for calibration campaigns (default)")
+    group.add_argument("--annotate", metavar="PNG", help="write the annotated side view of the heap")
+
+
+def cli_options(args) -> dict:
+    """A repose run's options from ``demcal simulate repose``'s arguments."""
+    return {"profile": args.profile, "annotate_to": args.annotate}

@@ -52,7 +52,7 @@ from demcal.simulate.engine import Simulation
 from demcal.simulate.integrate import axis_angle_quat, matrix_from_quat
 from demcal.simulate.params import DEMParameters
 from demcal.simulate.rigs import Rig, RigResult, RunTally, Trial, TrialGroup, check_seed, run_meta, used_rows
-from demcal.simulate.rigs.surfaces import PARTICLE, make_surface
+from demcal.simulate.rigs.surfaces import PARTICLE, make_surface, surface_options
 from demcal.simulate.timestep import material_time_step
 from demcal.simulate.walls import Plane
 from demcal.units import GRAVITY
@@ -337,9 +337,27 @@ def likelihood_grid(value: float, sd: float, bounds: tuple) -> np.ndarray:
     return np.linspace(lo, hi, LIKELIHOOD_POINTS)
 
 
+def cli_arguments(group) -> None:
+    """``demcal simulate incline``'s options."""
+    group.add_argument("--surface", default="steel",
+                       help="incline: plate surface, steel (default), particle or another material "
+                            "(needs --surface-material)")
+    group.add_argument("--mode", choices=MODES, default="slide",
+                       help="incline: slide (the particle along the slope), roll (across it) or sled (a sled of "
+                            "glued particles, for round particles that roll first)")
+    group.add_argument("--tilt-rate", type=float, default=1.0, metavar="DEG_S",
+                       help="incline: tilt rate [deg/s] (default 1)")
+
+
+def cli_options(args) -> dict:
+    """The incline's options from ``demcal simulate incline``'s arguments."""
+    return {"mode": args.mode, "surface": args.surface, "tilt_rate_deg_s": args.tilt_rate,
+            **surface_options(args.surface_values)}
+
+
 RIG = Rig("incline", sheet="incline", run=run_incline, task=task, run_task=run_task, compared="slide_angle_deg",
           observables={"slide_angle_deg": "deg", "roll_angle_deg": "deg", "static_friction_apparent": "-",
                        "rolling_friction_apparent": "-"},
           lab_test="inclinometer, plate tilted slowly",
           trial_groups=trial_groups, group_tasks=group_tasks, observed=observed, grid=likelihood_grid,
-          describe_twin=describe_twin)
+          describe_twin=describe_twin, cli_arguments=cli_arguments, cli_options=cli_options)

@@ -35,7 +35,7 @@ import numpy as np
 from demcal.errors import InputError
 from demcal.provenance import Provenance
 from demcal.simulate.params import DEMParameters
-from demcal.simulate.rigs import Rig, RigResult, check_seed, run_meta
+from demcal.simulate.rigs import Rig, RigResult, check_seed, heap, run_meta
 from demcal.simulate.rigs.heap import (fill_lift_settle, heap_task, meta_rows, meta_values,
                                        repose_profile, run_heap_task, run_options,
                                        side_view_angles)
@@ -284,10 +284,19 @@ def run_task(inputs: dict) -> dict:
     return run_heap_task(run_lifting_cylinder, CylinderGeometry, inputs)
 
 
+def liggghts_case(params: DEMParameters, geometry: CylinderGeometry, lift_time: float):
+    """The tube in LIGGGHTS (``simulate.liggghts.deck.CylinderCase``: a 64-gon mesh), lifted at
+    ``lift_time`` [s]."""
+    from demcal.simulate.liggghts.deck import CylinderCase
+
+    return CylinderCase.for_cylinder(params, geometry, lift_start=float(lift_time))
+
+
 RIG = Rig("lifting_cylinder", sheet="repose", run=run_lifting_cylinder, task=task, run_task=run_task,
           compared="angle_deg", fallbacks=("angle_profile_deg", "angle_cone_deg"),
           observables={"angle_deg": "deg", "angle_left_deg": "deg", "angle_right_deg": "deg",
                        "angle_profile_deg": "deg", "angle_cone_deg": "deg", "crest_height_m": "m",
                        "base_diameter_m": "m", "escaped": "-"},
           geometry=CylinderGeometry, workbook_name="lifting_cylinder", flanks="both",
-          lab_test="lifting cylinder cone, side photograph of both flanks", measure=measure_heap)
+          lab_test="lifting cylinder cone, side photograph of both flanks", measure=measure_heap,
+          liggghts_case=liggghts_case, cli_arguments=heap.cli_arguments, cli_options=heap.cli_options)

@@ -46,7 +46,7 @@ import numpy as np
 from demcal.errors import InputError
 from demcal.provenance import Provenance
 from demcal.simulate.params import DEMParameters
-from demcal.simulate.rigs import Rig, RigResult, check_seed, run_meta
+from demcal.simulate.rigs import Rig, RigResult, check_seed, heap, run_meta
 from demcal.simulate.rigs.heap import (PX_PER_M, fill_lift_settle, heap_task, meta_rows, meta_values,
                                        repose_profile, run_heap_task, run_options,
                                        side_view_angles)
@@ -330,6 +330,14 @@ def measure_heap(centres, radii, geometry) -> dict:
             "angle_outside_deg": heap.angle_outside_deg, "notes": list(heap.notes)}
 
 
+def liggghts_case(params: DEMParameters, geometry: ReposeGeometry, lift_time: float):
+    """The carton in LIGGGHTS (``simulate.liggghts.deck.ReposeCase``), the plate lifted at
+    ``lift_time`` [s]."""
+    from demcal.simulate.liggghts.deck import ReposeCase
+
+    return replace(ReposeCase.for_params(params, geometry), plate_lift_start=float(lift_time))
+
+
 RIG = Rig("repose", sheet="repose", run=run_repose, task=task, run_task=run_task, compared="angle_deg",
           # a frictionless floor can spread the heap flat: the direct profile fit of the full
           # slope, then the heap beyond the carton
@@ -337,4 +345,5 @@ RIG = Rig("repose", sheet="repose", run=run_repose, task=task, run_task=run_task
           observables={"angle_deg": "deg", "angle_profile_deg": "deg", "angle_outside_deg": "deg",
                        "escaped": "-", "outside_fraction": "-"},
           geometry=ReposeGeometry, workbook_name="lifted_plate", flanks="right",
-          lab_test="plate withdrawal (pumping plate) heap, side photograph of its flank", measure=measure_heap)
+          lab_test="plate withdrawal (pumping plate) heap, side photograph of its flank", measure=measure_heap,
+          liggghts_case=liggghts_case, cli_arguments=heap.cli_arguments, cli_options=heap.cli_options)

@@ -130,3 +130,23 @@ def _checked(values: dict | None, keys: tuple, label: str) -> dict:
         except (TypeError, ValueError):
             raise InputError(f"{label}: {k} needs a number, got {values[k]!r}") from None
     return out
+
+
+def surface_options(items) -> dict:
+    """``--surface-material KEY=VALUE`` items of ``demcal simulate`` -> the rig options
+    ``surface_material`` and ``surface_contact``; a bad item names itself and the valid keys."""
+    if not items:
+        return {}
+    values = {}
+    for item in items:
+        key, sep, value = str(item).partition("=")
+        key = key.strip()
+        if not sep or key not in MATERIAL_KEYS + CONTACT_KEYS:
+            raise InputError(f"--surface-material {item!r}: expected KEY=VALUE with KEY one of "
+                             f"{', '.join(MATERIAL_KEYS + CONTACT_KEYS)}")
+        try:
+            values[key] = float(value)
+        except ValueError:
+            raise InputError(f"--surface-material {key}: needs a number, got {value!r}") from None
+    return {"surface_material": {k: v for k, v in values.items() if k in MATERIAL_KEYS},
+            "surface_contact": {k: v for k, v in values.items() if k in CONTACT_KEYS}}

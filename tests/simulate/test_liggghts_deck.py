@@ -1,4 +1,4 @@
-"""The LIGGGHTS-PUBLIC 3.8 deck of the paper's repose case (benchmarks/liggghts).
+"""The LIGGGHTS-PUBLIC 3.8 deck of the paper's repose case (simulate/liggghts).
 
 Most tests read the generated script and meshes and need no LIGGGHTS; the last one runs the
 deck for 200 steps and is skipped when the binary is absent.
@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from benchmarks.liggghts import deck as dk
-from benchmarks.liggghts.run import find_liggghts, parse_log, read_positions, run_liggghts
+from demcal.simulate.liggghts import deck as dk
+from demcal.simulate.liggghts.run import find_liggghts, parse_log, read_positions, run_liggghts
 from demcal.errors import InputError
 
 CASE = dk.ReposeCase()
