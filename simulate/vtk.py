@@ -157,12 +157,12 @@ def wall_quads(walls, origins, domain_lo, domain_hi):
         c = origins[k]
         if packed["kind"][k] == CYLINDER:
             axis, u, v = packed["normal"][k], packed["axis_u"][k], packed["axis_v"][k]
-            radius, hh = packed["half"][k]
+            r0, hh, r1 = packed["half"][k]
             phi = np.linspace(0.0, 2.0 * np.pi, CYLINDER_FACETS + 1)
-            rim = radius * (np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v)
+            ring = np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * v
+            low, high = r0 * ring - hh * axis, r1 * ring + hh * axis
             for f in range(CYLINDER_FACETS):
-                quads.append([c + rim[f] - hh * axis, c + rim[f + 1] - hh * axis,
-                              c + rim[f + 1] + hh * axis, c + rim[f] + hh * axis])
+                quads.append([c + low[f], c + low[f + 1], c + high[f + 1], c + high[f]])
                 owner.append(k)
             continue
         if packed["kind"][k] == PLANE:
@@ -173,7 +173,7 @@ def wall_quads(walls, origins, domain_lo, domain_hi):
             hu, hv = 0.5 * (a.max() - a.min()), 0.5 * (b.max() - b.min())
         else:
             u, v = packed["axis_u"][k], packed["axis_v"][k]
-            hu, hv = packed["half"][k]
+            hu, hv = packed["half"][k, :2]
         quads.append([c - hu * u - hv * v, c + hu * u - hv * v, c + hu * u + hv * v, c - hu * u + hv * v])
         owner.append(k)
     return np.array(quads, dtype=float).reshape(-1, 4, 3), np.array(owner, dtype=np.int64)

@@ -1,14 +1,17 @@
-"""Rigid walls: infinite planes, finite rectangles and open cylinders, static or translating.
+"""Rigid walls: infinite planes, finite rectangles and open cylinders or cones, static or translating.
 
 ``Plane(point, normal)``
     One-sided infinite plane (the floor); spheres are kept on the side ``normal`` points to.
 ``Rectangle(centre, axis_u, axis_v, half_u, half_v)``
     Finite, two-sided rectangle (carton sides, the lifted end plate). A sphere touches it at the
     closest point of the rectangle, so its edges and corners push correctly.
-``Cylinder(centre, axis, radius, half_height)``
+``Cylinder(centre, axis, radius, half_height, top_radius=None)``
     Finite, two-sided open tube (the lifting cylinder of a repose test): its surface is the
     points at ``radius`` from the axis within ``half_height`` of ``centre`` along it; a sphere
-    touches it at the closest point of that surface, so its rims push correctly too.
+    touches it at the closest point of that surface, so its rims push correctly too. With a
+    ``top_radius`` the radius changes linearly from ``radius`` at ``-half_height`` to
+    ``top_radius`` at ``+half_height``: a truncated cone (a funnel), whose closest point is
+    found on the straight generator in the plane through the axis and the sphere centre.
 ``box_rectangles(lo, hi, faces=...)``
     The faces of an axis-aligned box as rectangles (e.g. an open carton: no "z+" face).
 
@@ -17,9 +20,9 @@ A wall may translate at a constant ``velocity`` [m/s] during ``[move_start, move
 contact velocity, so friction and damping see the moving surface.
 
 Kernel layout (``pack_walls``): one row per wall in float64 arrays ``kind`` (0 plane,
-1 rectangle, 2 cylinder), ``origin``, ``normal`` (a cylinder's axis), ``axis_u``, ``axis_v``,
-``half`` (2; a cylinder's radius and half height), ``velocity``, ``window`` (2) and int
-``material``.
+1 rectangle, 2 cylinder or cone), ``origin``, ``normal`` (a cylinder's axis), ``axis_u``,
+``axis_v``, ``half`` (3: a rectangle's half sizes; a cylinder's radius, half height and top
+radius), ``velocity``, ``window`` (2) and int ``material``.
 """
 
 from __future__ import annotations
@@ -87,7 +90,9 @@ class Rectangle:
 @dataclass(frozen=True)
 class Cylinder:
     """Finite two-sided open tube: axis through ``centre`` [m] along ``axis`` (unit), ``radius``
-    [m], extending ``half_height`` [m] either side of ``centre`` along the axis."""
+    [m], extending ``half_height`` [m] either side of ``centre`` along the axis; with
+    ``top_radius`` [m] a truncated cone, its radius ``radius`` at ``-half_height`` and
+    ``top_radius`` at ``+half_height`` along the axis (None: a cylinder)."""
 
     centre: tuple
     axis: tuple
@@ -98,12 +103,16 @@ class Cylinder:
     move_start: float = 0.0
     move_stop: float = math.inf
     name: str = "cylinder"
+    top_radius: float | None = None
 
     def to_dict(self) -> dict:
-        return {"kind": "cylinder", "centre": list(self.centre), "axis": list(self.axis),
-                "radius": self.radius, "half_height": self.half_height, "material": self.material,
-                "velocity": list(self.velocity), "move_start": self.move_start,
-                "move_stop": self.move_stop, "name": self.name}
+        out = {"kind": "cylinder", "centre": list(self.centre), "axis": list(self.axis),
+               "radius": self.radius, "half_height": self.half_height, "material": self.material,
+               "velocity": list(self.velocity), "move_start": self.move_start,
+               "move_stop": self.move_stop, "name": self.name}
+        if self.top_radius is not None:
+            out["top_radius"] = self.top_radius
+        return out
 
 
 WALL_TYPES = (Plane, Rectangle, Cylinder)
@@ -138,7 +147,7 @@ def pack_walls(walls, material_index) -> dict:
     """Kernel arrays of ``walls`` (see module docstring); ``material_index(name) -> int``."""
     n = len(walls)
     out = {"kind": np.zeros(n, np.int64), "origin": np.zeros((n, 3)), "normal": np.zeros((n, 3)),
-           "axis_u": np.zeros((n, 3)), "axis_v": np.zeros((n, 3)), "half": np.zeros((n, 2)),
+           "axis_u": np.zeros((n, 3)), "axis_v": np.zeros((n, 3)), "half": np.zeros((n, 3)),
            "velocity": np.zeros((n, 3)), "window": np.zeros((n, 2)), "material": np.zeros(n, np.int64)}
     for k, w in enumerate(walls):
         if isinstance(w, Plane):
@@ -157,11 +166,12 @@ def pack_walls(walls, material_index) -> dict:
             out["axis_u"][k] = u
             out["axis_v"][k] = v
             out["normal"][k] = np.cross(u, v)
-            out["half"][k] = (w.half_u, w.half_v)
+            out["half"][k] = (w.half_u, w.half_v, 0.0)
         elif isinstance(w, Cylinder):
-            if not (w.radius > 0 and w.half_height > 0):
-                raise InputError(f"wall {w.name!r}: radius and half height must be > 0, "
-                                 f"got {w.radius!r}, {w.half_height!r}")
+            top = w.radius if w.top_radius is None else w.top_radius
+            if not (w.radius > 0 and w.half_height > 0 and top > 0):
+                raise InputError(f"wall {w.name!r}: radius, top radius and half height must be > 0, "
+                                 f"got {w.radius!r}, {top!r}, {w.half_height!r}")
             axis = _unit(w.axis, f"wall {w.name!r} axis")
             # any unit vector across the axis: the direction used for a point on the axis
             u = np.cross(axis, (1.0, 0.0, 0.0) if abs(axis[0]) < 0.9 else (0.0, 1.0, 0.0))
@@ -170,7 +180,7 @@ def pack_walls(walls, material_index) -> dict:
             out["normal"][k] = axis
             out["axis_u"][k] = u / np.linalg.norm(u)
             out["axis_v"][k] = np.cross(axis, out["axis_u"][k])
-            out["half"][k] = (w.radius, w.half_height)
+            out["half"][k] = (w.radius, w.half_height, top)
         else:
             raise InputError(f"not a wall: {w!r}")
         out["velocity"][k] = np.asarray(w.velocity, float).reshape(3)
@@ -189,7 +199,8 @@ def wall_distance(kind, origin, normal, axis_u, axis_v, half, k, x, y, z):
     Plane: signed distance along its normal (negative behind it). Rectangle: distance to the
     closest point of the rectangle (its edges included); at zero distance the rectangle normal.
     Cylinder: distance to the closest point of the tube (its rims included); at zero distance
-    the radial direction.
+    the radial direction. A cone: the closest point on its generator, the segment from
+    (radius, -half height) to (top radius, +half height) in the plane through the axis.
     """
     dx = x - origin[k, 0]
     dy = y - origin[k, 1]
@@ -214,11 +225,23 @@ def wall_distance(kind, origin, normal, axis_u, axis_v, half, k, x, y, z):
             ey = axis_u[k, 1]
             ez = axis_u[k, 2]
         hh = half[k, 1]
-        ac = -hh if a < -hh else (hh if a > hh else a)
+        r0 = half[k, 0]
+        r1 = half[k, 2]
+        if r1 == r0:
+            ac = -hh if a < -hh else (hh if a > hh else a)
+            rc = r0
+        else:
+            # closest point of the generator (r0, -hh)-(r1, hh) to (rho, a)
+            gr = r1 - r0
+            ga = 2.0 * hh
+            t = ((rho - r0) * gr + (a + hh) * ga) / (gr * gr + ga * ga)
+            t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
+            ac = -hh + t * ga
+            rc = r0 + t * gr
         # vector from the closest point of the tube to the sphere centre
-        px = dx - ac * nx - half[k, 0] * ex
-        py = dy - ac * ny - half[k, 0] * ey
-        pz = dz - ac * nz - half[k, 0] * ez
+        px = dx - ac * nx - rc * ex
+        py = dy - ac * ny - rc * ey
+        pz = dz - ac * nz - rc * ez
         d = math.sqrt(px * px + py * py + pz * pz)
         if d == 0.0:
             return 0.0, ex, ey, ez
@@ -254,12 +277,14 @@ def wall_distances(packed: dict, points) -> np.ndarray:
             continue
         if packed["kind"][k] == CYLINDER:
             n = packed["normal"][k]
-            radius, hh = packed["half"][k]
+            r0, hh, r1 = packed["half"][k]
             a = d @ n
             radial = np.linalg.norm(d - a[:, None] * n, axis=1)
-            # distance within the plane through the axis: from (radial, a) to the segment
-            # {radius} x [-hh, hh]
-            out[:, k] = np.hypot(radial - radius, a - np.clip(a, -hh, hh))
+            # distance within the plane through the axis: from (radial, a) to the generator,
+            # the segment from (r0, -hh) to (r1, hh)
+            g = np.array([r1 - r0, 2.0 * hh])
+            t = np.clip(((radial - r0) * g[0] + (a + hh) * g[1]) / (g @ g), 0.0, 1.0)
+            out[:, k] = np.hypot(radial - (r0 + t * g[0]), a - (-hh + t * g[1]))
             continue
         u, v = packed["axis_u"][k], packed["axis_v"][k]
         du = np.clip(d @ u, -packed["half"][k, 0], packed["half"][k, 0])

@@ -200,3 +200,74 @@ def test_lifted_cylinder_releases_its_fill_and_nothing_tunnels_while_it_holds():
     assert sim.wall_origins()[tube, 2] == pytest.approx(0.05 + 0.3, rel=1e-6)
     assert rho.max() > 0.03                       # the column fell and spread once the tube rose
     assert sim.positions()[:, 2].max() < 0.05     # and none was carried up
+
+
+# ---- cones (the fixed funnel of a repose test)
+
+def _funnel(r_outlet=0.004, r_top=0.03, half_height=0.025, **kwargs):
+    # axis z through (0, 0, 0.1): the outlet at z = 0.075, the top at z = 0.125
+    return Cylinder((0.0, 0.0, 0.1), (0.0, 0.0, 1.0), r_outlet, half_height, "steel", top_radius=r_top, **kwargs)
+
+
+def test_cone_distance_against_a_dense_sampling_of_its_surface_in_kernel_and_numpy():
+    """The closest point of a truncated cone, against the nearest of 2 million points sampled on
+    its surface (an independent brute force), for points inside, outside, above the top rim,
+    below the outlet and on the axis."""
+    from demcal.simulate.walls import pack_walls, wall_distance, wall_distances
+
+    wall = _funnel()
+    packed = pack_walls([wall], lambda name: 0)
+    s = np.linspace(0.0, 1.0, 2001)                # along the generator
+    phi = np.linspace(0.0, 2.0 * np.pi, 1000, endpoint=False)
+    r = wall.radius + s * (wall.top_radius - wall.radius)
+    z = 0.1 - wall.half_height + s * 2.0 * wall.half_height
+    surface = np.stack([np.outer(r, np.cos(phi)), np.outer(r, np.sin(phi)), np.repeat(z[:, None], phi.size, 1)],
+                       axis=-1).reshape(-1, 3)
+    points = [(0.01, 0.0, 0.1), (0.0, 0.03, 0.09), (0.02, 0.01, 0.14), (0.0, 0.0, 0.06), (0.0, 0.0, 0.1),
+              (0.005, 0.0, 0.074), (0.04, 0.0, 0.13)]
+    for point in points:
+        brute = float(np.min(np.linalg.norm(surface - np.asarray(point), axis=1)))
+        got = wall_distance(packed["kind"], packed["origin"], packed["normal"], packed["axis_u"],
+                            packed["axis_v"], packed["half"], 0, *point)
+        # the sampling resolves the surface to about 0.1 mm around the rim
+        assert got[0] == pytest.approx(brute, abs=1e-4) and got[0] <= brute + 1e-12
+        assert wall_distances(packed, [point])[0, 0] == pytest.approx(got[0], abs=1e-15)
+        assert math.sqrt(got[1] ** 2 + got[2] ** 2 + got[3] ** 2) == pytest.approx(1.0)
+
+
+def test_equal_radii_make_the_same_tube_as_a_cylinder_bit_for_bit():
+    from demcal.simulate.walls import pack_walls, wall_distance
+
+    tube, cone = pack_walls([_tube()], lambda name: 0), pack_walls([_tube(top_radius=0.03)], lambda name: 0)
+    rng = np.random.default_rng(1)
+    for point in rng.uniform((-0.05, -0.05, -0.05), (0.05, 0.05, 0.15), size=(200, 3)):
+        a = wall_distance(*(tube[k] for k in ("kind", "origin", "normal", "axis_u", "axis_v", "half")), 0, *point)
+        b = wall_distance(*(cone[k] for k in ("kind", "origin", "normal", "axis_u", "axis_v", "half")), 0, *point)
+        assert a == b
+
+
+def test_a_sphere_too_big_for_the_outlet_rests_in_the_funnel_at_the_cones_height():
+    """A sphere on the axis of a funnel of half-angle alpha touches the wall where the radius is
+    R / cos(alpha): the rigid sphere would rest with its centre at z0 + (R / cos(alpha) - r0) /
+    tan(alpha) above the outlet (z0, r0). The wall is one contact at its closest point, so the
+    sphere sinks further by the Hertz overlap of a force m g / sin(alpha) along the normal,
+    delta / sin(alpha): 6.5e-6 m here."""
+    params = DEMParameters(e_pp=0.3, e_pw=0.3, mu_s_pw=0.4)
+    sim = simulation(params, dt=2e-5, gravity=(0.0, 0.0, -9.81))
+    tpl = sphere_template(sim)
+    wall = _funnel()
+    sim.add_wall(wall)
+    sim.add_clump(tpl, (0.0, 0.0, 0.15))
+    sim.run(duration=1.0)
+    tan_a = (wall.top_radius - wall.radius) / (2.0 * wall.half_height)
+    cos_a = 1.0 / math.sqrt(1.0 + tan_a ** 2)
+    sin_a = tan_a * cos_a
+    e_star = 1.0 / ((1 - 0.25 ** 2) / 2.5e7 + (1 - 0.3 ** 2) / (2 * 8e10 * 1.3))
+    normal_force = sim.masses()[0] * 9.81 / sin_a
+    overlap = (normal_force / (4.0 / 3.0 * e_star * math.sqrt(R))) ** (2.0 / 3.0)
+    z_rest = 0.1 - wall.half_height + (R / cos_a - wall.radius) / tan_a - overlap / sin_a
+    x = sim.positions()[0]
+    assert x[2] == pytest.approx(z_rest, abs=2e-7)
+    # on the axis every point of the ring is closest: the contact takes one side, pushes the
+    # sphere a step's distance across, then the other, so it chatters sideways in place
+    assert math.hypot(x[0], x[1]) < 1e-7 and abs(sim.velocities()[0][2]) < 1e-5
