@@ -1,5 +1,9 @@
-"""``demcal export DIR --to liggghts|yade|edem|json|all [--out PATH]``: the calibrated parameters
-of a finished campaign in the input terms of another DEM code (``simulate.export``).
+"""``demcal export DIR --to liggghts|yade|edem|json|all [--out PATH] [--check]``: the calibrated
+parameters of a finished campaign in the input terms of another DEM code (``simulate.export``).
+
+``--check`` (with ``--to liggghts``) runs the calibrated set in LIGGGHTS-PUBLIC in the lab's
+repose rig and tests LIGGGHTS' angle against the lab's (``analyse.liggghts_check``); the
+verdict goes to ``DIR/export/liggghts_check.json``.
 
 When the campaign folder holds a ``critique.json`` whose critique recalibrated with an accepted
 extension (its ``heap_gains``), each export also says whether the target can run that
@@ -10,6 +14,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from demcal.analyse.liggghts_check import CAP, FIRST, LIFT_TIME_S, SETTLE_S, STEP
 from demcal.errors import InputError
 from demcal.provenance import code_version, sha256_file
 from demcal.simulate.export import EXPORT_FILES, CalibratedWith, export_model, render
@@ -84,9 +89,48 @@ def _targets(text: str) -> list:
 
 
 def _run(args: argparse.Namespace) -> int:
-    for path in write_exports(args.campaign, _targets(args.to), args.out):
+    targets = _targets(args.to)
+    if args.check and targets != ["liggghts"]:
+        raise InputError(f"--check runs the calibrated set in LIGGGHTS: give --to liggghts, not --to {args.to}")
+    for path in write_exports(args.campaign, targets, args.out):
         print(f"wrote {path}")
+    if args.check:
+        return check_in_liggghts(args)
     return 0
+
+
+def check_in_liggghts(args: argparse.Namespace) -> int:
+    """``--check``: the calibrated set in LIGGGHTS, its verdict printed and written; exit 0
+    when LIGGGHTS' angle is equivalent to the lab's, 1 otherwise."""
+    import sys
+
+    from demcal.analyse.liggghts_check import check_calibration
+    from demcal.analyse.results import read_campaign_results
+    from demcal.jsonio import write_json
+    from demcal.simulate.liggghts.run import LiggghtsUnavailable
+
+    campaign = Path(args.campaign)
+    results = read_campaign_results(campaign)
+    path = campaign / "results.json"
+    folder = campaign / "export"
+    workdir = Path(args.check_dir) if args.check_dir else folder / "liggghts_check"
+
+    def progress(run):
+        angle = f"{run.angle_deg:.2f} deg ({run.read_by})" if run.read_by else "no angle found"
+        print(f"  LIGGGHTS seed {run.seed}: {angle}, {run.spheres} spheres, loop {run.wall_s:.1f} s", flush=True)
+
+    print(f"running the calibrated set in LIGGGHTS ({results.repose_rig} rig), runs in {workdir}", flush=True)
+    try:
+        check = check_calibration(results, workdir, source={"file": str(path), "sha256": sha256_file(path)},
+                                  lift_time=args.lift_time, duration=args.duration, first=args.first,
+                                  step=args.step, cap=args.cap, progress=progress)
+    except LiggghtsUnavailable as exc:
+        print(f"error: --check: {exc}", file=sys.stderr)
+        return 2
+    out = write_json(folder / "liggghts_check.json", check.to_dict())
+    print(check.summary())
+    print(f"wrote {out}")
+    return 0 if check.verdict == "equivalent" else 1
 
 
 def register(subparsers) -> None:
@@ -99,4 +143,17 @@ def register(subparsers) -> None:
     p.add_argument("--to", default="all", metavar="FORMAT",
                    help=f"{', '.join(EXPORT_FILES)}, a comma list, or all (default)")
     p.add_argument("--out", metavar="PATH", help="file (one format) or folder (default DIR/export/)")
+    g = p.add_argument_group("--check: the calibrated set run in LIGGGHTS (needs the liggghts binary)")
+    g.add_argument("--check", action="store_true",
+                   help="run the calibrated set in LIGGGHTS in the lab's repose rig and test its mean angle "
+                        "against the lab's (two one-sided tests, the validation's tolerance); exit 0 when "
+                        "equivalent, 1 otherwise; the verdict goes to DIR/export/liggghts_check.json")
+    g.add_argument("--check-dir", metavar="DIR", help="folder of the LIGGGHTS runs (default DIR/export/liggghts_check)")
+    g.add_argument("--lift-time", type=float, default=LIFT_TIME_S, metavar="S",
+                   help=f"time the wall starts to rise [s] (default {LIFT_TIME_S:g}, the paper's)")
+    g.add_argument("--duration", type=float, default=None, metavar="S",
+                   help=f"simulated time [s] (default: until {SETTLE_S:g} s after the wall is clear)")
+    g.add_argument("--first", type=int, default=FIRST, help=f"runs at the first look (default {FIRST})")
+    g.add_argument("--step", type=int, default=STEP, help=f"runs added between looks (default {STEP})")
+    g.add_argument("--cap", type=int, default=CAP, help=f"largest number of runs (default {CAP})")
     p.set_defaults(handler=_run)

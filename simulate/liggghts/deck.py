@@ -298,6 +298,11 @@ class ReposeCase:
         """Number of time steps covering ``seconds`` (nearest integer)."""
         return int(round(seconds / self.time_step))
 
+    def settling_from(self) -> float:
+        """Time [s] after which only the heap's settling remains: the lifted wall's lower edge
+        past its top."""
+        return self.plate_lift_start + self.box_height / self.plate_lift_speed
+
     def phase_steps(self, duration: float) -> tuple:
         """The run split into (label, steps) phases: before, during and after the plate lift.
 
