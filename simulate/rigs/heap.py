@@ -179,14 +179,16 @@ def rms_speed(sim) -> float:
     return math.sqrt(2.0 * sim.kinetic_energy() / m) if m > 0 else 0.0
 
 
-def fill_lift_settle(sim, wall: int, lift_speed: float, prof: ReposeProfile, clearance: float,
+def fill_lift_settle(sim, wall: int | None, lift_speed: float, prof: ReposeProfile, clearance: float,
                      fill_count: int, *, callback=None) -> HeapRun:
     """Fill ``sim`` from its factories, lift wall ``wall`` at ``lift_speed`` [m/s] and let the
     heap settle, as ``prof`` says (module docstring).
 
     The wall counts as clear once its lower edge is ``clearance`` [m] (a particle's width) above
     the highest sphere of the fill; ``fill_count`` is what the factories were asked to insert
-    (a shortfall is noted). ``callback(sim, t_end, final)`` as in ``simulate.rigs``.
+    (a shortfall is noted). With ``wall`` None nothing is lifted (a heap poured through a fixed
+    funnel): the heap forms while the factories fill, and settles after.
+    ``callback(sim, t_end, final)`` as in ``simulate.rigs``.
     """
     run = HeapRun()
     dt = sim.dt
@@ -214,10 +216,13 @@ def fill_lift_settle(sim, wall: int, lift_speed: float, prof: ReposeProfile, cle
         run.t_lift = prof.lift_time
         while advance(min(CHUNK_S, min(prof.lift_time, prof.duration) - sim.time)):
             pass
-    z_top = float((sim.sphere_positions()[:, 2] + sim.sphere_radii()).max()) if sim.n_spheres else 0.0
-    run.t_clear = run.t_lift + (z_top + clearance) / lift_speed
-    stop = run.t_clear if prof.early_end else math.inf
-    sim.set_wall_motion(wall, (0.0, 0.0, lift_speed), run.t_lift, stop)
+    if wall is None:
+        run.t_clear = run.t_lift
+    else:
+        z_top = float((sim.sphere_positions()[:, 2] + sim.sphere_radii()).max()) if sim.n_spheres else 0.0
+        run.t_clear = run.t_lift + (z_top + clearance) / lift_speed
+        stop = run.t_clear if prof.early_end else math.inf
+        sim.set_wall_motion(wall, (0.0, 0.0, lift_speed), run.t_lift, stop)
     # flow and settle
     while advance(min(CHUNK_S, prof.duration - sim.time)):
         if prof.early_end and sim.time > run.t_clear + 0.2 and rms_speed(sim) < SETTLED_SPEED:
@@ -403,6 +408,34 @@ def side_view_angles(centres, radii, side: str, *, x_min: float | None = None,
 __all__ = ["CHUNK_S", "HeapRun", "PROFILES", "PROFILE_STEP", "PX_PER_M", "ReposeProfile", "SETTLED_SPEED",
            "SideView", "fill_lift_settle", "heap_task", "meta_rows", "meta_values", "repose_profile", "rms_speed",
            "run_heap_task", "run_options", "side_view_angles", "top_profile"]
+
+
+def pile_height_and_diameter(x, z) -> tuple:
+    """Height [m] of a top profile ``z(x)`` and the width [m] of the pile under its highest
+    point: the run of ``x`` around it where the profile stands above the floor, so that stray
+    particles beyond a gap do not count."""
+    x, z = np.asarray(x, float), np.asarray(z, float)
+    if x.size == 0 or not np.any(z > 0):
+        return 0.0, 0.0
+    top = int(np.argmax(z))
+    covered = z > 0
+    lo = top
+    while lo > 0 and covered[lo - 1]:
+        lo -= 1
+    hi = top
+    while hi < x.size - 1 and covered[hi + 1]:
+        hi += 1
+    return float(z[top]), float(x[hi] - x[lo])
+
+
+def cone_observables(view) -> dict:
+    """The observables of a cone seen from the side (``heap.SideView``)."""
+    h, d = pile_height_and_diameter(view.profile_x, view.profile_z)
+    return {"angle_deg": view.angle_deg, "angle_left_deg": view.flanks_deg.get("left", math.nan),
+            "angle_right_deg": view.flanks_deg.get("right", math.nan),
+            "angle_profile_deg": view.angle_profile_deg,
+            "angle_cone_deg": math.degrees(math.atan2(2.0 * h, d)) if d > 0 else math.nan,
+            "crest_height_m": view.crest_height, "base_diameter_m": d}
 
 
 def cli_arguments(group) -> None:

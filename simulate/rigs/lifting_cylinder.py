@@ -36,8 +36,8 @@ from demcal.errors import InputError
 from demcal.provenance import Provenance
 from demcal.simulate.params import DEMParameters
 from demcal.simulate.rigs import Rig, RigResult, check_seed, heap, run_meta
-from demcal.simulate.rigs.heap import (fill_lift_settle, heap_task, meta_rows, meta_values,
-                                       repose_profile, run_heap_task, run_options,
+from demcal.simulate.rigs.heap import (cone_observables, fill_lift_settle, heap_task, meta_rows,
+                                       meta_values, repose_profile, run_heap_task, run_options,
                                        side_view_angles)
 from demcal.simulate.timestep import material_time_step
 from demcal.units import MM
@@ -236,34 +236,6 @@ def run_lifting_cylinder(params: DEMParameters, seed: int = 0, *, geometry: Cyli
                     inserted=sum(f.inserted for f in sim.factories))
     return RigResult("lifting_cylinder", observable, rec, meta, params.to_dict(),
                      Provenance(seed=seed, options=options))
-
-
-def pile_height_and_diameter(x, z) -> tuple:
-    """Height [m] of a top profile ``z(x)`` and the width [m] of the pile under its highest
-    point: the run of ``x`` around it where the profile stands above the floor, so that stray
-    particles beyond a gap do not count."""
-    x, z = np.asarray(x, float), np.asarray(z, float)
-    if x.size == 0 or not np.any(z > 0):
-        return 0.0, 0.0
-    top = int(np.argmax(z))
-    covered = z > 0
-    lo = top
-    while lo > 0 and covered[lo - 1]:
-        lo -= 1
-    hi = top
-    while hi < x.size - 1 and covered[hi + 1]:
-        hi += 1
-    return float(z[top]), float(x[hi] - x[lo])
-
-
-def cone_observables(view) -> dict:
-    """The observables of a cone seen from the side (``heap.SideView``)."""
-    h, d = pile_height_and_diameter(view.profile_x, view.profile_z)
-    return {"angle_deg": view.angle_deg, "angle_left_deg": view.flanks_deg.get("left", math.nan),
-            "angle_right_deg": view.flanks_deg.get("right", math.nan),
-            "angle_profile_deg": view.angle_profile_deg,
-            "angle_cone_deg": math.degrees(math.atan2(2.0 * h, d)) if d > 0 else math.nan,
-            "crest_height_m": view.crest_height, "base_diameter_m": d}
 
 
 def measure_heap(centres, radii, geometry=None) -> dict:

@@ -400,7 +400,7 @@ def test_lifting_cylinder_refuses_a_fill_whose_cone_it_could_not_read():
 
 
 def test_height_and_diameter_method_reads_a_cone_and_ignores_strays():
-    from demcal.simulate.rigs.lifting_cylinder import pile_height_and_diameter
+    from demcal.simulate.rigs.heap import pile_height_and_diameter
 
     # a 30 deg cone 40 mm high on a 1 mm grid, and a stray seed 50 mm beyond its toe
     x = np.arange(-0.2, 0.2001, 0.001)
