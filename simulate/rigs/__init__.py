@@ -45,6 +45,7 @@ from demcal.provenance import Provenance
 #: Rig name -> the module that declares it (``RIG``): the one registration line of a rig.
 RIGS = {"repose": "demcal.simulate.rigs.repose",
         "lifting_cylinder": "demcal.simulate.rigs.lifting_cylinder",
+        "funnel": "demcal.simulate.rigs.funnel",
         "drop": "demcal.simulate.rigs.drop",
         "incline": "demcal.simulate.rigs.incline"}
 
