@@ -7,6 +7,8 @@ repose            plate withdrawal ("pumping plate")  ``angle_deg`` (photo metho
                   heap (``simulate.rigs.repose``)     profile and outside-heap angles, escapes
 lifting_cylinder  cylinder lifted off its fill: a     ``angle_deg`` (photo method, both flanks),
                   cone (``...rigs.lifting_cylinder``) each flank, profile angle, crest height
+funnel            cone poured through a fixed funnel  as the lifting cylinder, and the particles
+                  (``simulate.rigs.funnel``)          left in the funnel
 drop              free fall onto a plate, rebound     ``apparent_restitution`` = sqrt(h_rebound /
                   filmed (``simulate.rigs.drop``)     h_drop) of the centre of mass
 incline           inclinometer, plate tilted slowly   ``slide_angle_deg``, ``roll_angle_deg``
@@ -21,7 +23,13 @@ returns a :class:`RigResult`; :func:`run_rig` runs one by name. A rig's ``task(p
 ``analyse.runs.run_key``), and :func:`run_task` runs any task on the rig it names.
 
 The repose rigs (the workbook's ``repose`` sheet) are chosen by the meta key ``repose_rig``
-(:func:`repose_rig`): ``lifted_plate`` (the default) or ``lifting_cylinder``.
+(:func:`repose_rig`): ``lifted_plate`` (the default), ``lifting_cylinder`` or ``funnel``.
+
+Rigs whose sheets hold single trials (the drop, the incline) also say how the lab's rows become
+twin runs (:class:`TrialGroup`, ``Rig.trial_groups`` and ``Rig.group_tasks``) and what a run
+reads (``Rig.reading``): the joint calibration (``analyse.twin_likelihood``) and the critique
+loop over them. Each rig also declares its ``demcal simulate`` options and, for a repose rig,
+its case in LIGGGHTS (``Rig.liggghts_case``).
 
 >>> from simulate.params import DEMParameters
 >>> result = run_rig("drop", DEMParameters(), seed=1, height=0.4, orientation_deg=0.0)
@@ -51,7 +59,7 @@ RIGS = {"repose": "demcal.simulate.rigs.repose",
 
 #: Repose rigs labs use that have no twin yet, with the prefix of their meta keys: their
 #: workbooks are refused by name instead of being simulated as another rig.
-UNBUILT_REPOSE_RIGS = {"funnel": "funnel_", "drum": "drum_"}
+UNBUILT_REPOSE_RIGS = {"drum": "drum_"}
 
 
 @dataclass(frozen=True)

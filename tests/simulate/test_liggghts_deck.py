@@ -373,3 +373,39 @@ def test_lifting_cylinder_deck_is_a_tube_mesh_lifted_between_runs(tmp_path):
     steps = dict(deck.phases)
     assert steps["fill_and_settle"] * case.time_step == pytest.approx(2.0, abs=case.time_step)
     assert steps["plate_lift"] * case.time_step * 0.01 == pytest.approx(0.12 + case.plate_clearance, abs=1e-5)
+
+
+def test_funnel_deck_is_a_cone_mesh_poured_into_and_holds_its_stream(tmp_path):
+    """The funnel's deck: a 64-gon cone from the outlet to the rim around x = y = D/2, poured into
+    from above the rim, nothing lifted; in LIGGGHTS the stream stays inside the cone and runs out
+    of the outlet onto the floor."""
+    from demcal.simulate.params import DEMParameters
+    from demcal.simulate.rigs import rig
+    from demcal.simulate.rigs.funnel import FunnelGeometry
+    from demcal.simulate.shapes.sphere import Sphere
+
+    params = DEMParameters(shape=Sphere(0.00646), particle_density_kg_m3=1200, shear_modulus_pa=1.04e6, dt=None)
+    geo = FunnelGeometry(0.04, 0.12, 0.08, 0.07, fill_count=300)
+    case = rig("funnel").liggghts_case(params, geo, 4.0)
+    deck = dk.write_deck(tmp_path, seed=2, duration=1.2, case=case)
+    cone = dk.read_ascii_stl(deck.meshes["funnel"])
+    assert set(deck.meshes) == {"funnel"} and cone.shape == (128, 3, 3)
+    rho = np.hypot(cone[..., 0] - 0.06, cone[..., 1] - 0.06)
+    # vertices on the outlet circle at z = 70 mm and on the rim circle at z = 150 mm
+    np.testing.assert_allclose(rho[cone[..., 2] < 0.1], 0.02, rtol=1e-8)
+    np.testing.assert_allclose(rho[cone[..., 2] > 0.1], 0.06, rtol=1e-8)
+    commands = _commands(deck.script.read_text())
+    assert not [c for c in commands if "move/mesh" in c]
+    assert [c[1] for c in commands if c[0] == "run"] == [str(case.steps(1.2))]
+    x0, x1, y0, y1, z0, z1 = case.fill_region
+    assert z0 == pytest.approx(0.15) and max(math.hypot(x - 0.06, y - 0.06) for x in (x0, x1) for y in (y0, y1)) < 0.06
+    if find_liggghts() is None:
+        pytest.skip("LIGGGHTS not installed")
+    result = run_liggghts(seed=2, workdir=tmp_path, duration=1.2, case=case, nice=0)
+    p = result["positions"]
+    assert result["lost_spheres"] == 0 and result["bodies"] > 100
+    # inside the funnel's height every seed is inside its cone; some have reached the floor
+    inside = (p[:, 2] > 0.07) & (p[:, 2] < 0.15)
+    r_cone = 0.02 + (p[inside, 2] - 0.07) * (0.04 / 0.08)
+    assert np.all(np.hypot(p[inside, 0] - 0.06, p[inside, 1] - 0.06) < r_cone)
+    assert np.sum(p[:, 2] < 0.02) > 10

@@ -293,27 +293,30 @@ def test_the_workbook_names_its_repose_rig_and_another_rigs_dimension_is_refused
                         "lift_speed_mm_s": 10, "fill_count": 400})
     assert cyl.rig == "lifting_cylinder" and cyl.workbook_name == "lifting_cylinder"
     assert CylinderGeometry(**cyl.geometry) == CylinderGeometry(0.06, 0.12, 0.01, 400)
-    with pytest.raises(WorkbookError, match=r"file wb.xlsx, sheet .meta.*repose_rig: 'funnel' has no twin yet.*"
-                                            r"lifted_plate, lifting_cylinder"):
-        repose_rig({"repose_rig": "funnel"}, file="wb.xlsx")
+    with pytest.raises(WorkbookError, match=r"file wb.xlsx, sheet .meta.*repose_rig: 'drum' has no twin yet.*"
+                                            r"lifted_plate, lifting_cylinder, funnel"):
+        repose_rig({"repose_rig": "drum"}, file="wb.xlsx")
     # a blank row of a template says nothing
     assert repose_rig({"cylinder_diameter_mm": None, "drum_speed_rpm": " "}).name == "repose"
     for meta, key, rig in (({"cylinder_diameter_mm": 100.0}, "cylinder_diameter_mm", "lifting_cylinder"),
                            ({"drum_speed_rpm": 5}, "drum_speed_rpm", "drum"),
-                           ({"funnel_outlet_mm": 20}, "funnel_outlet_mm", "funnel"),
+                           ({"funnel_outlet_diameter_mm": 20}, "funnel_outlet_diameter_mm", "funnel"),
                            ({"repose_rig": "lifting_cylinder", "box_length_mm": 200}, "box_length_mm", "lifted_plate")):
         with pytest.raises(WorkbookError, match=f"meta {key}: a dimension of the {rig} rig"):
             repose_rig(meta)
     with pytest.raises(WorkbookError, match=r"cylinder_height_mm: missing"):
         repose_setup({"repose_rig": "lifting_cylinder", "cylinder_diameter_mm": 60, "lift_speed_mm_s": 10})
+    with pytest.raises(WorkbookError, match=r"funnel_outlet_height_mm: missing"):
+        repose_setup({"repose_rig": "funnel", "funnel_outlet_diameter_mm": 40, "funnel_top_diameter_mm": 120,
+                      "funnel_height_mm": 80})
 
 
 # ---------------------------------------------------------------------------------- run_rig
 
 def test_run_rig_rejects_unknown_rig_listing_valid_ones():
-    with pytest.raises(InputError, match="unknown rig 'shear'; valid rigs: repose, lifting_cylinder, drop, incline"):
+    with pytest.raises(InputError, match="unknown rig 'shear'; valid rigs: repose, lifting_cylinder, funnel, drop, incline"):
         run_rig("shear", PARAMS)
-    assert set(RIGS) == {"repose", "lifting_cylinder", "drop", "incline"}
+    assert set(RIGS) == {"repose", "lifting_cylinder", "funnel", "drop", "incline"}
 
 
 def test_rig_result_round_trips_through_json(tmp_path):
@@ -349,7 +352,7 @@ def test_each_rigs_task_is_the_run_stores_key_layout_and_runs_on_its_rig():
     ran = run_task(drop.task(PARAMS, "particle-steel", 0.05, 0.0, 5))
     direct = run_rig("drop", PARAMS, seed=5, height=0.05, orientation_deg=0.0, pair="particle-steel")
     assert ran["rig"] == "drop" and ran["observable"] == direct.observable
-    with pytest.raises(InputError, match="unknown rig 'shear' in a run's task; valid rigs: repose, lifting_cylinder, drop, incline"):
+    with pytest.raises(InputError, match="unknown rig 'shear' in a run's task; valid rigs: repose, lifting_cylinder, funnel, drop, incline"):
         run_task({"rig": "shear"})
 
 
