@@ -19,7 +19,7 @@ Velde 1961):
 so the funnel never overflows and the stream through the outlet is the pour itself.
 
 Fill. Without a ``fill_count`` in the workbook the sample is the cone of height
-``HEAP_SHARE`` of the outlet's height at 30 deg, at the bulk packing ``BULK_PACKING``. A
+``HEAP_SHARE`` of the outlet's height at 30 deg, at the bulk packing ``heap.BULK_PACKING``. A
 funnel is refused before any run when its outlet is under ``MIN_OUTLET_LENGTHS`` particle
 lengths (the stream would arch; Beverloo's k d is 1.5 d), when the fill's cone at
 ``LOWEST_ANGLE_DEG`` is under ``MIN_LAYERS`` particle widths high (too few layers for its
@@ -56,8 +56,6 @@ from demcal.units import GRAVITY, MM
 BEVERLOO_C, BEVERLOO_K = 0.58, 1.5
 #: Share of the funnel's discharge rate the factory pours at [-].
 POUR_SHARE = 0.5
-#: Bulk packing fraction of a loose random heap [-], for sizing the fill and the flow.
-BULK_PACKING = 0.6
 #: The default fill: a 30 deg cone of this share of the outlet's height [-].
 HEAP_SHARE = 0.6
 #: The outlet must be at least this many particle lengths across.
@@ -69,12 +67,6 @@ LOWEST_ANGLE_DEG = 20.0
 STEEPEST_ANGLE_DEG = 45.0
 #: Mesh facets of the funnel in LIGGGHTS.
 FACETS = 64
-
-
-def cone_height(bulk_volume: float, angle_deg: float) -> float:
-    """Height [m] of a cone of ``bulk_volume`` [m^3] whose flanks rise at ``angle_deg``."""
-    t = math.tan(math.radians(angle_deg))
-    return (3.0 * bulk_volume * t * t / math.pi) ** (1.0 / 3.0)
 
 
 def equivalent_diameter(shape) -> float:
@@ -112,17 +104,10 @@ class FunnelGeometry:
     REQUIRED = ("funnel_outlet_diameter_mm", "funnel_top_diameter_mm", "funnel_height_mm", "funnel_outlet_height_mm")
 
     def __post_init__(self):
-        for name in ("outlet_diameter", "top_diameter", "cone_height", "outlet_height"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise InputError(f"funnel: {name} must be a positive number, got {value!r}")
+        heap.check_dimensions(self, ("outlet_diameter", "top_diameter", "cone_height", "outlet_height"), "funnel")
         if not self.top_diameter > self.outlet_diameter:
             raise InputError(f"funnel: the top ({self.top_diameter * 1e3:g} mm) must be wider than the outlet "
                              f"({self.outlet_diameter * 1e3:g} mm); meta funnel_top_diameter_mm")
-        if self.fill_count is not None:
-            if int(self.fill_count) != self.fill_count or self.fill_count < 1:
-                raise InputError(f"funnel: fill_count must be a positive integer, got {self.fill_count!r}")
-            object.__setattr__(self, "fill_count", int(self.fill_count))
 
     @classmethod
     def from_meta(cls, meta: dict, file=None) -> "FunnelGeometry":
@@ -137,12 +122,12 @@ class FunnelGeometry:
 
     def filled_for(self, shape) -> "FunnelGeometry":
         """The same funnel with its fill count: the workbook's, or a 30 deg cone of
-        ``HEAP_SHARE`` of the outlet's height at ``BULK_PACKING`` (at least 10 particles)."""
+        ``HEAP_SHARE`` of the outlet's height at ``heap.BULK_PACKING`` (at least 10 particles)."""
         if self.fill_count is not None:
             return self
         h = HEAP_SHARE * self.outlet_height
         volume = math.pi * h ** 3 / (3.0 * math.tan(math.radians(30.0)) ** 2)
-        return replace(self, fill_count=max(10, int(round(BULK_PACKING * volume / shape.volume()))))
+        return replace(self, fill_count=max(10, int(round(heap.BULK_PACKING * volume / shape.volume()))))
 
     def check_for(self, shape) -> None:
         """Refuse a funnel whose stream would arch, or whose cone could not be read or would
@@ -153,13 +138,13 @@ class FunnelGeometry:
             raise InputError(f"funnel: an outlet of {self.outlet_diameter * 1e3:g} mm is under {MIN_OUTLET_LENGTHS:g} "
                              f"particle lengths ({length * 1e3:.3g} mm) across, so the stream would arch; use a "
                              "wider outlet (meta funnel_outlet_diameter_mm)")
-        bulk = geo.fill_count * shape.volume() / BULK_PACKING
-        low = cone_height(bulk, LOWEST_ANGLE_DEG)
+        bulk = geo.fill_count * shape.volume() / heap.BULK_PACKING
+        low = heap.cone_height(bulk, LOWEST_ANGLE_DEG)
         if low < MIN_LAYERS * width:
             raise InputError(f"funnel: {geo.fill_count} particles make a cone about {low * 1e3:.3g} mm high at "
                              f"{LOWEST_ANGLE_DEG:g} deg, under {MIN_LAYERS:g} particle widths ({width * 1e3:.3g} mm), "
                              "too few layers for its flanks to be read; raise meta fill_count")
-        high = cone_height(bulk, STEEPEST_ANGLE_DEG)
+        high = heap.cone_height(bulk, STEEPEST_ANGLE_DEG)
         if high > self.outlet_height - length:
             raise InputError(f"funnel: {geo.fill_count} particles make a cone up to {high * 1e3:.3g} mm high (at "
                              f"{STEEPEST_ANGLE_DEG:g} deg), which would reach the outlet {self.outlet_height * 1e3:g} mm "
@@ -169,7 +154,7 @@ class FunnelGeometry:
         """Time [s] over which the fill is poured: at ``POUR_SHARE`` of Beverloo's discharge rate."""
         geo = self.filled_for(shape)
         d = equivalent_diameter(shape)
-        per_s = (BEVERLOO_C * BULK_PACKING * math.sqrt(GRAVITY)
+        per_s = (BEVERLOO_C * heap.BULK_PACKING * math.sqrt(GRAVITY)
                  * max(self.outlet_diameter - BEVERLOO_K * d, d) ** 2.5 / shape.volume())
         return geo.fill_count / (POUR_SHARE * per_s)
 
@@ -198,8 +183,8 @@ def build_funnel(params: DEMParameters, seed, geo: FunnelGeometry, prof, *, dt: 
     from demcal.simulate.walls import Cylinder, Plane
 
     length = float(params.shape.extent[0])
-    bulk = geo.fill_count * params.shape.volume() / BULK_PACKING
-    reach = max(1.5 * cone_height(bulk, 15.0) / math.tan(math.radians(15.0)), geo.top_diameter) + 0.05
+    bulk = geo.fill_count * params.shape.volume() / heap.BULK_PACKING
+    reach = max(1.5 * heap.cone_height(bulk, 15.0) / math.tan(math.radians(15.0)), geo.top_diameter) + 0.05
     column = max(3.0 * length, 0.3 * geo.cone_height)     # the factory's column above the rim
     sim = Simulation(MaterialTable.from_parameters(params), domain_lo=(-reach, -reach, -0.02),
                      domain_hi=(reach, reach, geo.top_z + column + 0.05), dt=dt,
@@ -209,8 +194,7 @@ def build_funnel(params: DEMParameters, seed, geo: FunnelGeometry, prof, *, dt: 
     sim.add_wall(Cylinder((0.0, 0.0, geo.outlet_height + geo.cone_height / 2), (0.0, 0.0, 1.0),
                           geo.outlet_diameter / 2, geo.cone_height / 2, "steel", name="funnel",
                           top_radius=geo.top_diameter / 2))
-    # the square inscribed in the rim, less a margin: the stream falls inside the funnel
-    half = (geo.top_diameter / 2 - min(0.005, 0.05 * geo.top_diameter)) / math.sqrt(2.0)
+    half = heap.inscribed_half(geo.top_diameter)      # the stream falls inside the funnel
     sim.add_factory(ParticleFactory(templates, geo.fill_count, (-half, -half, geo.top_z),
                                     (half, half, geo.top_z + column), seed=seed, start_time=0.0,
                                     end_time=prof.fill_time, material="particle", weights=weights))
@@ -345,7 +329,7 @@ def liggghts_case(params: DEMParameters, geometry: FunnelGeometry, lift_time: fl
     geo = geometry.filled_for(params.shape)
     base = ReposeCase.for_params(params)
     D, column = geo.top_diameter, max(3.0 * float(params.shape.extent[0]), 0.3 * geo.cone_height)
-    half = (D / 2 - min(0.005, 0.05 * D)) / math.sqrt(2.0)
+    half = heap.inscribed_half(D)
     fields = {f: getattr(base, f) for f in ReposeCase.__dataclass_fields__}
     fields["plate_lift_start"] = fields["fill_time"] = max(1.0, geo.pour_time(params.shape))
     fields.update(box_length=D, box_width=D, box_height=geo.top_z + column, n_segments=geo.fill_count,
@@ -355,9 +339,7 @@ def liggghts_case(params: DEMParameters, geometry: FunnelGeometry, lift_time: fl
 
 RIG = Rig("funnel", sheet="repose", run=run_funnel, task=task, run_task=run_task,
           compared="angle_deg", fallbacks=("angle_profile_deg", "angle_cone_deg"),
-          observables={"angle_deg": "deg", "angle_left_deg": "deg", "angle_right_deg": "deg",
-                       "angle_profile_deg": "deg", "angle_cone_deg": "deg", "crest_height_m": "m",
-                       "base_diameter_m": "m", "in_funnel": "-", "escaped": "-"},
+          observables={**heap.CONE_OBSERVABLES, "in_funnel": "-", "escaped": "-"},
           geometry=FunnelGeometry, workbook_name="funnel", flanks="both",
           lab_test="fixed funnel cone (ISO 4324), side photograph of both flanks", measure=measure_heap,
           liggghts_case=liggghts_case, cli_arguments=heap.cli_arguments, cli_options=heap.cli_options)

@@ -410,6 +410,40 @@ __all__ = ["CHUNK_S", "HeapRun", "PROFILES", "PROFILE_STEP", "PX_PER_M", "Repose
            "run_heap_task", "run_options", "side_view_angles", "top_profile"]
 
 
+#: Bulk packing fraction of a loose random heap [-], for sizing fills and cones.
+BULK_PACKING = 0.6
+#: Observables of a cone read on both flanks (``cone_observables``) and their units.
+CONE_OBSERVABLES = {"angle_deg": "deg", "angle_left_deg": "deg", "angle_right_deg": "deg",
+                    "angle_profile_deg": "deg", "angle_cone_deg": "deg", "crest_height_m": "m",
+                    "base_diameter_m": "m"}
+
+
+def cone_height(bulk_volume: float, angle_deg: float) -> float:
+    """Height [m] of a cone of ``bulk_volume`` [m^3] whose flanks rise at ``angle_deg``:
+    V = pi h^3 / (3 tan^2 a)."""
+    t = math.tan(math.radians(angle_deg))
+    return (3.0 * bulk_volume * t * t / math.pi) ** (1.0 / 3.0)
+
+
+def inscribed_half(diameter: float) -> float:
+    """Half side [m] of the square inscribed in a circle of ``diameter``, less a margin of
+    5 mm (at most 5 % of the diameter): a sphere placed in it is inside the circle's wall."""
+    return (diameter / 2 - min(0.005, 0.05 * diameter)) / math.sqrt(2.0)
+
+
+def check_dimensions(geometry, names, rig: str) -> None:
+    """Refuse a rig's dimensions (dataclass fields ``names``) that are not positive numbers,
+    and a ``fill_count`` that is not a positive integer (stored as an int)."""
+    for name in names:
+        value = getattr(geometry, name)
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise InputError(f"{rig}: {name} must be a positive number, got {value!r}")
+    if geometry.fill_count is not None:
+        if int(geometry.fill_count) != geometry.fill_count or geometry.fill_count < 1:
+            raise InputError(f"{rig}: fill_count must be a positive integer, got {geometry.fill_count!r}")
+        object.__setattr__(geometry, "fill_count", int(geometry.fill_count))
+
+
 def pile_height_and_diameter(x, z) -> tuple:
     """Height [m] of a top profile ``z(x)`` and the width [m] of the pile under its highest
     point: the run of ``x`` around it where the profile stands above the floor, so that stray

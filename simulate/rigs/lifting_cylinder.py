@@ -36,29 +36,21 @@ from demcal.errors import InputError
 from demcal.provenance import Provenance
 from demcal.simulate.params import DEMParameters
 from demcal.simulate.rigs import Rig, RigResult, check_seed, heap, run_meta
-from demcal.simulate.rigs.heap import (cone_observables, fill_lift_settle, heap_task, meta_rows,
-                                       meta_values, repose_profile, run_heap_task, run_options,
-                                       side_view_angles)
+from demcal.simulate.rigs.heap import (BULK_PACKING, CONE_OBSERVABLES, check_dimensions, cone_height,
+                                       cone_observables, fill_lift_settle, heap_task, inscribed_half,
+                                       meta_rows, meta_values, repose_profile, run_heap_task,
+                                       run_options, side_view_angles)
 from demcal.simulate.timestep import material_time_step
 from demcal.units import MM
 
 #: Share of the tube's volume filled when the workbook gives no fill count [-].
 FILL_SHARE = 0.5
-#: Bulk packing fraction of a loose random fill [-], for sizing the fill.
-BULK_PACKING = 0.6
 #: The cone must be at least this many particle widths high at ``LOWEST_ANGLE_DEG``.
 MIN_LAYERS = 4.0
 #: The flattest cone the check allows for [deg].
 LOWEST_ANGLE_DEG = 20.0
 #: The tube must be at least this many particle lengths across.
 MIN_DIAMETER_LENGTHS = 4.0
-
-
-def cone_height(bulk_volume: float, angle_deg: float) -> float:
-    """Height [m] of a cone of ``bulk_volume`` [m^3] whose flanks rise at ``angle_deg``:
-    V = pi h^3 / (3 tan^2 a)."""
-    t = math.tan(math.radians(angle_deg))
-    return (3.0 * bulk_volume * t * t / math.pi) ** (1.0 / 3.0)
 
 
 @dataclass(frozen=True)
@@ -87,14 +79,7 @@ class CylinderGeometry:
     REQUIRED = ("cylinder_diameter_mm", "cylinder_height_mm", "lift_speed_mm_s")
 
     def __post_init__(self):
-        for name in ("diameter", "height", "lift_speed"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise InputError(f"lifting cylinder: {name} must be a positive number, got {value!r}")
-        if self.fill_count is not None:
-            if int(self.fill_count) != self.fill_count or self.fill_count < 1:
-                raise InputError(f"lifting cylinder: fill_count must be a positive integer, got {self.fill_count!r}")
-            object.__setattr__(self, "fill_count", int(self.fill_count))
+        check_dimensions(self, ("diameter", "height", "lift_speed"), "lifting cylinder")
 
     @classmethod
     def from_meta(cls, meta: dict, file=None) -> "CylinderGeometry":
@@ -160,8 +145,7 @@ def build_lifting_cylinder(params: DEMParameters, seed, geo: CylinderGeometry, p
     templates, weights = particle_templates(sim, params, size_distribution)
     sim.add_wall(Plane((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), material="steel", name="floor"))
     sim.add_wall(Cylinder((0.0, 0.0, H / 2), (0.0, 0.0, 1.0), D / 2, H / 2, "steel", name="cylinder"))
-    # the square inscribed in the tube, less a margin: a sphere placed there is inside the tube
-    half = (D / 2 - min(0.005, 0.05 * D)) / math.sqrt(2.0)
+    half = inscribed_half(D)
     sim.add_factory(ParticleFactory(templates, geo.fill_count, (-half, -half, prof.fill_bottom * H),
                                     (half, half, prof.fill_top * H), seed=seed, start_time=0.0,
                                     end_time=prof.fill_time, material="particle", weights=weights))
@@ -266,9 +250,7 @@ def liggghts_case(params: DEMParameters, geometry: CylinderGeometry, lift_time: 
 
 RIG = Rig("lifting_cylinder", sheet="repose", run=run_lifting_cylinder, task=task, run_task=run_task,
           compared="angle_deg", fallbacks=("angle_profile_deg", "angle_cone_deg"),
-          observables={"angle_deg": "deg", "angle_left_deg": "deg", "angle_right_deg": "deg",
-                       "angle_profile_deg": "deg", "angle_cone_deg": "deg", "crest_height_m": "m",
-                       "base_diameter_m": "m", "escaped": "-"},
+          observables={**CONE_OBSERVABLES, "escaped": "-"},
           geometry=CylinderGeometry, workbook_name="lifting_cylinder", flanks="both",
           lab_test="lifting cylinder cone, side photograph of both flanks", measure=measure_heap,
           liggghts_case=liggghts_case, cli_arguments=heap.cli_arguments, cli_options=heap.cli_options)

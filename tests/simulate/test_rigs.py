@@ -398,7 +398,7 @@ def test_lifting_cylinder_refuses_a_fill_whose_cone_it_could_not_read():
         CylinderGeometry(0.02, 0.12, 0.05).check_for(seed)
     # by hand: 721 seeds of 6.46 mm at a packing of 0.6 are 1.69e-4 m^3, a 20 deg cone of it
     # pi h^3 / (3 tan^2 20) = V is 27.8 mm high
-    from demcal.simulate.rigs.lifting_cylinder import cone_height
+    from demcal.simulate.rigs.heap import cone_height
     assert cone_height(721 * math.pi / 6 * 0.00646 ** 3 / 0.6, 20.0) == pytest.approx(0.0278, abs=2e-4)
 
 
