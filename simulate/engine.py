@@ -146,7 +146,7 @@ def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw):
 @kernel
 def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass, n_bodies, bx, bv, bw, bR,
                     bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph,
-                    ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
+                    ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wspin_now, wmat,
                     e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min):
     """Contact forces, torques and rolling torques on every body from the Verlet lists.
 
@@ -326,10 +326,22 @@ def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mas
         wxi = bw[bi, 0]
         wyi = bw[bi, 1]
         wzi = bw[bi, 2]
+        # velocity of the wall's surface at the contact point: its translation, plus its spin
+        # about its centre (added only for a spinning wall, so other walls' sums are unchanged)
+        vwx = wvel_now[k, 0]
+        vwy = wvel_now[k, 1]
+        vwz = wvel_now[k, 2]
+        if wspin_now[k, 0] != 0.0 or wspin_now[k, 1] != 0.0 or wspin_now[k, 2] != 0.0:
+            rx = xi - nx * a - worig[k, 0]
+            ry = yi - ny * a - worig[k, 1]
+            rz = zi - nz * a - worig[k, 2]
+            vwx += wspin_now[k, 1] * rz - wspin_now[k, 2] * ry
+            vwy += wspin_now[k, 2] * rx - wspin_now[k, 0] * rz
+            vwz += wspin_now[k, 0] * ry - wspin_now[k, 1] * rx
         # velocity of the sphere relative to the wall at the contact point
-        vrx = bv[bi, 0] + wyi * aiz - wzi * aiy - wvel_now[k, 0]
-        vry = bv[bi, 1] + wzi * aix - wxi * aiz - wvel_now[k, 1]
-        vrz = bv[bi, 2] + wxi * aiy - wyi * aix - wvel_now[k, 2]
+        vrx = bv[bi, 0] + wyi * aiz - wzi * aiy - vwx
+        vry = bv[bi, 1] + wzi * aix - wxi * aiz - vwy
+        vrz = bv[bi, 2] + wxi * aiy - wyi * aix - vwz
         vn = vrx * nx + vry * ny + vrz * nz
         vtx = vrx - vn * nx
         vty = vry - vn * ny
@@ -401,12 +413,14 @@ def _count_contacts(n_bodies, bcount, sbody, sx, srad, ppi, pj, ws, wk, wkind, w
 
 
 @kernel
-def _wall_velocities(t, wvel, wwin, wvel_now):
-    """Velocity of each wall during the step whose midpoint is ``t`` (zero outside its window)."""
+def _wall_velocities(t, wvel, wspin, wwin, wvel_now, wspin_now):
+    """Velocity and spin of each wall during the step whose midpoint is ``t`` (zero outside its
+    window)."""
     for k in range(wvel.shape[0]):
         moving = wwin[k, 0] <= t < wwin[k, 1]
         for a in range(3):
             wvel_now[k, a] = wvel[k, a] if moving else 0.0
+            wspin_now[k, a] = wspin[k, a] if moving else 0.0
 
 
 @kernel
@@ -415,7 +429,7 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
              n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, bactive,
              n_spheres, sbody, soff, srad, sx, sx0, sxw,
              pstart, ppi, pj, ph, wstart, ws, wk, wh,
-             wkind, worig, wnorm, wu, wv, whalf, wvel, wwin, wmat, wx0, wvel_now,
+             wkind, worig, wnorm, wu, wv, whalf, wvel, wspin, wwin, wmat, wx0, wvel_now, wspin_now,
              e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min,
              lo, inv_cell, dims, cell_start):
     """Advance the state by ``n_steps`` steps (see the module docstring for the step).
@@ -438,13 +452,13 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
                     half_kick(b, tau, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi,
                               mode)
                     drift(b, dt, bx, bv, bq, bL, bw, bR, binvi)
-            _wall_velocities(t + h, wvel, wwin, wvel_now)
+            _wall_velocities(t + h, wvel, wspin, wwin, wvel_now, wspin_now)
             for k in range(n_walls):
                 for a in range(3):
                     worig[k, a] += wvel_now[k, a] * dt
             t += dt
         else:
-            _wall_velocities(t + h, wvel, wwin, wvel_now)
+            _wall_velocities(t + h, wvel, wspin, wwin, wvel_now, wspin_now)
         dmax2, dwmax2 = _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw)
         wmax2 = 0.0
         for k in range(n_walls):
@@ -469,7 +483,7 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
         hist_dt = dt if step >= 0 else 0.0
         _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass, n_bodies, bx, bv, bw,
                         bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj,
-                        ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wmat,
+                        ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wspin_now, wmat,
                         e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min)
     if n_steps > 0:
         for b in range(n_bodies):
@@ -637,6 +651,7 @@ class Simulation:
         self._w = pack_walls([], materials.index)
         self._wx0 = np.zeros((0, 3))
         self._wvel_now = np.zeros((0, 3))
+        self._wspin_now = np.zeros((0, 3))
         self._grid = None
         self._need_rebuild = True
         self._need_forces = True
@@ -696,15 +711,18 @@ class Simulation:
     def add_walls(self, walls) -> list[int]:
         return [self.add_wall(w) for w in walls]
 
-    def set_wall_motion(self, k: int, velocity, move_start: float = None, move_stop: float = math.inf):
-        """Translate wall ``k`` at ``velocity`` [m/s] during [move_start, move_stop) [s]
-        (default: from now on)."""
+    def set_wall_motion(self, k: int, velocity, move_start: float = None, move_stop: float = math.inf, *,
+                        spin=None):
+        """Translate wall ``k`` at ``velocity`` [m/s] (and spin it at ``spin`` [rad/s] about its
+        centre, ``simulate.walls``) during [move_start, move_stop) [s] (default: from now on)."""
         if not 0 <= k < len(self.walls):
             raise InputError(f"no wall {k!r}; there are {len(self.walls)}")
         start = self.time if move_start is None else float(move_start)
         if not move_stop >= start:
             raise InputError(f"move_stop ({move_stop!r}) is before move_start ({start!r})")
         self._w["velocity"][k] = np.asarray(velocity, dtype=float).reshape(3)
+        if spin is not None:
+            self._w["spin"][k] = np.asarray(spin, dtype=float).reshape(3)
         self._w["window"][k] = (start, move_stop)
 
     def add_factory(self, factory) -> None:
@@ -716,13 +734,14 @@ class Simulation:
         n_old = old["kind"].shape[0]
         self._w = pack_walls(self.walls, self.materials.index)
         # keep the current place and motion of the walls that already existed
-        for key in ("origin", "velocity", "window"):
+        for key in ("origin", "velocity", "spin", "window"):
             self._w[key][:n_old] = old[key][:n_old]
         wx0 = np.zeros((len(self.walls), 3))
         wx0[:n_old] = self._wx0[:n_old]
         wx0[n_old:] = self._w["origin"][n_old:]
         self._wx0 = wx0
         self._wvel_now = np.zeros((len(self.walls), 3))
+        self._wspin_now = np.zeros((len(self.walls), 3))
         self._need_rebuild = True
         self._check_pairs_defined()
 
@@ -929,7 +948,7 @@ class Simulation:
             self.n_spheres, S["sbody"], S["soff"], S["srad"], S["sx"], S["sx0"], S["sxw"],
             *self._pairs, *self._wpairs,
             W["kind"], W["origin"], W["normal"], W["axis_u"], W["axis_v"], W["half"], W["velocity"],
-            W["window"], W["material"], self._wx0, self._wvel_now,
+            W["spin"], W["window"], W["material"], self._wx0, self._wvel_now, self._wspin_now,
             pt.e_star, pt.g_star, pt.damping, pt.mu_s, pt.mu_r, pt.log_e, pt.e_exponent, pt.log_v_ref,
             pt.v_min, self.domain_lo, inv_cell, dims, cell_start)
         self.time = out[0]

@@ -19,10 +19,18 @@ A wall may translate at a constant ``velocity`` [m/s] during ``[move_start, move
 (e.g. the end plate lifted at 0.1 m/s from t = 4 s). The wall's velocity enters the relative
 contact velocity, so friction and damping see the moving surface.
 
+A rectangle or a cylinder may also spin at ``spin`` [rad/s] (an angular velocity vector) about
+the axis through its ``centre`` during the same window: its surface moves at
+``velocity + spin x (p - centre)`` at a contact point p, while its shape stays where it is.
+That is exact for a wall that is symmetric about the spin axis: a tube spinning about its own
+axis (a rotating drum), or a plate spinning about its normal through its centre whose edges
+the particles never reach (the drum's end plates, larger than the drum). The rolling friction
+against a wall uses the sphere's own angular velocity, as LIGGGHTS' ``cdt`` model does.
+
 Kernel layout (``pack_walls``): one row per wall in float64 arrays ``kind`` (0 plane,
 1 rectangle, 2 cylinder or cone), ``origin``, ``normal`` (a cylinder's axis), ``axis_u``,
 ``axis_v``, ``half`` (3: a rectangle's half sizes; a cylinder's radius, half height and top
-radius), ``velocity``, ``window`` (2) and int ``material``.
+radius), ``velocity``, ``spin``, ``window`` (2) and int ``material``.
 """
 
 from __future__ import annotations
@@ -79,12 +87,14 @@ class Rectangle:
     move_start: float = 0.0
     move_stop: float = math.inf
     name: str = "rectangle"
+    spin: tuple = (0.0, 0.0, 0.0)
 
     def to_dict(self) -> dict:
         return {"kind": "rectangle", "centre": list(self.centre), "axis_u": list(self.axis_u),
                 "axis_v": list(self.axis_v), "half_u": self.half_u, "half_v": self.half_v,
                 "material": self.material, "velocity": list(self.velocity),
-                "move_start": self.move_start, "move_stop": self.move_stop, "name": self.name}
+                "move_start": self.move_start, "move_stop": self.move_stop, "name": self.name,
+                **_spin_entry(self.spin)}
 
 
 @dataclass(frozen=True)
@@ -104,15 +114,22 @@ class Cylinder:
     move_stop: float = math.inf
     name: str = "cylinder"
     top_radius: float | None = None
+    spin: tuple = (0.0, 0.0, 0.0)
 
     def to_dict(self) -> dict:
         out = {"kind": "cylinder", "centre": list(self.centre), "axis": list(self.axis),
                "radius": self.radius, "half_height": self.half_height, "material": self.material,
                "velocity": list(self.velocity), "move_start": self.move_start,
-               "move_stop": self.move_stop, "name": self.name}
+               "move_stop": self.move_stop, "name": self.name, **_spin_entry(self.spin)}
         if self.top_radius is not None:
             out["top_radius"] = self.top_radius
         return out
+
+
+def _spin_entry(spin) -> dict:
+    """A spinning wall's ``spin`` for its ``to_dict`` (none for a wall that does not spin, so the
+    records of the walls before spins existed are unchanged)."""
+    return {"spin": [float(v) for v in spin]} if any(float(v) != 0.0 for v in spin) else {}
 
 
 WALL_TYPES = (Plane, Rectangle, Cylinder)
@@ -148,7 +165,8 @@ def pack_walls(walls, material_index) -> dict:
     n = len(walls)
     out = {"kind": np.zeros(n, np.int64), "origin": np.zeros((n, 3)), "normal": np.zeros((n, 3)),
            "axis_u": np.zeros((n, 3)), "axis_v": np.zeros((n, 3)), "half": np.zeros((n, 3)),
-           "velocity": np.zeros((n, 3)), "window": np.zeros((n, 2)), "material": np.zeros(n, np.int64)}
+           "velocity": np.zeros((n, 3)), "spin": np.zeros((n, 3)), "window": np.zeros((n, 2)),
+           "material": np.zeros(n, np.int64)}
     for k, w in enumerate(walls):
         if isinstance(w, Plane):
             out["kind"][k] = PLANE
@@ -184,6 +202,9 @@ def pack_walls(walls, material_index) -> dict:
         else:
             raise InputError(f"not a wall: {w!r}")
         out["velocity"][k] = np.asarray(w.velocity, float).reshape(3)
+        out["spin"][k] = np.asarray(getattr(w, "spin", (0.0, 0.0, 0.0)), float).reshape(3)
+        if not np.all(np.isfinite(out["spin"][k])):
+            raise InputError(f"wall {w.name!r}: spin must be a finite 3-vector [rad/s], got {w.spin!r}")
         if not w.move_stop >= w.move_start:
             raise InputError(f"wall {w.name!r}: move_stop ({w.move_stop!r}) is before "
                              f"move_start ({w.move_start!r})")

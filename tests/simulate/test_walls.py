@@ -271,3 +271,45 @@ def test_a_sphere_too_big_for_the_outlet_rests_in_the_funnel_at_the_cones_height
     # on the axis every point of the ring is closest: the contact takes one side, pushes the
     # sphere a step's distance across, then the other, so it chatters sideways in place
     assert math.hypot(x[0], x[1]) < 1e-7 and abs(sim.velocities()[0][2]) < 1e-5
+
+
+# ---- spinning walls (the rotating drum)
+
+@pytest.mark.parametrize("how", ["spinning", "translating"])
+def test_a_sphere_set_down_on_a_moving_plate_rolls_off_at_two_sevenths_of_its_speed(how):
+    """A solid sphere set down at rest on a surface moving at V slides until it rolls, then
+    moves at 2 V / 7 (angular momentum about the contact point is conserved; no rolling
+    friction). A plate spinning at omega about its normal drags it as a belt at V = omega r
+    under it, and a plate translating at V the same: the spin enters the contact velocity."""
+    params = DEMParameters(e_pw=0.5, mu_s_pw=0.5, mu_r_pw=0.0)
+    sim = simulation(params, dt=2e-6, gravity=(0.0, 0.0, -9.81))
+    tpl = sphere_template(sim)
+    omega, r = 1.0, 0.1
+    if how == "spinning":
+        plate = Rectangle((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), 0.15, 0.15, "steel",
+                          spin=(0.0, 0.0, omega))
+    else:
+        plate = Rectangle((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), 0.15, 0.15, "steel",
+                          velocity=(0.0, omega * r, 0.0))
+    sim.add_wall(plate)
+    sim.add_clump(tpl, (r, 0.0, R - 2e-6))     # resting on the plate, nearly at its weight's overlap
+    sim.run(duration=0.03)                       # it rolls after 2 V / (7 mu g) = 5.8 ms
+    v = sim.velocities()[0]
+    assert v[1] == pytest.approx(2.0 / 7.0 * omega * r, rel=0.02)
+    # rolling without slip: the contact point moves with the plate
+    w = sim.angular_velocities()[0]
+    assert v[1] + w[0] * R == pytest.approx(omega * r, rel=0.02)
+
+
+def test_a_spinning_wall_keeps_its_place_and_records_its_spin():
+    from demcal.simulate.walls import pack_walls
+
+    tube = _tube(spin=(0.0, 0.0, 2.0))
+    assert tube.to_dict()["spin"] == [0.0, 0.0, 2.0] and "spin" not in _tube().to_dict()
+    sim = simulation(DEMParameters())
+    k = sim.add_wall(tube)
+    sim.run(duration=0.01)
+    np.testing.assert_array_equal(sim.wall_origins()[k], (0.0, 0.0, 0.05))
+    assert pack_walls([tube], lambda name: 0)["spin"][0].tolist() == [0.0, 0.0, 2.0]
+    with pytest.raises(Exception, match="spin must be a finite"):
+        pack_walls([_tube(spin=(0.0, math.nan, 0.0))], lambda name: 0)
