@@ -73,7 +73,7 @@ from scipy import ndimage, stats
 from demcal.errors import InputError
 from demcal.measure.images import MAX_PHOTO_PIXELS, read_image
 
-SIDES = ("left", "right", "both", "auto")
+SIDES = ("left", "right", "both", "auto", "drum")
 FLANKS = ("left", "right")
 #: Heights between which a flank is fitted, as fractions of the crest height (step 7); one
 #: default for lab photos and simulated heaps alike, so their angles compare.
@@ -220,6 +220,16 @@ class DrumAngle:
     fit: FlankFit
     annotated: str | None = None
 
+    @property
+    def flanks(self) -> dict:
+        """A drum's free surface has no flanks (as a heap photo's result has)."""
+        return {}
+
+    @property
+    def base_tilt_deg(self) -> None:
+        """The drum is its own reference: no floor tilt is read."""
+        return None
+
     def to_dict(self) -> dict:
         return {"angle_deg": self.angle_deg, "centre_px": list(self.centre_px),
                 "radius_px": self.radius_px, "fit": self.fit.to_dict(), "annotated": self.annotated,
@@ -244,10 +254,11 @@ def angle_from_photo(image, side="both", annotate_to=None, scale_mm_per_px=None,
     image : str, pathlib.Path or numpy.ndarray
         Photo file, or an image array (grey ``(h, w)`` or BGR ``(h, w, 3)``, any numeric or
         boolean dtype). The floor must be visible and run into the bottom centre of the frame.
-    side : {"both", "left", "right", "auto"}
+    side : {"both", "left", "right", "auto", "drum"}
         Flank(s) to measure: "left" rises toward the crest, "right" falls from it. A heap from
         the plate-withdrawal rig has one flank; a cone has two. "auto" measures every flank
-        whose toe is inside the frame.
+        whose toe is inside the frame. "drum": the photo is a rotating drum seen end-on, and
+        its free surface is read by :func:`angle_from_drum` (which returns a ``DrumAngle``).
     annotate_to : str or pathlib.Path, optional
         Write an annotated copy (boundary, floor line, fitted lines, angles) to this file.
     scale_mm_per_px : float, optional
@@ -278,6 +289,8 @@ def angle_from_photo(image, side="both", annotate_to=None, scale_mm_per_px=None,
     """
     if side not in SIDES:
         raise InputError(f"side must be one of {SIDES}, got {side!r}")
+    if side == "drum":
+        return angle_from_drum(image, annotate_to=annotate_to, max_pixels=max_pixels)
     band = _check_band(band)
     _check_options(smooth, min_points)
     if not 0.0 < float(max_tilt_deg) <= 45.0:
@@ -341,8 +354,8 @@ def angle_from_profile(x, z, side="both", *, band=None, smooth=0.02, floor_z=0.0
     ReposeAngle
         With ``unit="m"``, ``base_tilt_deg=0`` and ``boundary=(x, z)`` sorted by x.
     """
-    if side not in SIDES:
-        raise InputError(f"side must be one of {SIDES}, got {side!r}")
+    if side not in SIDES or side == "drum":
+        raise InputError(f"side must be one of {SIDES[:-1]}, got {side!r}")
     band = _check_band(band)
     _check_options(smooth, min_points)
     x = np.asarray(x, dtype=float).ravel()

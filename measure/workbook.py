@@ -78,7 +78,7 @@ from demcal.text import control_characters, one_line
 NAME_PATTERN = re.compile(r"[a-z][a-z0-9_]*")
 MODES = ("slide", "roll")
 AXES = ("radial", "axial")
-SIDES = ("left", "right", "both")
+SIDES = ("left", "right", "both", "drum")
 #: What carries the particle down an incline: the particle itself, or a sled of glued particles.
 CARRIERS = ("particle", "sled")
 ROLLOUT_COLUMNS = ("slope_deg", "release_height_mm", "runout_mm")

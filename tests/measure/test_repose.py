@@ -440,6 +440,16 @@ def test_granudrum_surface_bends_at_high_speed():
     assert sd[45] > 2.5 * sd[10]
 
 
+def test_a_drum_photo_of_the_repose_sheet_is_read_by_the_drum_estimator(drum_angles):
+    """side ``drum`` in the repose sheet: the photo estimator of ``demcal measure`` reads the
+    free surface as angle_from_drum does, and a drum has no flanks or floor tilt."""
+    result = angle_from_photo(EXTERNAL_IMAGES / "granudrum_mcc_30rpm_averaged.bmp", side="drum")
+    assert result.angle_deg == drum_angles[30].angle_deg
+    assert result.flanks == {} and result.base_tilt_deg is None
+    with pytest.raises(InputError, match="side must be one of"):
+        angle_from_profile([0.0, 1.0], [0.0, 1.0], side="drum")
+
+
 def test_drum_annotation_and_bad_drum(tmp_path):
     out = tmp_path / "drum.png"
     result = angle_from_drum(EXTERNAL_IMAGES / "granudrum_mcc_30rpm_averaged.bmp", annotate_to=out)
