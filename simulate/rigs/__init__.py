@@ -54,6 +54,7 @@ from demcal.provenance import Provenance
 RIGS = {"repose": "demcal.simulate.rigs.repose",
         "lifting_cylinder": "demcal.simulate.rigs.lifting_cylinder",
         "funnel": "demcal.simulate.rigs.funnel",
+        "drum": "demcal.simulate.rigs.drum",
         "drop": "demcal.simulate.rigs.drop",
         "incline": "demcal.simulate.rigs.incline"}
 

@@ -284,3 +284,32 @@ def test_workbook_photos_are_decoded_once(heap_campaign, monkeypatch):
     monkeypatch.setattr(ImageFile.ImageFile, "load", counting("PIL load", ImageFile.ImageFile.load))
     measure_workbook(read_workbook(heap_campaign))
     assert calls == ["cv2.imdecode", "cv2.imdecode"]
+
+
+def _drum_photos(sheets):
+    for row in sheets["repose"]:
+        row["side"] = "drum"
+
+
+def test_a_drum_photo_with_no_free_surface_is_refused_naming_its_row(campaign):
+    """Drum photos (side ``drum``) are read by the drum estimator; one whose drum holds no
+    bed is refused naming the sheet, its row and column, and the command exits 2 without a
+    traceback."""
+    from demcal.simulate.rigs.drum import drum_photo
+
+    path = campaign(_drum_photos)
+    photos = (path if path.is_dir() else path.parent) / "photos"
+    # a bed of 4 mm spheres below a line at 30 deg through the drum's centre, then an empty drum
+    rng = np.random.default_rng(1)
+    pts = rng.uniform(-0.075, 0.075, size=(6000, 2))
+    bed = pts[(np.hypot(*pts.T) < 0.07) & (pts[:, 1] < np.tan(np.radians(30.0)) * pts[:, 0])]
+    centres = np.column_stack([bed[:, 0], np.zeros(len(bed)), bed[:, 1]])
+    cv2.imwrite(str(photos / "p1.png"), drum_photo(centres, np.full(len(bed), 0.004), 0.15))
+    cv2.imwrite(str(photos / "p2.png"), drum_photo(np.zeros((0, 3)), np.zeros(0), 0.15))
+    with pytest.raises(WorkbookError) as info:
+        measure_workbook(read_workbook(path))
+    assert (info.value.sheet, info.value.row, info.value.column) == ("repose", 2, "file")
+    assert "no powder bed found in the drum" in str(info.value)
+    proc = subprocess.run([sys.executable, "-m", "demcal.cli", "measure", str(path)], capture_output=True, text=True)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert "repose" in proc.stderr and "no powder bed found" in proc.stderr
