@@ -197,8 +197,10 @@ def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir, max_phot
         rows.append(r)
         records.append(rec)
     extra = {}
-    est = summarise("repose_angle_deg", values, rows, unit="deg", source=sheet.source(),
-                    method="heap photo: mean slope of the heap flanks (measure.repose)",
+    drums = [rec["side"] == "drum" for rec in records]
+    method = ("drum photo: central chord of the free surface (measure.repose.angle_from_drum)"
+              if drums and all(drums) else "heap photo: mean slope of the heap flanks (measure.repose)")
+    est = summarise("repose_angle_deg", values, rows, unit="deg", source=sheet.source(), method=method,
                     outliers=outliers, rejected=rejected, per_row=records)
     pairs = [(rec["value"], rec["angle_deg_manual"]) for rec in est.per_row
              if rec["used"] and rec["angle_deg_manual"] is not None]

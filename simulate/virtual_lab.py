@@ -74,7 +74,7 @@ from demcal.jsonio import read_json, write_json
 from demcal.provenance import Provenance, run_key
 from demcal.simulate.materials import youngs_modulus
 from demcal.simulate.params import DEMParameters
-from demcal.simulate.rigs import rig_of_geometry
+from demcal.simulate.rigs import rig as rig_named, rig_of_geometry
 from demcal.units import GRAVITY
 
 #: Effect kinds, the identifiers of the critique catalogue that a workbook can carry.
@@ -734,6 +734,7 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
             raise InputError(f"block_effect in the repose sheet: covariate must be operator or date, "
                              f"got {e.covariate!r}")
     spread = _by_day(effects, "repose")
+    rig = rig_of_geometry(geometry) if geometry is not None else rig_named("repose")
     seeds = iter(range(seed_base, seed_base + 100 * n))
     discarded: list = []
     for i in range(n):
@@ -745,7 +746,9 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
         angle = truth.repose_angle_deg + truth.repose_sd_deg * rng.standard_normal() + offset
         roll = truth.camera_roll_sd_deg * rng.standard_normal() + floor
         light = Lighting(gradient=float(rng.uniform(0.1, 0.35)), direction_deg=float(rng.uniform(0, 360)))
-        if mode == "analytic":
+        if mode == "analytic" and rig.analytic_photo is not None:
+            img, side = rig.analytic_photo(angle, rng), rig.flanks
+        elif mode == "analytic":
             x, z = heap_profile(angle + flank, angle - flank, height_m=0.10, floor_m=0.04,
                                 roughness_m=0.002, rng=rng)
             side = "both"
@@ -793,11 +796,14 @@ def _dem_heap_photo(truth: Truth, rng, roll, light, seeds, discarded: list, geom
     for _ in range(MAX_POURS):
         seed = next(seeds)
         res = rig.run(truth.params, seed, profile="quick", geometry=geometry)
-        x = np.asarray(res.record["profile_x"], float)
-        z = np.asarray(res.record["profile_z"], float)
-        img = heap_photo(x, z, rng=rng, camera_roll_deg=float(np.clip(roll, -15, 15)), light=light,
-                         noise_sd=4.0, blur_px=1.0, jpeg_quality=int(rng.integers(75, 93)),
-                         particle_m=truth.params.shape.outline_m)
+        if rig.run_photo is not None:
+            img = rig.run_photo(res.record, rng)
+        else:
+            x = np.asarray(res.record["profile_x"], float)
+            z = np.asarray(res.record["profile_z"], float)
+            img = heap_photo(x, z, rng=rng, camera_roll_deg=float(np.clip(roll, -15, 15)), light=light,
+                             noise_sd=4.0, blur_px=1.0, jpeg_quality=int(rng.integers(75, 93)),
+                             particle_m=truth.params.shape.outline_m)
         # read it back as the workbook will hold it (the JPEG written by _photos)
         stored = cv2.imdecode(cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 95])[1], cv2.IMREAD_COLOR)
         try:

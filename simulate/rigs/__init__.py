@@ -9,6 +9,8 @@ lifting_cylinder  cylinder lifted off its fill: a     ``angle_deg`` (photo metho
                   cone (``...rigs.lifting_cylinder``) each flank, profile angle, crest height
 funnel            cone poured through a fixed funnel  as the lifting cylinder, and the particles
                   (``simulate.rigs.funnel``)          left in the funnel
+drum              rotating drum, free surface seen    ``angle_deg`` (drum estimator, mean of frames),
+                  end-on (``simulate.rigs.drum``)     frame sd, profile angle
 drop              free fall onto a plate, rebound     ``apparent_restitution`` = sqrt(h_rebound /
                   filmed (``simulate.rigs.drop``)     h_drop) of the centre of mass
 incline           inclinometer, plate tilted slowly   ``slide_angle_deg``, ``roll_angle_deg``
@@ -23,7 +25,7 @@ returns a :class:`RigResult`; :func:`run_rig` runs one by name. A rig's ``task(p
 ``analyse.runs.run_key``), and :func:`run_task` runs any task on the rig it names.
 
 The repose rigs (the workbook's ``repose`` sheet) are chosen by the meta key ``repose_rig``
-(:func:`repose_rig`): ``lifted_plate`` (the default), ``lifting_cylinder`` or ``funnel``.
+(:func:`repose_rig`): ``lifted_plate`` (the default), ``lifting_cylinder``, ``funnel`` or ``drum``.
 
 Rigs whose sheets hold single trials (the drop, the incline) also say how the lab's rows become
 twin runs (:class:`TrialGroup`, ``Rig.trial_groups`` and ``Rig.group_tasks``) and what a run
@@ -57,11 +59,6 @@ RIGS = {"repose": "demcal.simulate.rigs.repose",
         "drum": "demcal.simulate.rigs.drum",
         "drop": "demcal.simulate.rigs.drop",
         "incline": "demcal.simulate.rigs.incline"}
-
-#: Repose rigs labs use that have no twin yet, with the prefix of their meta keys: their
-#: workbooks are refused by name instead of being simulated as another rig.
-UNBUILT_REPOSE_RIGS = {"drum": "drum_"}
-
 
 @dataclass(frozen=True)
 class Rig:
@@ -102,6 +99,10 @@ class Rig:
         ``liggghts_case(params, geometry, lift_time) -> case``: the rig in LIGGGHTS-PUBLIC
         (``simulate.liggghts.deck``), its particle and contact model from demcal's export, the
         wall lifted at ``lift_time`` [s].
+    analytic_photo, run_photo : callable or None
+        How the virtual lab draws the rig's photo (None: a heap seen from the side):
+        ``analytic_photo(angle_deg, rng) -> image`` of a heap at a given angle, and
+        ``run_photo(record, rng) -> image`` of a run's ``RigResult.record``.
 
     A rig whose sheet holds single trials (a drop, a tilt) also says how the lab's rows become
     twin runs and readings:
@@ -151,6 +152,8 @@ class Rig:
     lab_test: str = ""
     measure: Callable | None = None
     liggghts_case: Callable | None = None
+    analytic_photo: Callable | None = None
+    run_photo: Callable | None = None
     trial_groups: Callable | None = None
     group_tasks: Callable | None = None
     observed: Callable | None = None
@@ -273,18 +276,17 @@ def repose_rig(meta: dict, file=None) -> Rig:
     """The repose rig a workbook's ``meta`` names (key ``repose_rig``, default
     ``lifted_plate``).
 
-    An unknown name, a rig with no twin yet, and a dimension of another repose rig than the one
-    named raise ``WorkbookError`` naming the key: the twin must never simulate another heap than
-    the one the lab photographed.
+    An unknown name and a dimension of another repose rig than the one named raise
+    ``WorkbookError`` naming the key: the twin must never simulate another heap than the one
+    the lab photographed.
     """
     meta = meta or {}
     rigs = {r.workbook_name: r for r in rigs_of_sheet("repose")}
     raw = meta.get("repose_rig")
     name = str(raw).strip().lower() if raw is not None and str(raw).strip() else "lifted_plate"
     if name not in rigs:
-        why = ("has no twin yet" if name in UNBUILT_REPOSE_RIGS else "is not a repose rig")
-        raise WorkbookError(f"meta repose_rig: {name!r} {why}, so its heaps cannot be calibrated against "
-                            f"(its photos still measure with demcal measure); repose rigs with a twin: "
+        raise WorkbookError(f"meta repose_rig: {name!r} is not a repose rig with a twin, so its heaps cannot be "
+                            f"calibrated against (its photos still measure with demcal measure); repose rigs: "
                             f"{', '.join(rigs)}", file=file, sheet="meta", column="value", value=raw)
     chosen = rigs[name]
     own = set(chosen.geometry.META_KEYS)
@@ -292,8 +294,7 @@ def repose_rig(meta: dict, file=None) -> Rig:
     for key, value in meta.items():
         if value is None or (isinstance(value, str) and not value.strip()) or key in own:
             continue                              # a blank row of a template says nothing
-        other = others.get(key) or next((r for r, prefix in UNBUILT_REPOSE_RIGS.items()
-                                          if str(key).startswith(prefix)), None)
+        other = others.get(key)
         if other is not None:
             raise WorkbookError(f"meta {key}: a dimension of the {other} rig, but the workbook's heap is "
                                 f"the {name} rig's (meta repose_rig); its dimensions: {', '.join(chosen.geometry.META_KEYS)}",

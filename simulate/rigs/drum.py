@@ -197,6 +197,28 @@ def drum_photo(centres, radii, diameter: float, *, size: int = FRAME_PX) -> np.n
     return img
 
 
+def _with_noise(img, rng) -> np.ndarray:
+    return np.clip(img.astype(float) + rng.normal(0.0, 4.0, img.shape), 0, 255).astype(np.uint8)
+
+
+def analytic_photo(angle_deg: float, rng, fill_fraction: float = DEFAULT_FILL_FRACTION) -> np.ndarray:
+    """A virtual lab's drum frame of a bed at ``angle_deg``: particles of 1.5 % of the drum's
+    diameter at random in the part of the drum below a line at that angle, which holds
+    ``fill_fraction`` of its area; grey noise as a camera's."""
+    pts = rng.uniform(-1.0, 1.0, size=(40000, 2))
+    pts = pts[np.hypot(*pts.T) < 0.985]
+    height = pts[:, 1] - math.tan(math.radians(angle_deg)) * pts[:, 0]
+    bed = pts[height < np.quantile(height, fill_fraction)]
+    centres = np.column_stack([bed[:, 0], np.zeros(len(bed)), bed[:, 1]])
+    return _with_noise(drum_photo(centres, np.full(len(bed), 0.015), 2.0), rng)
+
+
+def run_photo(record: dict, rng) -> np.ndarray:
+    """A virtual lab's drum frame of a run: its last frame's spheres end-on, with noise."""
+    return _with_noise(drum_photo(record["sphere_positions"], record["sphere_radii"],
+                                  record["geometry"]["diameter"]), rng)
+
+
 def bed_profile_angle(centres, radii, diameter: float) -> float:
     """Angle [deg] of a line through the central ``CHORD`` of the bed's top profile, in the
     plane across the drum (x, z): the top of the spheres on a 1 mm grid, without a photo."""
@@ -368,4 +390,5 @@ RIG = Rig("drum", sheet="repose", run=run_drum, task=task, run_task=run_task,
                        "escaped": "-"},
           geometry=DrumGeometry, workbook_name="drum", flanks="drum",
           lab_test="rotating drum, end-on photographs of the free surface in steady rotation", measure=measure_heap,
+          analytic_photo=analytic_photo, run_photo=run_photo,
           cli_arguments=heap.cli_arguments, cli_options=heap.cli_options)

@@ -99,13 +99,14 @@ def lab_folder(tmp_path_factory):
                                   n_compression=3).path
 
 
-DRUM = (["repose_rig,drum\n"], ["repose_rig", "'drum' has no twin yet", "lifted_plate, lifting_cylinder"])
+DRUM = (["repose_rig,drum\n"], ["meta", "drum_diameter_mm", "missing"])
 NO_HEIGHT = (["repose_rig,lifting_cylinder\n", "lift_speed_mm_s,10\n"], ["cylinder_diameter_mm", "missing"])
 
 
 @pytest.mark.parametrize("command, rows, needles", [
     ("simulate", *DRUM), ("calibrate", *DRUM),
-    ("simulate", ["repose_rig,pile\n"], ["repose_rig", "'pile' is not a repose rig"]),
+    ("simulate", ["repose_rig,pile\n"], ["repose_rig", "'pile' is not a repose rig",
+                                          "lifted_plate, lifting_cylinder, funnel, drum"]),
     ("simulate", *NO_HEIGHT), ("calibrate", *NO_HEIGHT),
     ("simulate", ["drum_speed_rpm,5\n"], ["drum_speed_rpm", "a dimension of the drum rig"]),
     # the workbook's 25 mm segments would arch in a 60 mm tube

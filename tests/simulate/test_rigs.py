@@ -293,9 +293,9 @@ def test_the_workbook_names_its_repose_rig_and_another_rigs_dimension_is_refused
                         "lift_speed_mm_s": 10, "fill_count": 400})
     assert cyl.rig == "lifting_cylinder" and cyl.workbook_name == "lifting_cylinder"
     assert CylinderGeometry(**cyl.geometry) == CylinderGeometry(0.06, 0.12, 0.01, 400)
-    with pytest.raises(WorkbookError, match=r"file wb.xlsx, sheet .meta.*repose_rig: 'drum' has no twin yet.*"
-                                            r"lifted_plate, lifting_cylinder, funnel"):
-        repose_rig({"repose_rig": "drum"}, file="wb.xlsx")
+    with pytest.raises(WorkbookError, match=r"file wb.xlsx, sheet .meta.*repose_rig: 'pile' is not a repose rig.*"
+                                            r"lifted_plate, lifting_cylinder, funnel, drum"):
+        repose_rig({"repose_rig": "pile"}, file="wb.xlsx")
     # a blank row of a template says nothing
     assert repose_rig({"cylinder_diameter_mm": None, "drum_speed_rpm": " "}).name == "repose"
     for meta, key, rig in (({"cylinder_diameter_mm": 100.0}, "cylinder_diameter_mm", "lifting_cylinder"),
@@ -314,9 +314,9 @@ def test_the_workbook_names_its_repose_rig_and_another_rigs_dimension_is_refused
 # ---------------------------------------------------------------------------------- run_rig
 
 def test_run_rig_rejects_unknown_rig_listing_valid_ones():
-    with pytest.raises(InputError, match="unknown rig 'shear'; valid rigs: repose, lifting_cylinder, funnel, drop, incline"):
+    with pytest.raises(InputError, match="unknown rig 'shear'; valid rigs: repose, lifting_cylinder, funnel, drum, drop, incline"):
         run_rig("shear", PARAMS)
-    assert set(RIGS) == {"repose", "lifting_cylinder", "funnel", "drop", "incline"}
+    assert set(RIGS) == {"repose", "lifting_cylinder", "funnel", "drum", "drop", "incline"}
 
 
 def test_rig_result_round_trips_through_json(tmp_path):
@@ -352,7 +352,7 @@ def test_each_rigs_task_is_the_run_stores_key_layout_and_runs_on_its_rig():
     ran = run_task(drop.task(PARAMS, "particle-steel", 0.05, 0.0, 5))
     direct = run_rig("drop", PARAMS, seed=5, height=0.05, orientation_deg=0.0, pair="particle-steel")
     assert ran["rig"] == "drop" and ran["observable"] == direct.observable
-    with pytest.raises(InputError, match="unknown rig 'shear' in a run's task; valid rigs: repose, lifting_cylinder, funnel, drop, incline"):
+    with pytest.raises(InputError, match="unknown rig 'shear' in a run's task; valid rigs: repose, lifting_cylinder, funnel, drum, drop, incline"):
         run_task({"rig": "shear"})
 
 

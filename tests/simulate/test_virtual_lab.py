@@ -124,3 +124,25 @@ def test_a_lifting_cylinder_lab_writes_its_rig_and_reads_back(tmp_path):
     with pytest.raises(InputError, match="repose_rig: .*cylinder_height_mm: missing"):
         write_virtual_workbook(seeds, tmp_path / "bad", rng=3, n_photos=3,
                                repose_rig={k: v for k, v in rig.items() if k != "cylinder_height_mm"})
+
+
+def test_a_drum_lab_writes_end_on_frames_that_measure_read_back_at_the_truths_angle(tmp_path):
+    """The virtual lab's drum: its meta rows read back to the same drum, its photos are drum
+    frames (side ``drum``) of a bed at the truth's angle, and ``demcal measure`` reads them back
+    with the drum estimator to within the heap-to-heap scatter."""
+    from demcal.measure.pipeline import measure_workbook
+    from demcal.simulate.rigs import repose_setup
+    from demcal.simulate.rigs.drum import DrumGeometry
+    from demcal.simulate.shapes.sphere import Sphere
+
+    rig = {"repose_rig": "drum", "drum_diameter_mm": 150, "drum_width_mm": 40, "drum_speed_rpm": 10,
+           "drum_fill_fraction": 0.4}
+    seeds = Truth(params=DEMParameters(shape=Sphere(0.00646), particle_density_kg_m3=1200, dt=None),
+                  repose_angle_deg=35.0, repose_sd_deg=1.0)
+    vw = write_virtual_workbook(seeds, tmp_path / "lab", rng=3, n_photos=6, n_drop=2, n_incline=3, n_tracks=0,
+                                n_specimens=5, n_compression=3, repose_rig=rig)
+    wb = read_workbook(vw.path)
+    assert DrumGeometry(**repose_setup(wb.meta).geometry) == DrumGeometry(0.15, 0.04, 10.0, 0.4)
+    assert set(wb.sheet("repose").frame["side"]) == {"drum"}
+    est = measure_workbook(vw.path).quantities["repose_angle_deg"]
+    assert est.n == 6 and est.value == pytest.approx(35.0, abs=3.0 * 1.0 / math.sqrt(6) + 0.5)

@@ -173,7 +173,7 @@ def test_planted_effect_is_recorded(tmp_path, capsys):
     ("design: {drop_heights_mm: [400, -1]}", "design.drop_heights_mm: must be a number > 0, got -1"),
     ("design: {heights: [400]}", "design: unknown key 'heights'; valid: photos, n_specimens"),
     ("design: {repose_rig: {repose_rig: drum}}", "design.repose_rig: sheet 'meta', column 'value': meta "
-                                                 "repose_rig: 'drum' has no twin yet"),
+                                                 "drum_diameter_mm: missing"),
     ("design: {repose_rig: {repose_rig: lifting_cylinder, cylinder_diameter_mm: 60, lift_speed_mm_s: 10}}",
      "design.repose_rig: sheet 'meta', column 'value': meta cylinder_height_mm: missing"),
     ("design: {repose_rig: lifting_cylinder}", "design.repose_rig must be a mapping of workbook meta keys"),
