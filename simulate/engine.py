@@ -146,7 +146,7 @@ def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw):
 @kernel
 def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass, n_bodies, bx, bv, bw, bR,
                     bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph,
-                    ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wspin_now, wmat,
+                    ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat,
                     e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min):
     """Contact forces, torques and rolling torques on every body from the Verlet lists.
 
@@ -326,22 +326,11 @@ def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mas
         wxi = bw[bi, 0]
         wyi = bw[bi, 1]
         wzi = bw[bi, 2]
-        # velocity of the wall's surface at the contact point: its translation, plus its spin
-        # about its centre (added only for a spinning wall, so other walls' sums are unchanged)
-        vwx = wvel_now[k, 0]
-        vwy = wvel_now[k, 1]
-        vwz = wvel_now[k, 2]
-        if wspin_now[k, 0] != 0.0 or wspin_now[k, 1] != 0.0 or wspin_now[k, 2] != 0.0:
-            rx = xi - nx * a - worig[k, 0]
-            ry = yi - ny * a - worig[k, 1]
-            rz = zi - nz * a - worig[k, 2]
-            vwx += wspin_now[k, 1] * rz - wspin_now[k, 2] * ry
-            vwy += wspin_now[k, 2] * rx - wspin_now[k, 0] * rz
-            vwz += wspin_now[k, 0] * ry - wspin_now[k, 1] * rx
-        # velocity of the sphere relative to the wall at the contact point
-        vrx = bv[bi, 0] + wyi * aiz - wzi * aiy - vwx
-        vry = bv[bi, 1] + wzi * aix - wxi * aiz - vwy
-        vrz = bv[bi, 2] + wxi * aiy - wyi * aix - vwz
+        # velocity of the sphere relative to the wall's surface at the contact point (``wcv``:
+        # the wall's translation, and a spinning wall's spin x (p - centre))
+        vrx = bv[bi, 0] + wyi * aiz - wzi * aiy - wcv[q, 0]
+        vry = bv[bi, 1] + wzi * aix - wxi * aiz - wcv[q, 1]
+        vrz = bv[bi, 2] + wxi * aiy - wyi * aix - wcv[q, 2]
         vn = vrx * nx + vry * ny + vrz * nz
         vtx = vrx - vn * nx
         vty = vry - vn * ny
@@ -413,6 +402,27 @@ def _count_contacts(n_bodies, bcount, sbody, sx, srad, ppi, pj, ws, wk, wkind, w
 
 
 @kernel
+def _wall_contact_velocities(ws, wk, sx, srad, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wspin_now, wcv):
+    """Velocity of the wall's surface at each sphere-wall contact into ``wcv``: the wall's
+    translation, plus spin x (p - centre) for a spinning wall at the contact point p (the
+    middle of the overlap, as the contact force takes it)."""
+    for q in range(ws.shape[0]):
+        k = wk[q]
+        for c in range(3):
+            wcv[q, c] = wvel_now[k, c]
+        if wspin_now[k, 0] != 0.0 or wspin_now[k, 1] != 0.0 or wspin_now[k, 2] != 0.0:
+            i = ws[q]
+            d, nx, ny, nz = wall_distance(wkind, worig, wnorm, wu, wv, whalf, k, sx[i, 0], sx[i, 1], sx[i, 2])
+            a = srad[i] - 0.5 * (srad[i] - d)
+            rx = sx[i, 0] - nx * a - worig[k, 0]
+            ry = sx[i, 1] - ny * a - worig[k, 1]
+            rz = sx[i, 2] - nz * a - worig[k, 2]
+            wcv[q, 0] += wspin_now[k, 1] * rz - wspin_now[k, 2] * ry
+            wcv[q, 1] += wspin_now[k, 2] * rx - wspin_now[k, 0] * rz
+            wcv[q, 2] += wspin_now[k, 0] * ry - wspin_now[k, 1] * rx
+
+
+@kernel
 def _wall_velocities(t, wvel, wspin, wwin, wvel_now, wspin_now):
     """Velocity and spin of each wall during the step whose midpoint is ``t`` (zero outside its
     window)."""
@@ -442,6 +452,7 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
     h = 0.5 * dt
     mode = kick_mode(lever_mode, rolling_model)
     n_walls = wkind.shape[0]
+    wcv = np.empty((max(ws.shape[0], 1), 3))       # wall surface velocity at each wall contact
     n_rebuilds = 0
     n_wall_rebuilds = 0
     for step in range(-1 if need_forces else 0, n_steps):
@@ -481,9 +492,12 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
         need_rebuild = False
         # the first evaluation of a fresh state must not advance the contact history
         hist_dt = dt if step >= 0 else 0.0
+        if wcv.shape[0] < ws.shape[0]:
+            wcv = np.empty((2 * ws.shape[0], 3))
+        _wall_contact_velocities(ws, wk, sx, srad, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wspin_now, wcv)
         _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass, n_bodies, bx, bv, bw,
                         bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj,
-                        ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wspin_now, wmat,
+                        ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat,
                         e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min)
     if n_steps > 0:
         for b in range(n_bodies):

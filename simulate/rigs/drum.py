@@ -20,8 +20,9 @@ particle widths deep, and a speed whose Froude number omega^2 R / g is ``MAX_FRO
 (the bed would cataract or centrifuge: no free surface line; Mellmann 2001).
 
 Observable keys: ``angle_deg`` (mean over the frames of the drum estimator's angle),
-``angle_sd_deg`` (their sd), ``angle_profile_deg`` (a line through the central chord of the
-bed's top profile, without the photo), ``frames_read`` and ``escaped``.
+``angle_sd_deg`` (their sd: a bed of few particle diameters slumps and rocks by a few degrees
+between frames), ``angle_profile_deg`` (mean over the same frames of a line through the
+central chord of the bed's top profile, without the photo), ``frames_read`` and ``escaped``.
 
 References
 ----------
@@ -304,8 +305,9 @@ def run_drum(params: DEMParameters, seed: int = 0, *, geometry: DrumGeometry, pr
     Returns
     -------
     RigResult
-        ``observable`` as the module docstring lists. ``record``: ``frame_angles`` [deg],
-        ``frame_times`` [s], ``sphere_positions``, ``sphere_radii`` [m] (the last frame),
+        ``observable`` as the module docstring lists. ``record``: ``frame_angles``,
+        ``frame_profile_angles`` [deg], ``frame_times`` [s], ``sphere_positions``,
+        ``sphere_radii`` [m] (the last frame),
         ``geometry``, ``t_spin``, ``t_end`` [s].
     """
     from demcal.simulate.extensions import with_size_distribution  # scipy: only when running
@@ -336,7 +338,7 @@ def run_drum(params: DEMParameters, seed: int = 0, *, geometry: DrumGeometry, pr
     tally.add(sim.run(duration=spin_up))
     if callback is not None:
         callback(sim, t_end, False)
-    angles, times, notes = [], [], list(run.notes)
+    angles, profiles, times, notes = [], [], [], list(run.notes)
     for k in range(FRAMES):
         tally.add(sim.run(duration=sample / FRAMES))
         act = sim.active()
@@ -345,6 +347,7 @@ def run_drum(params: DEMParameters, seed: int = 0, *, geometry: DrumGeometry, pr
         last = k == FRAMES - 1
         angle, why = read_frame(pos, rad, geo.diameter, annotate_to=annotate_to if last else None)
         angles.append(angle)
+        profiles.append(bed_profile_angle(pos, rad, geo.diameter))
         times.append(sim.time)
         if why:
             notes.append(f"frame at {sim.time:.2f} s: {why}")
@@ -353,9 +356,10 @@ def run_drum(params: DEMParameters, seed: int = 0, *, geometry: DrumGeometry, pr
     read = np.isfinite(angles)
     observable = {"angle_deg": float(np.mean(np.asarray(angles)[read])) if read.any() else math.nan,
                   "angle_sd_deg": float(np.std(np.asarray(angles)[read], ddof=1)) if read.sum() > 1 else math.nan,
-                  "angle_profile_deg": bed_profile_angle(pos, rad, geo.diameter),
+                  "angle_profile_deg": float(np.nanmean(profiles)) if np.isfinite(profiles).any() else math.nan,
                   "frames_read": int(read.sum()), "escaped": len(sim.escaped)}
-    rec = {"frame_angles": np.asarray(angles), "frame_times": np.asarray(times), "sphere_positions": pos,
+    rec = {"frame_angles": np.asarray(angles), "frame_profile_angles": np.asarray(profiles),
+           "frame_times": np.asarray(times), "sphere_positions": pos,
            "sphere_radii": rad, "geometry": geo.to_dict(), "t_spin": t_spin, "t_end": sim.time,
            "escapes": [e.to_dict() for e in sim.escaped]}
     meta = run_meta(seed, dt, tally, sim.n_spheres, sim.time, profile=prof.name, notes=notes,
