@@ -303,6 +303,14 @@ class ReposeCase:
         past its top."""
         return self.plate_lift_start + self.box_height / self.plate_lift_speed
 
+    def motion(self, label: str) -> tuple:
+        """LIGGGHTS commands issued before and after the phase ``label``: the lifted wall's
+        ``move/mesh`` during ``plate_lift``."""
+        if label != "plate_lift":
+            return (), ()
+        return ((f"fix lift all move/mesh mesh {self.lifted_mesh} linear 0.0 0.0 {_g(self.plate_lift_speed)}",),
+                ("unfix lift",))
+
     def phase_steps(self, duration: float) -> tuple:
         """The run split into (label, steps) phases: before, during and after the plate lift.
 
@@ -553,13 +561,12 @@ def render_script(case: ReposeCase, seed: int, duration: float = 10.0,
                    f"{' '.join(columns)}")
         out.append(f"dump_modify snap format {POSITION_FORMAT}")
     for label, n in case.phase_steps(duration):
+        before, after = case.motion(label)
         out.append("")
-        if label == "plate_lift":
-            out.append(f"fix lift all move/mesh mesh {case.lifted_mesh} linear 0.0 0.0 {_g(case.plate_lift_speed)}")
+        out += list(before)
         out.append(f"# phase {label}")
         out.append(f"run             {n}")
-        if label == "plate_lift":
-            out.append("unfix lift")
+        out += list(after)
     out += ["", f"write_dump all custom {positions_file} {' '.join(columns)} "
                 f"modify format {POSITION_FORMAT}", ""]
     return "\n".join(out)

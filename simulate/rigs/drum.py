@@ -60,6 +60,8 @@ FRAME_PX = 600
 RIM_SHARE = 0.45
 #: Central share of the bed's free surface fitted by the profile method [-].
 CHORD = 0.5
+#: Facets of the drum's tube in LIGGGHTS.
+FACETS = 64
 
 
 def bed_depth(fill_fraction: float, diameter: float) -> float:
@@ -371,8 +373,13 @@ def run_drum(params: DEMParameters, seed: int = 0, *, geometry: DrumGeometry, pr
 
 def measure_heap(centres, radii, geometry) -> dict:
     """The drum observables of one frame of spheres (another code's): the estimator's angle of
-    the end-on view and the profile fit."""
-    diameter = geometry["diameter"] if isinstance(geometry, dict) else geometry.diameter
+    the end-on view and the profile fit. ``geometry``: a :class:`DrumGeometry` or a dict with
+    ``diameter`` [m] and, for a drum not centred on the origin, its ``centre`` [m]."""
+    if isinstance(geometry, dict):
+        diameter, centre = geometry["diameter"], np.asarray(geometry.get("centre", (0.0, 0.0, 0.0)), float)
+    else:
+        diameter, centre = geometry.diameter, np.zeros(3)
+    centres = np.asarray(centres, float).reshape(-1, 3) - centre
     angle, why = read_frame(centres, radii, diameter)
     return {"angle_deg": angle, "angle_profile_deg": bed_profile_angle(centres, radii, diameter),
             "notes": [why] if why else []}
@@ -388,11 +395,72 @@ def run_task(inputs: dict) -> dict:
     return heap.run_heap_task(run_drum, DrumGeometry, inputs)
 
 
+def liggghts_case(params: DEMParameters, geometry: DrumGeometry, lift_time: float):
+    """The drum in LIGGGHTS: its tube a ``FACETS``-gon mesh along y and its end plates two
+    square meshes, its axis through ``(R, ., R + 10 mm)`` (inside the deck's box, above its floor
+    plane), filled over the first second and turned about its axis (``move/mesh rotate``) from
+    ``lift_time`` [s]; the last frame is read by :func:`measure_heap` (the case's dict holds the
+    ``diameter`` and the ``centre``)."""
+    from demcal.simulate.liggghts.deck import ReposeCase, _g, _rectangle
+
+    geo = geometry.filled_for(params.shape)
+    R, W = geo.diameter / 2.0, geo.width
+    cx, cy, cz = R, W / 2.0, R + 0.01
+    period = 2.0 * math.pi / geo.omega
+    spin_up = max(SPIN_UP_REVS * period, SPIN_UP_MIN_S)
+
+    class DrumCase(ReposeCase):
+        walls_comment = "rotating drum: the tube and two end plates (meshes), turned about its axis along y"
+        title = "Dynamic angle of repose, rotating drum, LIGGGHTS-PUBLIC 3.8"
+        lifted_mesh = None
+
+        def meshes(self) -> dict:
+            phi = np.linspace(0.0, 2.0 * np.pi, FACETS + 1)
+            x, z = cx + R * np.cos(phi), cz + R * np.sin(phi)
+            tube = np.concatenate([_rectangle((x[k], 0.0, z[k]), (x[k + 1], 0.0, z[k + 1]),
+                                              (x[k + 1], W, z[k + 1]), (x[k], W, z[k])) for k in range(FACETS)])
+            h = 1.2 * R
+            plates = {name: _rectangle((cx - h, y, cz - h), (cx + h, y, cz - h), (cx + h, y, cz + h), (cx - h, y, cz + h))
+                      for name, y in (("end_y0", 0.0), ("end_y1", W))}
+            return {"drum": tube, **plates}
+
+        @property
+        def domain(self) -> tuple:
+            m = 0.02 + 0.2 * R
+            return (cx - R - m, cx + R + m, -m, W + m, -0.01, cz + R + m)
+
+        def settling_from(self) -> float:
+            return self.plate_lift_start + spin_up
+
+        def phase_steps(self, duration: float) -> tuple:
+            total = self.steps(duration)
+            start = min(self.steps(self.plate_lift_start), total)
+            return tuple((label, n) for label, n in (("fill_and_settle", start), ("rotate", total - start)) if n > 0)
+
+        def motion(self, label: str) -> tuple:
+            if label != "rotate":
+                return (), ()
+            return tuple(f"fix spin_{name} all move/mesh mesh {name} rotate origin {_g(cx)} {_g(cy)} {_g(cz)} "
+                         f"axis 0.0 1.0 0.0 period {_g(period)}" for name in self.meshes()), ()
+
+        def to_dict(self) -> dict:
+            return {**super().to_dict(), "diameter": geo.diameter, "width": W, "centre": [cx, cy, cz],
+                    "period_s": period}
+
+    base = ReposeCase.for_params(params)
+    half, inset = heap.inscribed_half(geo.diameter), min(0.005, 0.1 * W)
+    fields = {f: getattr(base, f) for f in ReposeCase.__dataclass_fields__}
+    fields.update(box_length=geo.diameter, box_width=W, box_height=cz + R, n_segments=geo.fill_count,
+                  plate_lift_start=float(lift_time),
+                  fill_region=(cx - half, cx + half, inset, W - inset, cz - half, cz + half))
+    return DrumCase(**fields)
+
+
 RIG = Rig("drum", sheet="repose", run=run_drum, task=task, run_task=run_task,
           compared="angle_deg", fallbacks=("angle_profile_deg",),
           observables={"angle_deg": "deg", "angle_sd_deg": "deg", "angle_profile_deg": "deg", "frames_read": "-",
                        "escaped": "-"},
           geometry=DrumGeometry, workbook_name="drum", flanks="drum",
           lab_test="rotating drum, end-on photographs of the free surface in steady rotation", measure=measure_heap,
-          analytic_photo=analytic_photo, run_photo=run_photo,
+          analytic_photo=analytic_photo, run_photo=run_photo, liggghts_case=liggghts_case,
           cli_arguments=heap.cli_arguments, cli_options=heap.cli_options)

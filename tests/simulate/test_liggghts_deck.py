@@ -409,3 +409,37 @@ def test_funnel_deck_is_a_cone_mesh_poured_into_and_holds_its_stream(tmp_path):
     r_cone = 0.02 + (p[inside, 2] - 0.07) * (0.04 / 0.08)
     assert np.all(np.hypot(p[inside, 0] - 0.06, p[inside, 1] - 0.06) < r_cone)
     assert np.sum(p[:, 2] < 0.02) > 10
+
+
+def test_drum_deck_turns_its_tube_and_end_plates_about_the_axis_after_the_fill(tmp_path):
+    """The drum's deck: a 64-gon tube along y and two square end plates, all three turned by
+    move/mesh rotate about the drum's axis at its period from the rotation's start; filled inside
+    the tube. In LIGGGHTS its bed is read by the rig's own estimator."""
+    from demcal.simulate.params import DEMParameters
+    from demcal.simulate.rigs import rig
+    from demcal.simulate.rigs.drum import DrumGeometry
+    from demcal.simulate.shapes.sphere import Sphere
+
+    params = DEMParameters(shape=Sphere(0.00646), particle_density_kg_m3=1200, shear_modulus_pa=1.04e6, dt=None)
+    case = rig("drum").liggghts_case(params, DrumGeometry(0.12, 0.03, 10.0, 0.4), 1.0)
+    deck = dk.write_deck(tmp_path, seed=1, duration=1.6, case=case)
+    tube = dk.read_ascii_stl(deck.meshes["drum"])
+    assert set(deck.meshes) == {"drum", "end_y0", "end_y1"} and tube.shape == (128, 3, 3)
+    np.testing.assert_allclose(np.hypot(tube[..., 0] - 0.06, tube[..., 2] - 0.07), 0.06, rtol=1e-8)
+    commands = _commands(deck.script.read_text())
+    runs = [i for i, c in enumerate(commands) if c[0] == "run"]
+    spins = [i for i, c in enumerate(commands) if c[3:5] == ["move/mesh", "mesh"]]
+    assert len(runs) == 2 and len(spins) == 3 and all(runs[0] < i < runs[1] for i in spins)
+    for i in spins:     # 10 rpm: a 6 s period about the axis through (60, ., 70) mm along y
+        assert commands[i][6:] == ["rotate", "origin", "0.06", "0.015", "0.07", "axis", "0.0", "1.0", "0.0",
+                                   "period", "6"]
+    x0, x1, y0, y1, z0, z1 = case.fill_region
+    assert max(math.hypot(x - 0.06, z - 0.07) for x in (x0, x1) for z in (z0, z1)) < 0.06
+    if find_liggghts() is None:
+        pytest.skip("LIGGGHTS not installed")
+    result = run_liggghts(seed=1, workdir=tmp_path, duration=1.6, case=case, nice=0)
+    p = result["positions"]
+    assert result["lost_spheres"] == 0 and result["bodies"] > 200
+    assert np.all(np.hypot(p[:, 0] - 0.06, p[:, 2] - 0.07) < 0.06)          # inside the tube
+    heap = rig("drum").measure(p, result["radii"], result["deck"]["case"])
+    assert 0.0 < heap["angle_profile_deg"] < 60.0
