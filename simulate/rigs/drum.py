@@ -40,7 +40,7 @@ import numpy as np
 from demcal.errors import DemcalError, InputError
 from demcal.provenance import Provenance
 from demcal.simulate.params import DEMParameters
-from demcal.simulate.rigs import Rig, RigResult, check_seed, heap, run_meta
+from demcal.simulate.rigs import Rig, RigResult, heap, run_meta
 from demcal.units import GRAVITY, MM
 
 #: Drum fill when the workbook gives neither ``drum_fill_fraction`` nor ``fill_count`` [-].
@@ -285,24 +285,9 @@ def run_drum(params: DEMParameters, seed: int = 0, *, geometry: DrumGeometry, pr
              annotate_to=None, force: bool = False, callback=None, size_distribution=None) -> RigResult:
     """Run the rotating drum and read its free surface (module docstring).
 
-    Parameters
-    ----------
-    params : DEMParameters
-        Materials, contact parameters, shape, mass model, rolling lever.
-    seed : int
-        Seed of the particle factory.
-    geometry : DrumGeometry
-        The drum, its speed and its bed.
-    profile : {"paper", "quick"} or ReposeProfile
-        How the fill is carried out (``simulate.rigs.heap.PROFILES``); the rotation follows.
-    annotate_to : path, optional
-        Write the annotated last frame there.
-    force : bool
-        Allow a time step above half the Rayleigh time.
-    callback : callable, optional
-        ``callback(sim, t_end, final)`` after each chunk (see ``simulate.rigs``).
-    size_distribution : simulate.extensions.SizeDistribution, optional
-        Draw each particle from these measured sizes.
+    The arguments are every repose rig's (``heap.RUN_ARGUMENTS``); ``geometry`` is a
+    :class:`DrumGeometry`, ``profile`` says how the drum is filled (the rotation follows) and
+    ``annotate_to`` gets the last frame.
 
     Returns
     -------
@@ -312,19 +297,9 @@ def run_drum(params: DEMParameters, seed: int = 0, *, geometry: DrumGeometry, pr
         ``sphere_radii`` [m] (the last frame),
         ``geometry``, ``t_spin``, ``t_end`` [s].
     """
-    from demcal.simulate.extensions import with_size_distribution  # scipy: only when running
     from demcal.simulate.timestep import material_time_step
 
-    seed = check_seed(seed)
-    if not isinstance(params, DEMParameters):
-        raise InputError(f"params must be a DEMParameters, got {type(params).__name__}")
-    if not isinstance(geometry, DrumGeometry):
-        raise InputError(f"geometry must be a DrumGeometry, got {type(geometry).__name__}")
-    if size_distribution is not None:
-        params = with_size_distribution(params, size_distribution)
-    prof = heap.repose_profile(profile)
-    geometry.check_for(params.shape)
-    geo = geometry.filled_for(params.shape)
+    seed, params, prof, geo = heap.prepare_run(params, seed, geometry, DrumGeometry, profile, size_distribution)
     period = 2.0 * math.pi / geo.omega
     spin_up = max(SPIN_UP_REVS * period, SPIN_UP_MIN_S)
     sample = max(SAMPLE_REVS * period, SAMPLE_MIN_S)

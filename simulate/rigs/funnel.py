@@ -49,7 +49,7 @@ import numpy as np
 from demcal.errors import InputError
 from demcal.provenance import Provenance
 from demcal.simulate.params import DEMParameters
-from demcal.simulate.rigs import Rig, RigResult, check_seed, heap, run_meta
+from demcal.simulate.rigs import Rig, RigResult, heap, run_meta
 from demcal.units import GRAVITY, MM
 
 #: Beverloo's discharge coefficient and empty-annulus factor (Beverloo et al. 1961).
@@ -205,25 +205,8 @@ def run_funnel(params: DEMParameters, seed: int = 0, *, geometry: FunnelGeometry
                annotate_to=None, force: bool = False, callback=None, size_distribution=None) -> RigResult:
     """Run the fixed-funnel repose test and measure the cone (module docstring).
 
-    Parameters
-    ----------
-    params : DEMParameters
-        Materials, contact parameters, shape, mass model, rolling lever.
-    seed : int
-        Seed of the particle factory.
-    geometry : FunnelGeometry
-        The funnel, its height and the fill.
-    profile : {"paper", "quick"} or ReposeProfile
-        How the run is carried out (``simulate.rigs.heap.PROFILES``); the pour lasts at least
-        the funnel's :meth:`FunnelGeometry.pour_time`.
-    annotate_to : path, optional
-        Write the annotated side view of the cone there.
-    force : bool
-        Allow a time step above half the Rayleigh time.
-    callback : callable, optional
-        ``callback(sim, t_end, final)`` after each chunk (see ``simulate.rigs``).
-    size_distribution : simulate.extensions.SizeDistribution, optional
-        Draw each particle from these measured sizes.
+    The arguments are every repose rig's (``heap.RUN_ARGUMENTS``); ``geometry`` is a
+    :class:`FunnelGeometry`, and the pour lasts at least its :meth:`FunnelGeometry.pour_time`.
 
     Returns
     -------
@@ -232,19 +215,9 @@ def run_funnel(params: DEMParameters, seed: int = 0, *, geometry: FunnelGeometry
         [m], ``sphere_positions``, ``sphere_radii``, ``sphere_body``, ``body_positions`` [m]
         (the cone's), ``geometry``, ``t_poured``, ``t_end`` [s], ``ke_t`` [s], ``ke`` [J].
     """
-    from demcal.simulate.extensions import with_size_distribution  # scipy: only when running
     from demcal.simulate.timestep import material_time_step
 
-    seed = check_seed(seed)
-    if not isinstance(params, DEMParameters):
-        raise InputError(f"params must be a DEMParameters, got {type(params).__name__}")
-    if not isinstance(geometry, FunnelGeometry):
-        raise InputError(f"geometry must be a FunnelGeometry, got {type(geometry).__name__}")
-    if size_distribution is not None:
-        params = with_size_distribution(params, size_distribution)
-    prof = heap.repose_profile(profile)
-    geometry.check_for(params.shape)
-    geo = geometry.filled_for(params.shape)
+    seed, params, prof, geo = heap.prepare_run(params, seed, geometry, FunnelGeometry, profile, size_distribution)
     pour = max(prof.fill_time, geo.pour_time(params.shape))
     fall = math.sqrt(2.0 * geo.top_z / GRAVITY)
     prof = replace(prof, fill_time=pour, duration=max(prof.duration, pour + fall + 2.0))

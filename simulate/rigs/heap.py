@@ -444,6 +444,47 @@ def check_dimensions(geometry, names, rig: str) -> None:
         object.__setattr__(geometry, "fill_count", int(geometry.fill_count))
 
 
+#: The arguments of every repose rig's ``run(params, seed, *, geometry, profile, annotate_to,
+#: force, callback, size_distribution)``, for their docstrings.
+RUN_ARGUMENTS = """
+params : DEMParameters
+    Materials, contact parameters, shape, mass model, rolling lever.
+seed : int
+    Seed of the particle factory.
+geometry
+    The rig's dimensions (its ``Rig.geometry`` class).
+profile : {"paper", "quick"} or ReposeProfile
+    How the run is carried out (``PROFILES``).
+annotate_to : path, optional
+    Write the annotated view of the heap there.
+force : bool
+    Allow a time step above half the Rayleigh time.
+callback : callable, optional
+    ``callback(sim, t_end, final)`` after each chunk (see ``simulate.rigs``).
+size_distribution : simulate.extensions.SizeDistribution, optional
+    Draw each particle from these measured sizes.
+"""
+
+
+def prepare_run(params, seed, geometry, geometry_class, profile, size_distribution):
+    """The checked inputs of a repose rig's run: the seed, the parameters (with the size
+    distribution), the profile, and the rig's dimensions with their fill for the shape (a heap
+    the rig could not read refused here, before anything runs)."""
+    from demcal.simulate.extensions import with_size_distribution  # scipy: only when running
+    from demcal.simulate.params import DEMParameters
+    from demcal.simulate.rigs import check_seed
+
+    seed = check_seed(seed)
+    if not isinstance(params, DEMParameters):
+        raise InputError(f"params must be a DEMParameters, got {type(params).__name__}")
+    if not isinstance(geometry, geometry_class):
+        raise InputError(f"geometry must be a {geometry_class.__name__}, got {type(geometry).__name__}")
+    if size_distribution is not None:
+        params = with_size_distribution(params, size_distribution)
+    geometry.check_for(params.shape)
+    return seed, params, repose_profile(profile), geometry.filled_for(params.shape)
+
+
 def pile_height_and_diameter(x, z) -> tuple:
     """Height [m] of a top profile ``z(x)`` and the width [m] of the pile under its highest
     point: the run of ``x`` around it where the profile stands above the floor, so that stray

@@ -35,10 +35,10 @@ import numpy as np
 from demcal.errors import InputError
 from demcal.provenance import Provenance
 from demcal.simulate.params import DEMParameters
-from demcal.simulate.rigs import Rig, RigResult, check_seed, heap, run_meta
+from demcal.simulate.rigs import Rig, RigResult, heap, run_meta
 from demcal.simulate.rigs.heap import (BULK_PACKING, CONE_OBSERVABLES, check_dimensions, cone_height,
                                        cone_observables, fill_lift_settle, heap_task, inscribed_half,
-                                       meta_rows, meta_values, repose_profile, run_heap_task,
+                                       meta_rows, meta_values, prepare_run, run_heap_task,
                                        run_options, side_view_angles)
 from demcal.simulate.timestep import material_time_step
 from demcal.units import MM
@@ -157,24 +157,8 @@ def run_lifting_cylinder(params: DEMParameters, seed: int = 0, *, geometry: Cyli
                          size_distribution=None) -> RigResult:
     """Run the lifting-cylinder repose test and measure the cone (module docstring).
 
-    Parameters
-    ----------
-    params : DEMParameters
-        Materials, contact parameters, shape, mass model, rolling lever.
-    seed : int
-        Seed of the particle factory.
-    geometry : CylinderGeometry
-        The tube, its lift speed and fill.
-    profile : {"paper", "quick"} or ReposeProfile
-        How the run is carried out (``simulate.rigs.heap.PROFILES``).
-    annotate_to : path, optional
-        Write the annotated side view of the cone there.
-    force : bool
-        Allow a time step above half the Rayleigh time.
-    callback : callable, optional
-        ``callback(sim, t_end, final)`` after each chunk (see ``simulate.rigs``).
-    size_distribution : simulate.extensions.SizeDistribution, optional
-        Draw each particle from these measured sizes (as ``run_repose``).
+    The arguments are every repose rig's (``heap.RUN_ARGUMENTS``); ``geometry`` is a
+    :class:`CylinderGeometry`.
 
     Returns
     -------
@@ -184,18 +168,8 @@ def run_lifting_cylinder(params: DEMParameters, seed: int = 0, *, geometry: Cyli
         ``geometry`` (the tube and the fill simulated), ``t_lift``, ``t_clear``, ``t_end`` [s],
         ``ke_t`` [s], ``ke`` [J].
     """
-    from demcal.simulate.extensions import with_size_distribution  # scipy: only when running
 
-    seed = check_seed(seed)
-    if not isinstance(params, DEMParameters):
-        raise InputError(f"params must be a DEMParameters, got {type(params).__name__}")
-    if not isinstance(geometry, CylinderGeometry):
-        raise InputError(f"geometry must be a CylinderGeometry, got {type(geometry).__name__}")
-    if size_distribution is not None:
-        params = with_size_distribution(params, size_distribution)
-    prof = repose_profile(profile)
-    geometry.check_for(params.shape)
-    geo = geometry.filled_for(params.shape)
+    seed, params, prof, geo = prepare_run(params, seed, geometry, CylinderGeometry, profile, size_distribution)
     width = max(float(shape.extent[1]) for shape in params.sized_shapes())
     if prof.early_end:
         # time enough to lift the tube clear of a full fill and to settle after it
