@@ -10,11 +10,14 @@ against the lab's photos by the same test as demcal's own validation.
    converts it), at the time step that follows the material.
 2. The schedule, as the paper's: the particles are poured over the first second, the wall is
    lifted at ``lift_time`` (default 4 s) and the run goes on ``SETTLE_S`` after the wall is
-   clear (the paper's 10 s for its carton: 4 + 2.5 + 3.5).
+   clear (the paper's 10 s for its carton: 4 + 2.5 + 3.5). Each case says when only settling
+   remains (``settling_from``): a funnel lifts nothing and pours for as long as its twin does; a
+   drum turns from ``lift_time`` and is read after its spin-up.
 3. Each run's final spheres are measured by the rig's own ``measure``: the side view rendered
    and read by the photo estimator, as the lab's photos and demcal's twins are; a heap the
    estimator finds no slope in is read by the rig's fallback method, and a run with no reading
-   at all is replaced by the next seed (and listed).
+   at all is replaced by the next seed (and listed); after ``MAX_TRIES_PER_RUN`` such runs in a
+   row, or a failed LIGGGHTS run, the check ends ``failed`` with the runs it made.
 4. The verdict: two one-sided tests of LIGGGHTS' mean angle against the lab's mean with the
    campaign's tolerance and the lab's heap-to-heap sd (``analyse.equivalence``), looked at
    after ``first`` runs and every ``step`` more up to ``cap`` (Haybittle-Peto levels, as the
@@ -34,7 +37,7 @@ import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from demcal.errors import InputError, SimulationError
+from demcal.errors import DemcalError, InputError, SimulationError
 
 #: Simulated time after the wall's lower edge passed its top [s] (the paper's carton:
 #: 10 - 4 - 2.5 s).
@@ -69,7 +72,9 @@ class TargetCheck:
     Attributes
     ----------
     verdict : str
-        ``equivalent``, ``different`` or ``undecided``.
+        ``equivalent``, ``different`` or ``undecided``; ``failed`` when LIGGGHTS failed or kept
+        giving heaps with no reading before the test could be made (``failure`` says why; the
+        runs it made are kept).
     code : str
         The LIGGGHTS version that ran (from its log).
     rig : str
@@ -86,6 +91,8 @@ class TargetCheck:
         The campaign's ``results.json`` (path, SHA-256) and the code version.
     case : dict
         The LIGGGHTS case (dimensions, particle, contact parameters, time step).
+    failure : str
+        Why there is no test (``failed``), else empty.
     """
 
     verdict: str
@@ -93,10 +100,11 @@ class TargetCheck:
     rig: str
     schedule: dict
     runs: list
-    test: dict
+    test: dict | None
     demcal: dict
     source: dict
     case: dict
+    failure: str = ""
 
     def to_dict(self) -> dict:
         out = asdict(self)
@@ -106,6 +114,9 @@ class TargetCheck:
     def summary(self) -> str:
         t = self.test
         used = [r for r in self.runs if math.isfinite(r.angle_deg)]
+        if t is None:
+            return (f"LIGGGHTS check ({self.code}, {self.rig} rig): {self.verdict} after {len(self.runs)} run(s): "
+                    f"{self.failure}")
         lines = [f"LIGGGHTS check ({self.code}, {self.rig} rig): {self.verdict}",
                  f"  LIGGGHTS {t['mean_deg']:.2f} deg [{t['ci95'][0]:.2f}, {t['ci95'][1]:.2f}] over "
                  f"{len(used)} runs against the lab's {t['target_deg']:.2f} deg, tolerance "
@@ -175,7 +186,7 @@ def check_calibration(results, workdir, *, source: dict | None = None, lift_time
     """
     from demcal.analyse.equivalence import sequential_equivalence
     from demcal.provenance import code_version
-    from demcal.simulate.liggghts.run import run_liggghts
+    from demcal.simulate.liggghts.run import LiggghtsUnavailable, run_liggghts
     from demcal.simulate.params import DEMParameters
     from demcal.simulate.rigs import repose_rig_named
 
@@ -203,10 +214,16 @@ def check_calibration(results, workdir, *, source: dict | None = None, lift_time
             res = run_liggghts(seed, workdir / f"seed{seed}", duration=plan["duration_s"], case=case,
                                binary=binary, nice=0)
             version["code"] = res["version"] or version["code"]
-            heap = rig.measure(res["positions"], res["radii"], res["deck"]["case"])
+            try:
+                heap = rig.measure(res["positions"], res["radii"], res["deck"]["case"])
+            except DemcalError as exc:          # nothing the rig can read: no reading
+                heap = {"notes": [str(exc)]}
             angle, how = read_angle(rig, heap)
+            notes = [str(n) for n in heap.get("notes", [])]
+            if res["lost_spheres"]:
+                notes.append(f"{res['lost_spheres']} spheres left LIGGGHTS' box")
             run = TargetRun(seed, angle, how, float(res["wall_s"]), int(res["spheres"]), int(res["lost_spheres"]),
-                            str(workdir / f"seed{seed}"), [str(n) for n in heap.get("notes", [])])
+                            str(workdir / f"seed{seed}"), notes)
             runs.append(run)
             if progress is not None:
                 progress(run)
@@ -215,9 +232,15 @@ def check_calibration(results, workdir, *, source: dict | None = None, lift_time
         raise SimulationError(f"{MAX_TRIES_PER_RUN} LIGGGHTS runs in a row gave no angle of repose "
                               f"(seeds up to {seed}, in {workdir}): {'; '.join(runs[-1].notes) or 'no heap found'}")
 
-    seq = sequential_equivalence(lambda k: [one_run() for _ in range(k)], target, lab_sd, lab_n, tolerance,
-                                 first=first, step=step, cap=cap, alpha=alpha)
     v = results.validation
     demcal = {"verdict": v.verdict, "mean_deg": float(v.mean_deg), "ci95": list(v.ci95), "n_runs": int(v.n_runs)}
-    return TargetCheck(seq.verdict, version["code"] or "LIGGGHTS", rig.workbook_name, plan, runs,
-                       seq.to_dict(), demcal, {**(source or {}), "code": code_version()}, case.to_dict())
+    made = {"rig": rig.workbook_name, "schedule": plan, "runs": runs, "demcal": demcal,
+            "source": {**(source or {}), "code": code_version()}, "case": case.to_dict()}
+    try:
+        seq = sequential_equivalence(lambda k: [one_run() for _ in range(k)], target, lab_sd, lab_n, tolerance,
+                                     first=first, step=step, cap=cap, alpha=alpha)
+    except LiggghtsUnavailable:
+        raise
+    except SimulationError as exc:          # the runs made so far are kept, with why it stopped
+        return TargetCheck("failed", version["code"] or "LIGGGHTS", test=None, failure=str(exc), **made)
+    return TargetCheck(seq.verdict, version["code"] or "LIGGGHTS", test=seq.to_dict(), **made)

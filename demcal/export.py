@@ -19,6 +19,7 @@ from demcal.errors import InputError
 from demcal.provenance import code_version, sha256_file
 from demcal.simulate.export import EXPORT_FILES, CalibratedWith, export_model, render
 from demcal.simulate.params import DEMParameters
+from demcal.text import one_line
 
 
 def accepted_extensions(critique) -> tuple:
@@ -119,7 +120,7 @@ def check_in_liggghts(args: argparse.Namespace) -> int:
         angle = f"{run.angle_deg:.2f} deg ({run.read_by})" if run.read_by else "no angle found"
         print(f"  LIGGGHTS seed {run.seed}: {angle}, {run.spheres} spheres, loop {run.wall_s:.1f} s", flush=True)
 
-    print(f"running the calibrated set in LIGGGHTS ({results.repose_rig} rig), runs in {workdir}", flush=True)
+    print(f"running the calibrated set in LIGGGHTS ({one_line(results.repose_rig)} rig), runs in {workdir}", flush=True)
     try:
         check = check_calibration(results, workdir, source={"file": str(path), "sha256": sha256_file(path)},
                                   lift_time=args.lift_time, duration=args.duration, first=args.first,
@@ -130,7 +131,7 @@ def check_in_liggghts(args: argparse.Namespace) -> int:
     out = write_json(folder / "liggghts_check.json", check.to_dict())
     print(check.summary())
     print(f"wrote {out}")
-    return 0 if check.verdict == "equivalent" else 1
+    return {"equivalent": 0, "failed": 2}.get(check.verdict, 1)
 
 
 def register(subparsers) -> None:

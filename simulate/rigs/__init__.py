@@ -89,7 +89,8 @@ class Rig:
     workbook_name : str or None
         The value of the meta key ``repose_rig`` that chooses it (repose rigs).
     flanks : str
-        Flank(s) of its heap the photos show: ``right`` (one) or ``both`` (a cone).
+        What its photos show, as the repose sheet's ``side`` says: ``right`` (one flank),
+        ``both`` (a cone) or ``drum`` (a drum's free surface, end-on).
     lab_test : str
         The lab test it is the twin of, in the report's words.
     measure : callable or None
@@ -309,7 +310,7 @@ class RigResult:
     Attributes
     ----------
     rig : str
-        ``"repose"``, ``"drop"`` or ``"incline"``.
+        The registered rig that ran (``RIGS``).
     observable : dict
         The measured quantities, named as in the lab (e.g. ``angle_deg``,
         ``apparent_restitution``, ``slide_angle_deg``); NaN when the run could not measure one.

@@ -299,6 +299,9 @@ def liggghts_case(params: DEMParameters, geometry: FunnelGeometry, lift_time: fl
         def phase_steps(self, duration: float) -> tuple:
             return (("pour_and_settle", self.steps(duration)),)
 
+        def to_dict(self) -> dict:          # what measure_heap reads of LIGGGHTS' final spheres
+            return {**super().to_dict(), **geo.to_dict()}
+
     geo = geometry.filled_for(params.shape)
     base = ReposeCase.for_params(params)
     D, column = geo.top_diameter, max(3.0 * float(params.shape.extent[0]), 0.3 * geo.cone_height)

@@ -71,6 +71,26 @@ def test_the_check_reads_each_heap_as_the_rig_does_and_tests_it_against_the_lab(
                                "settling_from_s": pytest.approx(1.0 + 0.08 / 0.2)}
 
 
+def test_runs_with_no_heap_end_the_check_as_failed_keeping_the_runs_made(tmp_path, monkeypatch):
+    """LIGGGHTS runs whose heaps the estimator cannot read are replaced by the next seed, twice;
+    then the check ends as ``failed``, saying why, with every run it made listed."""
+    import demcal.simulate.liggghts.run as lig
+    from demcal.analyse.liggghts_check import MAX_TRIES_PER_RUN, check_calibration
+
+    def empty_heap(seed, workdir, duration, case, binary=None, nice=0):
+        return {"version": "LIGGGHTS-PUBLIC 3.8.0", "positions": np.zeros((0, 3)), "radii": np.zeros(0),
+                "deck": {"case": case.to_dict()}, "wall_s": 0.1, "spheres": 0, "lost_spheres": 60}
+
+    monkeypatch.setattr(lig, "run_liggghts", empty_heap)
+    check = check_calibration(_results(target=30.0, tolerance=2.0), tmp_path, lift_time=1.0, duration=2.6,
+                              first=3, step=1, cap=3)
+    assert check.verdict == "failed" and check.test is None
+    assert len(check.runs) == MAX_TRIES_PER_RUN and [r.seed for r in check.runs] == [1, 2]
+    assert "gave no angle of repose" in check.failure and "failed after 2 run(s)" in check.summary()
+    assert all("60 spheres left LIGGGHTS' box" in r.notes for r in check.runs)
+    json.dumps(check.to_dict())
+
+
 def test_the_check_is_refused_without_liggghts_and_for_another_format(tmp_path, monkeypatch, capsys):
     """--check with another format is refused by name; without a LIGGGHTS binary the check
     says how to install it and exits 2, after writing the export."""

@@ -409,6 +409,9 @@ def test_funnel_deck_is_a_cone_mesh_poured_into_and_holds_its_stream(tmp_path):
     r_cone = 0.02 + (p[inside, 2] - 0.07) * (0.04 / 0.08)
     assert np.all(np.hypot(p[inside, 0] - 0.06, p[inside, 1] - 0.06) < r_cone)
     assert np.sum(p[:, 2] < 0.02) > 10
+    # the rig reads LIGGGHTS' spheres from the deck's record, as the check does
+    heap = rig("funnel").measure(p, result["radii"], result["deck"]["case"])
+    assert set(heap) >= {"angle_deg", "angle_profile_deg", "notes"}
 
 
 def test_drum_deck_turns_its_tube_and_end_plates_about_the_axis_after_the_fill(tmp_path):
