@@ -33,7 +33,7 @@ and transition behavior. Powder Technol. 118, 251-270.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -78,7 +78,7 @@ def bed_depth(fill_fraction: float, diameter: float) -> float:
 
 
 @dataclass(frozen=True)
-class DrumGeometry:
+class DrumGeometry(heap.RigDimensions):
     """The rotating drum and its bed, as in the workbook's ``meta`` sheet.
 
     Attributes
@@ -112,12 +112,6 @@ class DrumGeometry:
         if self.fill_fraction is not None and not 0.05 <= self.fill_fraction <= 0.7:
             raise InputError(f"drum: fill_fraction must be between 0.05 and 0.7 of the drum's volume, "
                              f"got {self.fill_fraction!r} (meta drum_fill_fraction)")
-
-    @classmethod
-    def from_meta(cls, meta: dict, file=None) -> "DrumGeometry":
-        """From a workbook ``meta`` dict; a missing dimension or a bad value raises
-        ``WorkbookError`` naming the sheet, the key and the value (and ``file``)."""
-        return cls(**heap.meta_values(cls.META_KEYS, meta, file, whole=("fill_count",), required=cls.REQUIRED))
 
     @property
     def omega(self) -> float:
@@ -166,13 +160,6 @@ class DrumGeometry:
             raise InputError(f"drum: at {self.speed_rpm:g} rpm the Froude number omega^2 R / g is {self.froude:.3g}, "
                              f"at or above {MAX_FROUDE:g}: the bed would cataract, with no free surface line; "
                              "lower meta drum_speed_rpm")
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    def meta_rows(self) -> list:
-        """The workbook meta rows (key, value) that describe this drum."""
-        return heap.meta_rows(self, self.META_KEYS)
 
     def describe(self, noun: str = "particles") -> str:
         """What the report says of the rig (``noun``: the particles' name, plural)."""

@@ -42,7 +42,7 @@ repose.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -75,7 +75,7 @@ def equivalent_diameter(shape) -> float:
 
 
 @dataclass(frozen=True)
-class FunnelGeometry:
+class FunnelGeometry(heap.RigDimensions):
     """The fixed funnel and its sample, as in the workbook's ``meta`` sheet.
 
     Attributes
@@ -108,12 +108,6 @@ class FunnelGeometry:
         if not self.top_diameter > self.outlet_diameter:
             raise InputError(f"funnel: the top ({self.top_diameter * 1e3:g} mm) must be wider than the outlet "
                              f"({self.outlet_diameter * 1e3:g} mm); meta funnel_top_diameter_mm")
-
-    @classmethod
-    def from_meta(cls, meta: dict, file=None) -> "FunnelGeometry":
-        """From a workbook ``meta`` dict; a missing dimension or a bad value raises
-        ``WorkbookError`` naming the sheet, the key and the value (and ``file``)."""
-        return cls(**heap.meta_values(cls.META_KEYS, meta, file, whole=("fill_count",), required=cls.REQUIRED))
 
     @property
     def top_z(self) -> float:
@@ -157,13 +151,6 @@ class FunnelGeometry:
         per_s = (BEVERLOO_C * heap.BULK_PACKING * math.sqrt(GRAVITY)
                  * max(self.outlet_diameter - BEVERLOO_K * d, d) ** 2.5 / shape.volume())
         return geo.fill_count / (POUR_SHARE * per_s)
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    def meta_rows(self) -> list:
-        """The workbook meta rows (key, value) that describe this funnel."""
-        return heap.meta_rows(self, self.META_KEYS)
 
     def describe(self, noun: str = "particles") -> str:
         """What the report says of the rig (``noun``: the particles' name, plural)."""

@@ -145,6 +145,28 @@ def meta_rows(geometry, keys: dict) -> list:
     return rows
 
 
+class RigDimensions:
+    """What every repose rig's dimensions (a frozen dataclass with ``META_KEYS``, ``meta key ->
+    (field, factor to SI)``, and the keys the workbook must give, ``REQUIRED``) share: read from
+    a workbook's meta, written back to it, and recorded."""
+
+    REQUIRED: tuple = ()
+
+    @classmethod
+    def from_meta(cls, meta: dict, file=None):
+        """From a workbook ``meta`` dict; a missing required key or a bad value raises
+        ``WorkbookError`` naming the sheet, the key and the value (and ``file``); an optional
+        key left out keeps its default."""
+        return cls(**meta_values(cls.META_KEYS, meta, file, whole=("fill_count",), required=cls.REQUIRED))
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def meta_rows(self) -> list:
+        """The workbook meta rows (key, value) that describe these dimensions."""
+        return meta_rows(self, self.META_KEYS)
+
+
 # ----------------------------------------------------------------------------------------------
 # the run
 

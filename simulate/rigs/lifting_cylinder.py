@@ -28,7 +28,7 @@ fits cannot, e.g. seeds that spread into a layer or two), ``crest_height_m``,
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -36,10 +36,10 @@ from demcal.errors import InputError
 from demcal.provenance import Provenance
 from demcal.simulate.params import DEMParameters
 from demcal.simulate.rigs import Rig, RigResult, heap, run_meta
-from demcal.simulate.rigs.heap import (BULK_PACKING, CONE_OBSERVABLES, check_dimensions, cone_height,
-                                       cone_observables, fill_lift_settle, heap_task, inscribed_half,
-                                       meta_rows, meta_values, prepare_run, run_heap_task,
-                                       run_options, side_view_angles)
+from demcal.simulate.rigs.heap import (BULK_PACKING, CONE_OBSERVABLES, RigDimensions, check_dimensions,
+                                       cone_height, cone_observables, fill_lift_settle, heap_task,
+                                       inscribed_half, prepare_run, run_heap_task, run_options,
+                                       side_view_angles)
 from demcal.simulate.timestep import material_time_step
 from demcal.units import MM
 
@@ -54,7 +54,7 @@ MIN_DIAMETER_LENGTHS = 4.0
 
 
 @dataclass(frozen=True)
-class CylinderGeometry:
+class CylinderGeometry(RigDimensions):
     """The lifting cylinder and its fill, as in the workbook's ``meta`` sheet.
 
     Attributes
@@ -81,13 +81,6 @@ class CylinderGeometry:
     def __post_init__(self):
         check_dimensions(self, ("diameter", "height", "lift_speed"), "lifting cylinder")
 
-    @classmethod
-    def from_meta(cls, meta: dict, file=None) -> "CylinderGeometry":
-        """From a workbook ``meta`` dict (``cylinder_diameter_mm``, ``cylinder_height_mm``,
-        ``lift_speed_mm_s``, optional ``fill_count``); a missing dimension or a bad value raises
-        ``WorkbookError`` naming the sheet, the key and the value (and ``file``)."""
-        return cls(**meta_values(cls.META_KEYS, meta, file, whole=("fill_count",), required=cls.REQUIRED))
-
     def filled_for(self, shape) -> "CylinderGeometry":
         """The same tube with its fill count: the workbook's, or ``FILL_SHARE`` of the tube's
         volume at ``BULK_PACKING`` of ``shape``'s volume (at least 10)."""
@@ -110,13 +103,6 @@ class CylinderGeometry:
             raise InputError(f"lifting cylinder: {geo.fill_count} particles make a cone about {h * 1e3:.3g} mm high at "
                              f"{LOWEST_ANGLE_DEG:g} deg, under {MIN_LAYERS:g} particle widths ({width * 1e3:.3g} mm), "
                              "too few layers for its flanks to be read; raise meta fill_count or the tube's size")
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    def meta_rows(self) -> list:
-        """The workbook meta rows (key, value) that describe this tube."""
-        return meta_rows(self, self.META_KEYS)
 
     def describe(self, noun: str = "particles") -> str:
         """What the report says of the rig (``noun``: the particles' name, plural)."""

@@ -39,7 +39,7 @@ bodies whose centre is beyond the end plate) [-].
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -47,7 +47,7 @@ from demcal.errors import InputError
 from demcal.provenance import Provenance
 from demcal.simulate.params import DEMParameters
 from demcal.simulate.rigs import Rig, RigResult, check_seed, heap, run_meta
-from demcal.simulate.rigs.heap import (PX_PER_M, fill_lift_settle, heap_task, meta_rows, meta_values,
+from demcal.simulate.rigs.heap import (PX_PER_M, RigDimensions, fill_lift_settle, heap_task,
                                        repose_profile, run_heap_task, run_options,
                                        side_view_angles)
 from demcal.simulate.scenes import build_paper_repose_case
@@ -59,7 +59,7 @@ REFERENCE_LENGTH, REFERENCE_WIDTH = 0.025, 0.011
 
 
 @dataclass(frozen=True)
-class ReposeGeometry:
+class ReposeGeometry(RigDimensions):
     """The repose rig's carton and fill, as in the workbook's ``meta`` sheet.
 
     Attributes
@@ -93,15 +93,6 @@ class ReposeGeometry:
         object.__setattr__(self, "fill_count", int(self.fill_count))
 
     @classmethod
-    def from_meta(cls, meta: dict, file=None) -> "ReposeGeometry":
-        """From a workbook ``meta`` dict (keys ``box_length_mm``, ``box_width_mm``,
-        ``box_height_mm``, ``plate_lift_speed_mm_s``, ``fill_count``; docs/workbook.md); a
-        missing or empty key keeps the default (200, 100, 250 mm, 100 mm/s, 500). A bad value
-        raises ``WorkbookError`` naming the sheet, the key and the value (and ``file``).
-        Which repose rig a workbook has is ``simulate.rigs.repose_rig``'s to say."""
-        return cls(**meta_values(cls.META_KEYS, meta, file, whole=("fill_count",)))
-
-    @classmethod
     def for_particle(cls, shape) -> "ReposeGeometry":
         """The default carton in proportion to a particle (``simulate.shapes``): scaled by the
         particle's width over ``REFERENCE_WIDTH``, the width it was made for, and filled with as
@@ -121,16 +112,9 @@ class ReposeGeometry:
                        box_height=self.box_height * factor,
                        fill_count=max(10, int(round(self.fill_count * factor ** 3))))
 
-    def to_dict(self) -> dict:
-        return asdict(self)
-
     def check_for(self, shape) -> None:
         """The carton's heap is read on its slope from the crest, inside the carton too, so any
         fill that flows out under the plate leaves a slope to read: nothing to refuse."""
-
-    def meta_rows(self) -> list:
-        """The workbook meta rows (key, value) that describe this carton."""
-        return meta_rows(self, self.META_KEYS)
 
     def describe(self, noun: str = "particles") -> str:
         """What the report says of the rig (``noun``: the particles' name, plural)."""
