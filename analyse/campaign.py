@@ -269,13 +269,18 @@ def factor_levels(measurement, levels: str = "minmax") -> dict:
     return table
 
 
-def repose_setup(measurement):
-    """The repose rig of a measurement's workbook and its dimensions
-    (``simulate.rigs.ReposeSetup``); a rig without a twin, or a dimension of another rig,
-    refused naming its meta key."""
-    from demcal.simulate.rigs import repose_setup as setup_of
+def repose_setups(measurement) -> list:
+    """The repose rigs of a measurement's workbook with their dimensions
+    (``simulate.rigs.ReposeSetup``), the first one's photos the target's; a rig without a twin,
+    or a dimension of a rig not named, refused naming its meta key."""
+    from demcal.simulate.rigs import repose_setups as setups_of
 
-    return setup_of(measurement.meta, file=measurement.workbook.get("source"))
+    return setups_of(measurement.meta, file=measurement.workbook.get("source"))
+
+
+def repose_setup(measurement):
+    """The first repose rig of a measurement's workbook (:func:`repose_setups`)."""
+    return repose_setups(measurement)[0]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -449,15 +454,21 @@ def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
     factors = factor_levels(measurement, config.levels)
     base = base_parameters(measurement).with_(**config.model_extensions)
     material_time_step(base)          # a time step above the safe limit is refused before any run
-    setup = repose_setup(measurement)
-    setup.check_for(base.shape, measurement.workbook.get("source"))   # and a heap no photo could read
+    setups = repose_setups(measurement)
+    setup = setups[0]
+    for s in setups:
+        s.check_for(base.shape, measurement.workbook.get("source"))   # and a heap no photo could read
     if config.workflow == "plausible":
         from demcal.analyse.plausible import derive_plausible
 
         results = derive_plausible(measurement, config, execute, factors=factors, base=base,
-                                   setup=setup, responses=_responses, run_refs=_run_refs)
+                                   setups=setups, responses=_responses, run_refs=_run_refs)
         fallbacks = results.pop("fallback_runs")
     else:
+        if len(setups) > 1:
+            raise InputError(f"the design-expert workflow fits the angle of one heap; the workbook names "
+                             f"{len(setups)} repose rigs ({', '.join(s.workbook_name for s in setups)}): "
+                             "calibrate with --workflow plausible, which conditions on every rig")
         results = _derive_design_expert(measurement, config, execute, factors, base, setup)
         fallbacks = results.pop("fallback_runs")
     # the sections come as their analyses' dictionaries; from_dict types them here, so that a

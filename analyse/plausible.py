@@ -49,13 +49,15 @@ import numpy as np
 from demcal.analyse.equivalence import (default_tolerance, lab_heaps_for_power, runs_for_power,
                                  sequential_equivalence, tost_power)
 from demcal.analyse.noise import pooled_noise, replicates_for, seed_correlation
-from demcal.analyse.results import Calibration, HeapOnly, ParameterEstimate, Point, Validation
-from demcal.analyse.surrogate import (IMPLAUSIBILITY_CUT, U_STOP, NoisySurrogate, Prior, next_points,
+from demcal.analyse.results import Calibration, HeapOnly, OtherRig, ParameterEstimate, Point, Validation
+from demcal.analyse.surrogate import (IMPLAUSIBILITY_CUT, U_STOP, HeapDatum, NoisySurrogate, Prior, next_points,
                                posterior, recommend, recommend_among, space_filling)
 from demcal.errors import AnalysisError
 
 #: Stage numbers of the seed streams (never reorder: they define which seeds a campaign uses).
 SEED_STREAMS = {"noise": 1, "design": 2, "sequential": 3, "validation": 4, "surrogate": 5, "refine": 6}
+#: Marks the seed streams of a workbook's second and further repose rigs.
+RIG_STREAM = 100
 #: Prior samples kept in results.json for the plausible-set plots.
 KEPT_SAMPLES = 1500
 #: A design point's own replicate variance is shrunk toward the pooled one with this weight
@@ -64,15 +66,21 @@ NOISE_PRIOR_DF = 4
 
 
 class SeedStream:
-    """Distinct run seeds per stage from one campaign seed."""
+    """Distinct run seeds per stage from one campaign seed (and, for the workbook's second and
+    further repose rigs, the rig's place ``rig``: each rig draws its own seeds)."""
 
-    def __init__(self, seed: int):
+    def __init__(self, seed: int, rig: int = 0):
         self.seed = int(seed)
+        self.rig = int(rig)
         self.used: dict = {}
+
+    def entropy(self, stage: str) -> list[int]:
+        """The ``SeedSequence`` entropy of a stage's stream (the first rig's as ever)."""
+        return [self.seed, SEED_STREAMS[stage]] + ([RIG_STREAM, self.rig] if self.rig else [])
 
     def take(self, stage: str, n: int) -> list[int]:
         start = self.used.get(stage, 0)
-        state = np.random.SeedSequence([self.seed, SEED_STREAMS[stage]]).generate_state(start + n, dtype=np.uint64)
+        state = np.random.SeedSequence(self.entropy(stage)).generate_state(start + n, dtype=np.uint64)
         self.used[stage] = start + n
         return [int(s % (2 ** 31 - 1)) for s in state[start:]]
 
@@ -111,19 +119,53 @@ def _noise_variances(groups, pooled) -> np.ndarray:
     return np.array(out)
 
 
-def derive_plausible(measurement, config, execute, *, factors, base, setup, responses, run_refs) -> dict:
+class _Heap:
+    """One repose rig of the workbook: its lab angle (target, heap-to-heap sd, heaps), the
+    equivalence tolerance, and, as the workflow goes, its noise, design runs and surrogate.
+
+    ``index`` is the rig's place in the meta's ``repose_rig``; the first rig's stages, stream
+    seeds and results are those of a single-rig campaign."""
+
+    def __init__(self, index, setup, estimate, config):
+        self.index, self.setup = index, setup
+        self.quantity = estimate.name
+        self.target = float(estimate.value)
+        self.lab_sd = float(estimate.sd) if estimate.n >= 2 and math.isfinite(estimate.sd) else None
+        self.lab_n = int(estimate.n) if self.lab_sd is not None else None
+        self.target_var = self.lab_sd ** 2 / self.lab_n if self.lab_sd is not None else 0.0
+        self.tolerance = float(config.tolerance) if config.tolerance else default_tolerance(self.lab_sd)
+        self.seeds = SeedStream(config.seed, index)
+        self.design: list = []                    # every design point: x, runs, stage, seeds, refs
+        self.rounds: list = []
+        self.refinements: list = []
+        self.stopped = "budget"
+
+    def stage(self, name: str) -> str:
+        """A stage's name in the campaign's log (the rig named from the second rig on)."""
+        return name if self.index == 0 else f"{name} ({self.setup.workbook_name})"
+
+    def stream(self, *entropy) -> np.random.SeedSequence:
+        """A seed sequence of this rig (the first rig's as a single-rig campaign's)."""
+        return np.random.SeedSequence(list(entropy) + ([RIG_STREAM, self.index] if self.index else []))
+
+    def datum(self) -> HeapDatum:
+        return HeapDatum(self.model, self.target, self.target_var)
+
+
+def derive_plausible(measurement, config, execute, *, factors, base, setups, responses, run_refs) -> dict:
     """The workflow of the module docstring; ``execute(stage, tasks) -> records`` supplies the
-    DEM runs (the run store, or a replay from it); ``setup`` the workbook's repose rig
-    (``simulate.rigs.ReposeSetup``). Returns what ``results.json`` holds."""
-    est = measurement.quantities["repose_angle_deg"]
-    target = float(est.value)
-    lab_sd = float(est.sd) if est.n >= 2 and math.isfinite(est.sd) else None
-    lab_n = int(est.n) if lab_sd is not None else None
-    target_var = lab_sd ** 2 / lab_n if lab_sd is not None else 0.0
-    tolerance = float(config.tolerance) if config.tolerance else default_tolerance(lab_sd)
+    DEM runs (the run store, or a replay from it); ``setups`` the workbook's repose rigs
+    (``simulate.rigs.ReposeSetup``), the first one's angle ``repose_angle_deg``, each further
+    one's the measurement's ``repose_angle_deg.<rig>``. Each rig has its own noise, design and
+    surrogate; the posterior is conditioned on every rig's heap at once. Returns what
+    ``results.json`` holds."""
+    from demcal.measure.pipeline import repose_quantity
+
+    heaps = [_Heap(i, setup, measurement.quantities[repose_quantity(i, setup.workbook_name)], config)
+             for i, setup in enumerate(setups)]
+    first = heaps[0]
     flank_band = measurement.provenance.options.get("flank_band")
     heap_prior = measured_prior(measurement, factors)
-    seeds = SeedStream(config.seed)
     fallbacks: list = []
     constraints = {}
     if config.likelihood == "joint":
@@ -135,12 +177,10 @@ def derive_plausible(measurement, config, execute, *, factors, base, setup, resp
     # the surrogate spans both priors, so that the heap-only posterior can be compared on it
     box_low, box_high = np.minimum(prior.low, heap_prior.low), np.maximum(prior.high, heap_prior.high)
 
-    def task(x, seed):
-        return setup.task(base.with_(**{n: float(v) for n, v in zip(names, x)}), seed, profile=config.profile)
-
-    def run(stage, points, seed_lists):
-        tasks = [task(x, s) for x, ss in zip(points, seed_lists) for s in ss]
-        records = execute(stage, tasks)
+    def run(heap, stage, points, seed_lists):
+        tasks = [heap.setup.task(base.with_(**{n: float(v) for n, v in zip(names, x)}), s, profile=config.profile)
+                 for x, ss in zip(points, seed_lists) for s in ss]
+        records = execute(heap.stage(stage), tasks)
         y = responses(records, fallbacks)
         _check_band(records, flank_band)
         out, i = [], 0
@@ -149,117 +189,211 @@ def derive_plausible(measurement, config, execute, *, factors, base, setup, resp
             i += len(ss)
         return out, records
 
-    design = []                                  # every design point: x, runs, stage, seeds, refs
-
-    def add(stage, points, seed_lists, ys, records):
+    def add(heap, stage, points, seed_lists, ys, records):
         i = 0
         for x, ss, y in zip(points, seed_lists, ys):
-            design.append({"stage": stage, "x": np.asarray(x, dtype=float), "seeds": list(ss),
-                           "responses": np.asarray(y, dtype=float),
-                           "runs": run_refs(records[i:i + len(ss)])})
+            heap.design.append({"stage": stage, "x": np.asarray(x, dtype=float), "seeds": list(ss),
+                                "responses": np.asarray(y, dtype=float),
+                                "runs": run_refs(records[i:i + len(ss)])})
             i += len(ss)
+
+    def fit(heap):
+        groups = [p["responses"] for p in heap.design]
+        heap.pooled = pooled_noise(groups)
+        x = np.array([p["x"] for p in heap.design])
+        y = np.array([p["responses"].mean() for p in heap.design])
+        seed = int(heap.stream(config.seed, SEED_STREAMS["surrogate"]).generate_state(1)[0] % (2 ** 31))
+        heap.model = NoisySurrogate(box_low, box_high, seed=seed).fit(x, y, _noise_variances(groups, heap.pooled))
 
     # 1. noise at the centre, and the seed correlation --------------------------------------
     a = prior.truncated_mean_sd()[0]
     b = np.minimum(a + 0.5 * prior.sd, prior.high - 1e-9 * (prior.high - prior.low))
-    pair_seeds = seeds.take("noise", config.noise_repeats)
-    (ya, yb), noise_records = run("noise", [a, b], [pair_seeds, pair_seeds])
-    add("noise", [a, b], [pair_seeds, pair_seeds], [ya, yb], noise_records)
-    centre_noise = pooled_noise([ya, yb])
-    correlation = seed_correlation(ya, yb)
-    k = int(config.replicates) if config.replicates else replicates_for(centre_noise.sd, tolerance)
+    for heap in heaps:
+        pair_seeds = heap.seeds.take("noise", config.noise_repeats)
+        (ya, yb), noise_records = run(heap, "noise", [a, b], [pair_seeds, pair_seeds])
+        add(heap, "noise", [a, b], [pair_seeds, pair_seeds], [ya, yb], noise_records)
+        heap.centre_noise = pooled_noise([ya, yb])
+        heap.correlation = seed_correlation(ya, yb)
+        heap.pair = {"a": a.tolist(), "b": b.tolist(), "seeds": pair_seeds,
+                     "a_responses": ya.tolist(), "b_responses": yb.tolist()}
+        k = heap.k = int(config.replicates) if config.replicates else replicates_for(heap.centre_noise.sd, heap.tolerance)
 
-    # 2. space-filling design (at most half the budget: the rest goes where it informs) --------
-    n0 = max(min(config.initial_points, config.budget_runs // (2 * k)), 3)
-    x0 = space_filling(prior, n0, np.random.SeedSequence([config.seed, SEED_STREAMS["design"], 0]))
-    s0 = seeds.take("design", len(x0) * k)
-    seed_lists = [s0[i * k:(i + 1) * k] for i in range(len(x0))]
-    ys, records = run("design", list(x0), seed_lists)
-    add("design", list(x0), seed_lists, ys, records)
+        # 2. space-filling design (at most half the budget: the rest goes where it informs) ----
+        heap.n0 = max(min(config.initial_points, config.budget_runs // (2 * k)), 3)
+        # rigs with as many points share them
+        x0 = space_filling(prior, heap.n0, np.random.SeedSequence([config.seed, SEED_STREAMS["design"], 0]))
+        s0 = heap.seeds.take("design", len(x0) * k)
+        seed_lists = [s0[i * k:(i + 1) * k] for i in range(len(x0))]
+        ys, records = run(heap, "design", list(x0), seed_lists)
+        add(heap, "design", list(x0), seed_lists, ys, records)
+        fit(heap)
 
-    surrogate_seed = int(np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"]]).generate_state(1)[0] % (2 ** 31))
-
-    def fit():
-        groups = [p["responses"] for p in design]
-        pooled = pooled_noise(groups)
-        x = np.array([p["x"] for p in design])
-        y = np.array([p["responses"].mean() for p in design])
-        model = NoisySurrogate(box_low, box_high, seed=surrogate_seed).fit(x, y, _noise_variances(groups, pooled))
-        return model, pooled
-
-    model, pooled = fit()
-
-    # 3. sequential runs where the sign of mean - target is least certain -------------------
-    rounds = []
-    spent = len(x0) * k
-    stopped = "budget"
-    r = 0
-    while spent + config.batch * k <= config.budget_runs:
-        r += 1
-        pts, u_min = next_points(model, prior, target, config.batch, noise_var=pooled.sd ** 2 / k,
-                                 seed=np.random.SeedSequence([config.seed, SEED_STREAMS["sequential"], r]))
-        if u_min >= U_STOP:
-            rounds.append({"round": r, "u_min": u_min, "points": 0})
-            stopped = f"settled: every candidate has |m - target| / s >= {U_STOP:g}"
-            break
-        ss = seeds.take("sequential", len(pts) * k)
-        seed_lists = [ss[i * k:(i + 1) * k] for i in range(len(pts))]
-        ys, records = run(f"sequential {r}", list(pts), seed_lists)
-        add(f"sequential {r}", list(pts), seed_lists, ys, records)
-        spent += len(pts) * k
-        rounds.append({"round": r, "u_min": u_min, "points": len(pts)})
-        model, pooled = fit()
+        # 3. sequential runs where the sign of mean - target is least certain -----------------
+        spent = len(x0) * k
+        r = 0
+        while spent + config.batch * k <= config.budget_runs:
+            r += 1
+            pts, u_min = next_points(heap.model, prior, heap.target, config.batch, noise_var=heap.pooled.sd ** 2 / k,
+                                     seed=heap.stream(config.seed, SEED_STREAMS["sequential"], r))
+            if u_min >= U_STOP:
+                heap.rounds.append({"round": r, "u_min": u_min, "points": 0})
+                heap.stopped = f"settled: every candidate has |m - target| / s >= {U_STOP:g}"
+                break
+            ss = heap.seeds.take("sequential", len(pts) * k)
+            seed_lists = [ss[i * k:(i + 1) * k] for i in range(len(pts))]
+            ys, records = run(heap, f"sequential {r}", list(pts), seed_lists)
+            add(heap, f"sequential {r}", list(pts), seed_lists, ys, records)
+            spent += len(pts) * k
+            heap.rounds.append({"round": r, "u_min": u_min, "points": len(pts)})
+            fit(heap)
 
     # 4. posterior, plausible set, recommended point --------------------------------------------
     def calibrated():
-        post = posterior(model, prior, target, target_var,
+        post = posterior(first.model, prior, first.target, first.target_var,
                          discrepancy_var=config.discrepancy_sd ** 2,
-                         seed=np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 1]))
-        return post, recommend(post, model)
+                         seed=np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 1]),
+                         others=[h.datum() for h in heaps[1:]])
+        return post, recommend(post, first.model)
 
     post, best = calibrated()
     # the validation runs at the recommended point, so the surrogate's mean there decides it:
-    # pin it down with runs of its own, refit, and let the recommended point move
-    refinements = []
+    # pin it down with runs of its own (in every rig), refit, and let the recommended point move
     for r in range(1, config.refine_rounds + 1):
         x_r = np.array([best["values"][n] for n in names])
-        ss = seeds.take("refine", config.refine_runs)
-        (y,), records = run(f"refine {r}", [x_r], [ss])
-        add(f"refine {r}", [x_r], [ss], [y], records)
-        model, pooled = fit()
-        refinements.append({"round": r, "runs": len(ss), "predicted": best["predicted"],
-                            "predicted_sd": best["predicted_sd"], "mean": float(y.mean()),
-                            "sd": float(y.std(ddof=1)) if y.size > 1 else None})
+        for heap in heaps:
+            predicted = [float(v[0]) for v in heap.model.predict(x_r[None, :])]
+            ss = heap.seeds.take("refine", config.refine_runs)
+            (y,), records = run(heap, f"refine {r}", [x_r], [ss])
+            add(heap, f"refine {r}", [x_r], [ss], [y], records)
+            fit(heap)
+            heap.refinements.append({"round": r, "runs": len(ss), "predicted": predicted[0],
+                                     "predicted_sd": predicted[1], "mean": float(y.mean()),
+                                     "sd": float(y.std(ddof=1)) if y.size > 1 else None})
         post, best = calibrated()
     mode = best
-    if refinements:
+    if config.refine_rounds:
         # the surrogate is least sure where no run has been made: the validation goes to the
         # refined point (its mean angle measured by refine_runs runs) the posterior rates
         # highest, not to a mode the last refit may have moved to unmeasured ground
-        refined = [p["x"] for p in design if p["stage"].startswith("refine")]
-        best = recommend_among(post, model, refined)
+        refined = [p["x"] for p in first.design if p["stage"].startswith("refine")]
+        best = recommend_among(post, first.model, refined)
         best["chosen"] = f"refined point of round {best.pop('index') + 1}"
-        for i, ref in enumerate(refinements):
-            m, s = model.predict(refined[i][None, :])
-            ref.update(final_predicted=float(m[0]), final_predicted_sd=float(s[0]))
+        for heap in heaps:
+            for i, ref in enumerate(heap.refinements):
+                m, s = heap.model.predict(refined[i][None, :])
+                ref.update(final_predicted=float(m[0]), final_predicted_sd=float(s[0]))
     else:
         best["chosen"] = "posterior mode"
     parameters = _parameter_table(post, best)
     heap_only = None
     if constraints:
-        hp = posterior(model, heap_prior, target, target_var, discrepancy_var=config.discrepancy_sd ** 2,
-                       seed=np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 3]))
-        hb = recommend(hp, model)
+        hp = posterior(first.model, heap_prior, first.target, first.target_var, discrepancy_var=config.discrepancy_sd ** 2,
+                       seed=np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 3]),
+                       others=[h.datum() for h in heaps[1:]])
+        hb = recommend(hp, first.model)
         heap_only = HeapOnly(parameters=_parameter_table(hp, hb), recommended=Point(**hb), ess=hp.ess)
+    by_rig = None
+    if len(heaps) > 1:
+        # what each rig says alone, on its own surrogate and the same prior
+        by_rig = {}
+        for heap in heaps:
+            alone = posterior(heap.model, prior, heap.target, heap.target_var,
+                              discrepancy_var=config.discrepancy_sd ** 2,
+                              seed=heap.stream(config.seed, SEED_STREAMS["surrogate"], 4))
+            by_rig[heap.setup.workbook_name] = {n: {"sd_ratio": v["sd_ratio"], "ci95": v["ci95"]}
+                                                for n, v in alone.summary().items()}
     inside = {n: bool(parameters[n].ci95[0] <= best["values"][n] <= parameters[n].ci95[1]) for n in names}
 
-    # 5. validation by equivalence ---------------------------------------------------------------
+    # 5. validation by equivalence, in every rig ------------------------------------------------
     x_best = np.array([best["values"][n] for n in names])
+    for heap in heaps:
+        heap.validation = _validate(heap, config, x_best, best, run, run_refs)
+
+    # what is kept for plots and the audit
+    keep = np.random.default_rng(np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 2]))
+    draws = keep.choice(post.weights.size, size=KEPT_SAMPLES, p=post.weights)
+    rigs = ", ".join(h.setup.workbook_name for h in heaps)
+    out = {
+        "prior": prior.to_dict(),
+        **_heap_sections(first, names, config),
+        "calibration": Calibration(
+            method=("posterior of the measured-mean-and-sd prior given the lab's angle of repose"
+                    + (f" in each of its repose rigs ({rigs}), each with its own surrogate" if len(heaps) > 1 else "")
+                    + ", by importance sampling on a stochastic-kriging surrogate of the mean heap angle; "
+                    f"plausible set: implausibility < {IMPLAUSIBILITY_CUT:g} (history matching"
+                    + ("; the largest over the rigs); " if len(heaps) > 1 else "); ")
+                    + ("recommended point: the refined point of highest posterior density; "
+                       if config.refine_rounds else "recommended point: the posterior mode; ")
+                    + ("joint: the drop and incline twins constrain the restitutions and frictions "
+                       "first (analyse.twin_likelihood)" if constraints else "heap only")),
+            likelihood=config.likelihood,
+            twins={n: c.to_dict() for n, c in constraints.items()},
+            heap_only=heap_only,
+            by_rig=by_rig,
+            parameters=parameters,
+            recommended=Point(**best), posterior_mode=Point(**mode), recommended_inside_ci95=inside,
+            target_deg=first.target, target_sd_deg=first.lab_sd, target_n=first.lab_n, target_var=first.target_var,
+            discrepancy_sd_deg=config.discrepancy_sd,
+            plausible={"cut": IMPLAUSIBILITY_CUT, "share_of_prior": float(np.mean(post.plausible)),
+                       "box": post.plausible_box()},
+            ess=post.ess,
+            samples={"names": list(names),
+                     "prior": post.samples[:KEPT_SAMPLES].tolist(),
+                     "prior_implausibility": post.implausibility[:KEPT_SAMPLES].tolist(),
+                     "posterior": post.samples[draws].tolist()}),
+        "validation": first.validation,
+        "calibrated_parameters": base.with_(**best["values"]).to_dict(),
+        "fallback_runs": fallbacks,
+    }
+    if len(heaps) > 1:
+        out["other_rigs"] = [OtherRig(rig=h.setup.rig, workbook_name=h.setup.workbook_name, quantity=h.quantity,
+                                      geometry=h.setup.geometry, target_deg=h.target, target_sd_deg=h.lab_sd,
+                                      target_n=h.lab_n, target_var=h.target_var,
+                                      **{k: v for k, v in _heap_sections(h, names, config).items()},
+                                      predicted=_predicted(h, x_best), validation=h.validation)
+                             for h in heaps[1:]]
+    return out
+
+
+def _predicted(heap, x) -> dict:
+    """The rig's surrogate at the point ``x``: mean angle and sd [deg]."""
+    m, s = heap.model.predict(np.asarray(x, dtype=float)[None, :])
+    return {"mean_deg": float(m[0]), "sd_deg": float(s[0])}
+
+
+def _heap_sections(heap, names, config) -> dict:
+    """A rig's noise study, design runs and surrogate, as ``results.json`` holds them."""
+    design = heap.design
+    design_pooled = pooled_noise([p["responses"] for p in design if p["stage"] != "noise"]) \
+        if sum(p["stage"] != "noise" for p in design) else None
+    noise = {"centre": heap.centre_noise.to_dict(), "design": design_pooled.to_dict() if design_pooled else None,
+             "all_points": heap.pooled.to_dict(), "seed_correlation": heap.correlation.to_dict(),
+             "replicates": heap.k, "replicates_rule": ("set by --replicates" if config.replicates else
+                                                       "fewest k >= 2 with run SD / sqrt(k) <= 3 x tolerance, at most 4"),
+             "pairs": heap.pair}
+    return {
+        "noise": noise,
+        "design": {"points": [{"stage": p["stage"], "settings": dict(zip(names, p["x"].tolist())),
+                               "responses": p["responses"].tolist(), "mean": float(p["responses"].mean()),
+                               "seeds": p["seeds"], "runs": p["runs"]} for p in design],
+                   "replicates": heap.k, "initial_points": int(heap.n0), "batch": config.batch,
+                   "budget_runs": config.budget_runs, "rounds": heap.rounds, "stopped_because": heap.stopped,
+                   "refinements": heap.refinements},
+        "surrogate": {"kernel": str(heap.model.kernel), "length_scales": dict(zip(names, heap.model.length_scales().tolist())),
+                      "leave_one_out": heap.model.leave_one_out(),
+                      "noise_model": "pooled" if heap.pooled.constant else "per point, shrunk to pooled"},
+    }
+
+
+def _validate(heap, config, x_best, best, run, run_refs) -> Validation:
+    """Fresh runs of the rig at the recommended point, tested for equivalence with its lab angle
+    (module docstring, step 6)."""
     val = {"responses": [], "seeds": [], "runs": []}
+    target, lab_sd, lab_n, tolerance, pooled = heap.target, heap.lab_sd, heap.lab_n, heap.tolerance, heap.pooled
 
     def draw(n):
-        ss = seeds.take("validation", n)
-        (y,), records = run(f"validation {len(val['seeds']) + n}", [x_best], [ss])
+        ss = heap.seeds.take("validation", n)
+        (y,), records = run(heap, f"validation {len(val['seeds']) + n}", [x_best], [ss])
         val["responses"] += y.tolist()
         val["seeds"] += ss
         val["runs"] += run_refs(records)
@@ -267,7 +401,8 @@ def derive_plausible(measurement, config, execute, *, factors, base, setup, resp
 
     # the first look comes when the test has 80 % power to decide at the predicted bias (at
     # least validation_first runs, at most the cap); then validation_step more at a time
-    first = runs_for_power(best["predicted"] - target, pooled.sd, tolerance, 0.8, lab_sd, lab_n,
+    predicted = best["predicted"] if heap.index == 0 else _predicted(heap, x_best)["mean_deg"]
+    first = runs_for_power(predicted - target, pooled.sd, tolerance, 0.8, lab_sd, lab_n,
                            config.alpha, n_max=config.validation_cap)
     first = max(config.validation_first, first) if first is not None else config.validation_first
     seq = sequential_equivalence(draw, target, lab_sd, lab_n, tolerance, first=first,
@@ -280,62 +415,12 @@ def derive_plausible(measurement, config, execute, *, factors, base, setup, resp
     needed = runs_for_power(0.0, pooled.sd, tolerance, 0.8, lab_sd, lab_n, config.alpha, n_max=1000)
     needed_exact = runs_for_power(0.0, pooled.sd, tolerance, 0.8, alpha=config.alpha, n_max=1000)
     heaps = lab_heaps_for_power(pooled.sd, config.validation_cap, tolerance, lab_sd) if lab_sd else None
-    validation = Validation(verdict=vdict["verdict"], mean_deg=vdict["mean_deg"], ci95=tuple(vdict["ci95"]),
-                            tolerance_deg=tolerance, target_deg=target, n_runs=vdict["n_runs"],
-                            detectable_bias_deg=vdict["detectable_bias_deg"], settings=best["values"],
-                            power_if_on_target=power, runs_for_power=needed,
-                            runs_for_power_exact_target=needed_exact, lab_heaps_for_power=heaps,
-                            test=vdict, **val)
-
-    # what is kept for plots and the audit
-    keep = np.random.default_rng(np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 2]))
-    draws = keep.choice(post.weights.size, size=KEPT_SAMPLES, p=post.weights)
-    design_pooled = pooled_noise([p["responses"] for p in design if p["stage"] != "noise"]) \
-        if sum(p["stage"] != "noise" for p in design) else None
-    noise = {"centre": centre_noise.to_dict(), "design": design_pooled.to_dict() if design_pooled else None,
-             "all_points": pooled.to_dict(), "seed_correlation": correlation.to_dict(),
-             "replicates": k, "replicates_rule": ("set by --replicates" if config.replicates else
-                                                  "fewest k >= 2 with run SD / sqrt(k) <= 3 x tolerance, at most 4"),
-             "pairs": {"a": a.tolist(), "b": b.tolist(), "seeds": pair_seeds,
-                       "a_responses": ya.tolist(), "b_responses": yb.tolist()}}
-    loo = model.leave_one_out()
-    return {
-        "prior": prior.to_dict(),
-        "noise": noise,
-        "design": {"points": [{"stage": p["stage"], "settings": dict(zip(names, p["x"].tolist())),
-                               "responses": p["responses"].tolist(), "mean": float(p["responses"].mean()),
-                               "seeds": p["seeds"], "runs": p["runs"]} for p in design],
-                   "replicates": k, "initial_points": int(n0), "batch": config.batch,
-                   "budget_runs": config.budget_runs, "rounds": rounds, "stopped_because": stopped,
-                   "refinements": refinements},
-        "surrogate": {"kernel": str(model.kernel), "length_scales": dict(zip(names, model.length_scales().tolist())),
-                      "leave_one_out": loo, "noise_model": "pooled" if pooled.constant else "per point, shrunk to pooled"},
-        "calibration": Calibration(
-            method=("posterior of the measured-mean-and-sd prior given the lab's angle of repose, by "
-                    "importance sampling on a stochastic-kriging surrogate of the mean heap angle; "
-                    f"plausible set: implausibility < {IMPLAUSIBILITY_CUT:g} (history matching); "
-                    + ("recommended point: the refined point of highest posterior density; "
-                       if refinements else "recommended point: the posterior mode; ")
-                    + ("joint: the drop and incline twins constrain the restitutions and frictions "
-                       "first (analyse.twin_likelihood)" if constraints else "heap only")),
-            likelihood=config.likelihood,
-            twins={n: c.to_dict() for n, c in constraints.items()},
-            heap_only=heap_only,
-            parameters=parameters,
-            recommended=Point(**best), posterior_mode=Point(**mode), recommended_inside_ci95=inside,
-            target_deg=target, target_sd_deg=lab_sd, target_n=lab_n, target_var=target_var,
-            discrepancy_sd_deg=config.discrepancy_sd,
-            plausible={"cut": IMPLAUSIBILITY_CUT, "share_of_prior": float(np.mean(post.plausible)),
-                       "box": post.plausible_box()},
-            ess=post.ess,
-            samples={"names": list(names),
-                     "prior": post.samples[:KEPT_SAMPLES].tolist(),
-                     "prior_implausibility": post.implausibility[:KEPT_SAMPLES].tolist(),
-                     "posterior": post.samples[draws].tolist()}),
-        "validation": validation,
-        "calibrated_parameters": base.with_(**best["values"]).to_dict(),
-        "fallback_runs": fallbacks,
-    }
+    return Validation(verdict=vdict["verdict"], mean_deg=vdict["mean_deg"], ci95=tuple(vdict["ci95"]),
+                      tolerance_deg=tolerance, target_deg=target, n_runs=vdict["n_runs"],
+                      detectable_bias_deg=vdict["detectable_bias_deg"], settings=best["values"],
+                      power_if_on_target=power, runs_for_power=needed,
+                      runs_for_power_exact_target=needed_exact, lab_heaps_for_power=heaps,
+                      test=vdict, **val)
 
 
 def _parameter_table(post, best) -> dict:

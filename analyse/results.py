@@ -205,9 +205,15 @@ class Calibration(Record):
     twins : dict
         Per parameter, what its lab test's twin says (joint calibration).
     heap_only : HeapOnly or None
+    by_rig : dict or None
+        With several repose rigs: per rig (workbook name), per parameter, the ``sd_ratio`` and
+        ``ci95`` of the posterior given that rig's heap alone (same prior, the rig's own
+        surrogate), beside ``parameters`` given every rig's.
     samples : dict
         Prior and posterior samples kept for the plots.
     """
+
+    _omit_if_none = ("by_rig",)
 
     method: str
     likelihood: str
@@ -225,6 +231,7 @@ class Calibration(Record):
     heap_only: HeapOnly | None = None
     posterior_mode: Point | None = None
     samples: dict = field(default_factory=dict)
+    by_rig: dict | None = None
 
 
 @dataclass(frozen=True)
@@ -373,6 +380,43 @@ class SurrogateSummary(Record):
     length_scales: dict
     leave_one_out: dict
     noise_model: str
+
+
+@dataclass(frozen=True)
+class OtherRig(Record):
+    """A workbook's second (or further) repose rig in the plausible workflow: its heaps join the
+    posterior through a surrogate of their own (``results["other_rigs"]``).
+
+    Attributes
+    ----------
+    rig, workbook_name, quantity : str
+        The registered rig, its name in the workbook and the measured quantity
+        (``repose_angle_deg.<rig>``).
+    geometry : dict
+        Its dimensions.
+    target_deg, target_sd_deg, target_n, target_var
+        The lab's angle in this rig, heap-to-heap sd, heaps and the variance of the mean.
+    noise, design, surrogate : NoiseStudy, DesignRuns, SurrogateSummary
+        As the first rig's sections of the same names.
+    predicted : dict
+        The rig's surrogate at the recommended point: ``mean_deg``, ``sd_deg``.
+    validation : Validation
+        The rig's runs at the recommended point, tested for equivalence with its lab angle.
+    """
+
+    rig: str
+    workbook_name: str
+    quantity: str
+    geometry: dict
+    target_deg: float
+    target_sd_deg: float | None
+    target_n: int | None
+    target_var: float
+    noise: NoiseStudy
+    design: DesignRuns
+    surrogate: SurrogateSummary
+    predicted: dict
+    validation: Validation
 
 
 # --------------------------------------------------------------------------------------------
@@ -600,6 +644,9 @@ class CampaignResult(Record):
     plackett_burman, significant, steepest_climb, box_behnken, optimisation
         The paper's procedure: ScreeningStage, FactorChoice, SteepestClimbStage,
         BoxBehnkenStage, Optimisation, or None.
+    other_rigs : list of OtherRig or None
+        Plausible workflow with several repose rigs: the second and further rigs (the first
+        rig's are the sections above).
     runner, wall_s : str, float or None
         The DEM runner and the campaign's wall time (not re-derived by the audit).
     schema_version : int
@@ -628,13 +675,15 @@ class CampaignResult(Record):
     steepest_climb: SteepestClimbStage | None = None
     box_behnken: BoxBehnkenStage | None = None
     optimisation: Optimisation | None = None
+    other_rigs: list[OtherRig] | None = None
     runner: str | None = None
     wall_s: float | None = None
     repose_rig: str = "lifted_plate"
     schema_version: int = SCHEMA_VERSION
 
     _omit_if_none = ("calibration", "prior", "noise", "design", "surrogate", "plackett_burman",
-                     "significant", "steepest_climb", "box_behnken", "optimisation", "runner", "wall_s")
+                     "significant", "steepest_climb", "box_behnken", "optimisation", "other_rigs", "runner",
+                     "wall_s")
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "results.json") -> "CampaignResult":
@@ -657,8 +706,10 @@ class CampaignResult(Record):
         cal = self.calibration
         if cal:
             for name, p in cal.parameters.items():
+                alone = ", ".join(f"{rig} {v[name]['sd_ratio']:.2f}" for rig, v in (cal.by_rig or {}).items())
                 lines.append(f"  {name:14s} {p.value:.4g}  95 % set [{p.ci95[0]:.4g}, {p.ci95[1]:.4g}]"
-                             f"  posterior/prior sd {p.sd_ratio:.2f} ({p.identifiability})")
+                             f"  posterior/prior sd {p.sd_ratio:.2f} ({p.identifiability})"
+                             + (f"; each rig alone: {alone}" if alone else ""))
             rec = cal.recommended
             lines.append(f"  predicted mean angle at the recommended point ({rec.chosen}) {rec.predicted:.2f} "
                          f"+- {rec.predicted_sd:.2f} deg")
@@ -674,6 +725,12 @@ class CampaignResult(Record):
             lines.append(f"  power to show equivalence even exactly on target: {v.power_if_on_target:.2f}; "
                          f"80 % would take {n(v.runs_for_power)} runs against this lab target, "
                          f"{n(v.runs_for_power_exact_target)} against an exactly known one")
+        for o in self.other_rigs or ():
+            w = o.validation
+            lo, hi = w.ci95
+            lines.append(f"validation in the {o.workbook_name} rig: {w.verdict} (tolerance {w.tolerance_deg:.2f} deg): "
+                         f"mean {w.mean_deg:.2f} deg over {w.n_runs} runs, 95 % CI [{lo:.2f}, {hi:.2f}], "
+                         f"target {w.target_deg:.2f}")
         conf = v.confirmation
         if conf:
             lo, hi = conf["pi95"]

@@ -237,9 +237,25 @@ class NoisySurrogate:
 # ----------------------------------------------------------------------------------------------
 # posterior, plausible set, identifiability
 
+@dataclass(frozen=True)
+class HeapDatum:
+    """A further lab heap the posterior is conditioned on (another repose rig): the surrogate of
+    its rig's mean angle, the lab's angle in that rig and the variance of that mean."""
+
+    surrogate: NoisySurrogate
+    target: float
+    target_var: float
+
+    def terms(self, x, discrepancy_var: float) -> tuple[np.ndarray, np.ndarray]:
+        """Log-likelihood and implausibility of the heap at the points ``x`` (n, dim)."""
+        m, s = self.surrogate.predict(x)
+        var = s ** 2 + self.target_var + discrepancy_var
+        return -0.5 * (self.target - m) ** 2 / var - 0.5 * np.log(var), np.abs(self.target - m) / np.sqrt(var)
+
+
 @dataclass
 class Posterior:
-    """Prior samples weighted by the likelihood of the lab target.
+    """Prior samples weighted by the likelihood of the lab target (and of the ``others`` heaps).
 
     Attributes
     ----------
@@ -247,10 +263,13 @@ class Posterior:
     weights : numpy.ndarray (n,)
         Normalised importance weights.
     predicted, predicted_sd : numpy.ndarray (n,)
-        Surrogate mean and sd at each sample.
+        Surrogate mean and sd at each sample (of the first heap).
     implausibility : numpy.ndarray (n,)
+        The largest over the heaps (history matching's maximum implausibility).
     ess : float
         Effective sample size of the weights.
+    others : tuple of HeapDatum
+        The further heaps.
     """
 
     prior: Prior
@@ -264,6 +283,7 @@ class Posterior:
     target_var: float
     discrepancy_var: float
     parameters: dict = field(default_factory=dict)
+    others: tuple = ()
 
     @property
     def plausible(self) -> np.ndarray:
@@ -312,7 +332,8 @@ def weighted_quantiles(values, weights, qs) -> list[float]:
 
 
 def posterior(surrogate: NoisySurrogate, prior: Prior, target: float, target_var: float, *,
-              discrepancy_var: float = 0.0, n: int = 20000, seed=0, log_likelihood=None) -> Posterior:
+              discrepancy_var: float = 0.0, n: int = 20000, seed=0, log_likelihood=None,
+              others=()) -> Posterior:
     """Importance-sample the posterior of the parameters given the lab target.
 
     Parameters
@@ -331,37 +352,51 @@ def posterior(surrogate: NoisySurrogate, prior: Prior, target: float, target_var
     log_likelihood : callable, optional
         ``f(samples) -> (n,)`` log-likelihood of other lab tests (the joint calibration's drop
         and incline twins), added to the heap's.
+    others : sequence of HeapDatum
+        Further heaps (other repose rigs of the workbook), each with its own surrogate: their
+        log-likelihoods are added, and the implausibility is the largest of all heaps'.
     """
     rng = np.random.default_rng(seed)
     x = prior.sample(n, rng)
     m, s = surrogate.predict(x)
     var = s ** 2 + target_var + discrepancy_var
     logw = -0.5 * (target - m) ** 2 / var - 0.5 * np.log(var)
+    implausibility = np.abs(target - m) / np.sqrt(var)
+    for other in others:
+        ll, imp = other.terms(x, discrepancy_var)
+        logw = logw + ll
+        implausibility = np.maximum(implausibility, imp)
     if log_likelihood is not None:
         logw = logw + np.asarray(log_likelihood(x), dtype=float)
     logw -= logw.max()
     w = np.exp(logw)
     w /= w.sum()
     ess = float(1.0 / np.sum(w ** 2))
-    return Posterior(prior, x, w, m, s, np.abs(target - m) / np.sqrt(var), ess, float(target),
-                     float(target_var), float(discrepancy_var))
+    return Posterior(prior, x, w, m, s, implausibility, ess, float(target),
+                     float(target_var), float(discrepancy_var), others=tuple(others))
 
 
 def log_posterior(post: Posterior, surrogate: NoisySurrogate, x, log_likelihood=None) -> np.ndarray:
-    """Log prior + log likelihood of the lab target at the points ``x`` (n, dim), the surrogate's
-    own variance added to the target's and the discrepancy's (unnormalised)."""
+    """Log prior + log likelihood of the lab target (and of the posterior's other heaps) at the
+    points ``x`` (n, dim), the surrogate's own variance added to the target's and the
+    discrepancy's (unnormalised)."""
     x = np.atleast_2d(np.asarray(x, dtype=float))
     m, s = surrogate.predict(x)
     var = s ** 2 + post.target_var + post.discrepancy_var
     val = post.prior.logpdf(x) - 0.5 * (post.target - m) ** 2 / var - 0.5 * np.log(var)
+    for other in post.others:
+        val = val + other.terms(x, post.discrepancy_var)[0]
     if log_likelihood is not None:
         val = val + np.asarray(log_likelihood(x), dtype=float)
     return val
 
 
 def _at(post: Posterior, surrogate: NoisySurrogate, x, log_post: float) -> dict:
-    m, s = surrogate.predict(np.asarray(x, dtype=float)[None, :])
+    x = np.asarray(x, dtype=float)
+    m, s = surrogate.predict(x[None, :])
     imp = abs(post.target - m[0]) / math.sqrt(s[0] ** 2 + post.target_var + post.discrepancy_var)
+    for other in post.others:
+        imp = max(imp, float(other.terms(x[None, :], post.discrepancy_var)[1][0]))
     return {"values": {n: float(v) for n, v in zip(post.prior.names, x)}, "predicted": float(m[0]),
             "predicted_sd": float(s[0]), "implausibility": float(imp), "log_posterior": float(log_post)}
 

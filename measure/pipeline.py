@@ -19,7 +19,9 @@ sphere model at the measured particle density with the balance's.
 Quantity names are those of docs/workbook.md: ``length_mm``, ``diameter_mm``, ``mass_g``,
 ``particle_density_kg_m3``, ``envelope_density_kg_m3``, ``restitution.<pair>``,
 ``static_friction.<surface>``, ``rolling_friction.<surface>``, ``poisson_ratio``,
-``elastic_modulus_pa``, ``shear_modulus_pa`` (when curves are given) and ``repose_angle_deg``.
+``elastic_modulus_pa``, ``shear_modulus_pa`` (when curves are given) and ``repose_angle_deg``
+(the meta's first repose rig; ``repose_angle_deg.<rig>`` for each further one, see
+:func:`photo_rigs`).
 Each value is in the unit its name carries (mm, g, kg/m^3, Pa, deg) or is dimensionless.
 
 The angle of repose comes from the heap photos through a photo estimator
@@ -58,7 +60,7 @@ from demcal.units import GRAVITY
 #: Order of the quantities in outputs (prefixes stand for their families).
 ORDER = ("length_mm", "diameter_mm", "width_mm", "thickness_mm", "mass_g", "particle_density_kg_m3", "envelope_density_kg_m3",
          "restitution.", "static_friction.", "rolling_friction.", "poisson_ratio",
-         "elastic_modulus_pa", "shear_modulus_pa", "repose_angle_deg")
+         "elastic_modulus_pa", "shear_modulus_pa", "repose_angle_deg", "repose_angle_deg.")
 
 
 def _order_key(name: str):
@@ -164,15 +166,67 @@ def _annotated_names(ids: dict) -> dict:
             for r, s in stems.items()}
 
 
-def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir, max_photo_pixels) -> Estimate:
-    """``repose_angle_deg`` from the heap photos of the ``repose`` sheet."""
+def repose_quantity(index: int, workbook_name: str) -> str:
+    """The quantity of the photos of the workbook's ``index``-th repose rig (meta
+    ``repose_rig``): ``repose_angle_deg`` for the first, ``repose_angle_deg.<rig>`` for the others."""
+    return "repose_angle_deg" if index == 0 else f"repose_angle_deg.{workbook_name}"
+
+
+def photo_rigs(wb: Workbook) -> dict:
+    """The rows of the ``repose`` sheet by the repose rig they photograph, in the meta's order
+    (``{workbook name: [row, ...]}``): the sheet's ``rig`` column, a blank cell meaning the
+    meta's first rig. Without a ``rig`` column every row is the first rig's, as the meta names
+    it (an unknown name is left to the calibration to refuse: its photos still measure). A row
+    of a rig the meta does not name, a rig named without photos, several rigs without a ``rig``
+    column, and a drum photo read as a heap (or the reverse) are refused naming sheet, row and
+    column."""
+    from demcal.simulate.rigs import repose_rigs
+
+    sheet = wb.sheet("repose")
+    f = sheet.frame
+    file = str(sheet.file)
+    if "rig" not in f:
+        raw = wb.meta.get("repose_rig")
+        if raw is not None and "," in str(raw):
+            names = [r.workbook_name for r in repose_rigs(wb.meta, str(wb.source))]
+            raise WorkbookError(f"meta repose_rig names {len(names)} rigs ({', '.join(names)}): the repose sheet "
+                                "needs a column rig saying which rig each photo shows", file=file,
+                                sheet=sheet.name, column="rig")
+        first = str(raw).strip().lower() if raw is not None and str(raw).strip() else "lifted_plate"
+        return {first: list(sheet.rows)}
+    rigs = repose_rigs(wb.meta, str(wb.source))
+    names = [r.workbook_name for r in rigs]
+    out = {n: [] for n in names}
+    for r in sheet.rows:
+        name = f.at[r, "rig"] or names[0]
+        if name not in out:
+            raise WorkbookError(f"rig {name}: meta repose_rig names {', '.join(names)}, not this rig",
+                                file=file, sheet=sheet.name, row=r, column="rig", value=name)
+        drum = next(x for x in rigs if x.workbook_name == name).flanks == "drum"
+        side = f.at[r, "side"] if "side" in f else "both"
+        if (side == "drum") != drum:
+            raise WorkbookError(f"side {side}: a photo of the {name} rig " + (
+                "shows a drum's free surface: its side is drum" if drum else "shows a heap, not a drum"),
+                file=file, sheet=sheet.name, row=r, column="side", value=side)
+        out[name].append(r)
+    empty = [n for n, rows in out.items() if not rows]
+    if empty:
+        raise WorkbookError(f"meta repose_rig names {', '.join(empty)} but no photo has that rig",
+                            file=file, sheet=sheet.name, column="rig")
+    return out
+
+
+def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir, max_photo_pixels,
+                    rows_of_rig=None, name="repose_angle_deg") -> Estimate:
+    """The quantity ``name`` from the heap photos of the ``repose`` sheet's rows
+    ``rows_of_rig`` (default: every row)."""
     sheet = wb.sheet("repose")
     f = sheet.frame
     values, rows, records, rejected = [], [], [], []
     names = _annotated_names({r: f.at[r, "photo_id"] for r in sheet.rows})
     if annotate_dir is not None:
         Path(annotate_dir).mkdir(parents=True, exist_ok=True)
-    for r in sheet.rows:
+    for r in (sheet.rows if rows_of_rig is None else rows_of_rig):
         rel = f.at[r, "file"]
         side = f.at[r, "side"] if "side" in f else "both"
         annotate_to = None if annotate_dir is None else Path(annotate_dir) / names[r]
@@ -200,7 +254,7 @@ def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir, max_phot
     drums = [rec["side"] == "drum" for rec in records]
     method = ("drum photo: central chord of the free surface (measure.repose.angle_from_drum)"
               if drums and all(drums) else "heap photo: mean slope of the heap flanks (measure.repose)")
-    est = summarise("repose_angle_deg", values, rows, unit="deg", source=sheet.source(), method=method,
+    est = summarise(name, values, rows, unit="deg", source=sheet.source(), method=method,
                     outliers=outliers, rejected=rejected, per_row=records)
     pairs = [(rec["value"], rec["angle_deg_manual"]) for rec in est.per_row
              if rec["used"] and rec["angle_deg_manual"] is not None]
@@ -260,32 +314,37 @@ def _check_finite(est: Estimate) -> None:
 
 def repose_estimate(wb: Workbook, *, photo_estimator=None, outliers="none", annotate_dir=None,
                     max_photo_pixels=MAX_PHOTO_PIXELS):
-    """``repose_angle_deg`` from the photos, overridden by ``meta`` ``target_repose_deg`` if given.
+    """The angle of repose of each repose rig from its photos (:func:`photo_rigs`,
+    :func:`repose_quantity`), the first one's overridden by ``meta`` ``target_repose_deg`` if
+    given.
 
     ``max_photo_pixels``, the most pixels a photo may have [px], is passed to the photo
     estimator as ``max_pixels``.
 
     Returns
     -------
-    (Estimate or None, list of str)
-        The estimate (None when there is neither a photo nor a target) and notes.
+    (dict of str -> Estimate, list of str)
+        The estimates by quantity (empty when there is neither a photo nor a target) and notes.
     """
     notes = []
-    photo = None
+    found = {}
     sheet = wb.sheet("repose")
     if sheet is not None and sheet.rows:
         estimator = photo_estimator or _default_photo_estimator()
         if estimator is None:
             notes.append("repose photos not measured: no photo estimator (measure.repose) available")
         else:
-            photo = _photo_estimate(wb, estimator, outliers=outliers, annotate_dir=annotate_dir,
-                                    max_photo_pixels=max_photo_pixels)
+            for i, (rig, rows) in enumerate(photo_rigs(wb).items()):
+                name = repose_quantity(i, rig)
+                found[name] = _photo_estimate(wb, estimator, outliers=outliers, annotate_dir=annotate_dir,
+                                              max_photo_pixels=max_photo_pixels, rows_of_rig=rows, name=name)
     target = wb.meta.get("target_repose_deg")
     if target is None:
-        return photo, notes
+        return found, notes
+    photo = found.get("repose_angle_deg")
     meta = wb.sheet("meta")
     row = next(r for r in meta.rows if meta.frame.at[r, "key"] == "target_repose_deg")
-    override = Estimate(
+    found["repose_angle_deg"] = Estimate(
         name="repose_angle_deg", value=float(target), sd=math.nan, n=1, ci95=(math.nan, math.nan),
         unit="deg", rows_used=[row], rows_rejected=[], source=meta.source(),
         method="meta target_repose_deg (overrides the photo estimate)",
@@ -293,7 +352,7 @@ def repose_estimate(wb: Workbook, *, photo_estimator=None, outliers="none", anno
         per_row=[] if photo is None else list(photo.per_row))
     notes.append(f"repose_angle_deg: meta target_repose_deg = {target:g} deg overrides the photo estimate"
                  + ("" if photo is None else f" ({photo.value:.4g} deg)"))
-    return override, notes
+    return found, notes
 
 
 def measure_particle(wb, reading: ReadOptions | None = None) -> Measurement:
@@ -359,8 +418,7 @@ def measure_workbook(wb, *, photo_estimator=None, outliers="none", annotate_dir=
     quantities.update(compression_estimates(wb, outliers=outliers, r2_min=r2_min))
     repose, notes = repose_estimate(wb, photo_estimator=photo_estimator, outliers=outliers,
                                     annotate_dir=annotate_dir, max_photo_pixels=max_photo_pixels)
-    if repose is not None:
-        quantities["repose_angle_deg"] = repose
+    quantities.update(repose)
     quantities = {n: quantities[n] for n in sorted(quantities, key=_order_key)}
     for est in quantities.values():
         _check_finite(est)

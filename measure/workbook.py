@@ -132,9 +132,9 @@ SHEETS = {
                                        "thickness_after_mm", "length_mm"),
                              choices=("axis",), files=(("curve_file", "curve"),)),
     "repose": SheetSpec(required=("photo_id", "file"),
-                        optional=("side", "scale_mm_per_px", "angle_deg_manual"), ids=("photo_id",),
+                        optional=("side", "rig", "scale_mm_per_px", "angle_deg_manual"), ids=("photo_id",),
                         positive=("scale_mm_per_px",), angles=("angle_deg_manual",),
-                        choices=("side",), files=(("file", "photo"),)),
+                        choices=("side", "rig"), files=(("file", "photo"),)),
 }
 
 #: Sheets every workbook must have.
@@ -500,6 +500,13 @@ def _check_choice(column: str, value: str | None) -> str | None:
             return None
         return ("unknown surface; valid: particle, steel or another material name "
                 "(a letter then letters, digits or _)")
+    if column == "rig":
+        from demcal.simulate.rigs import repose_rig_names
+
+        valid = repose_rig_names()
+        if value is None or value in valid:     # a blank rig: the meta's first repose rig
+            return None
+        return f"unknown rig; valid: {', '.join(valid)}"
     valid = {"mode": MODES, "axis": AXES, "side": SIDES, "carrier": CARRIERS}[column]
     if value in valid:
         return None

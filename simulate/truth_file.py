@@ -187,9 +187,9 @@ def parse_design(values, where: str = "design") -> dict:
         elif key == "trials_per_specimen" and value is None:
             pass
         elif key == "repose_rig":
-            from demcal.simulate.virtual_lab import repose_geometry
+            from demcal.simulate.virtual_lab import repose_geometries
             try:
-                repose_geometry(value)              # checked now, used by write_virtual_workbook
+                repose_geometries(value)            # checked now, used by write_virtual_workbook
             except InputError as exc:
                 raise InputError(f"{where}.{exc}") from None
         elif key == "interleaved":

@@ -712,7 +712,7 @@ def _compression(truth: Truth, rng, specimens, n: int, root: Path) -> pd.DataFra
 
 
 def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base: int, geometry=None,
-            size=None):
+            size=None, prefix=""):
     import cv2
 
     from demcal.simulate.render import PHOTO_PX_PER_M, PHOTO_SIZE, Lighting, heap_photo, heap_profile
@@ -738,7 +738,7 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
     seeds = iter(range(seed_base, seed_base + 100 * n))
     discarded: list = []
     for i in range(n):
-        row = {"photo_id": f"P{i + 1}", "operator": ops[i % len(ops)],
+        row = {"photo_id": f"{prefix}P{i + 1}", "operator": ops[i % len(ops)],
                "date": str(rng.choice(list(truth.days))) if spread else day}
         offset = sum(_level_offset(tuple({"operator": truth.operators, "date": truth.days,
                                           "batch": truth.batches}[e.covariate]),
@@ -759,7 +759,7 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
                              particle_m=truth.params.shape.outline_m)
         else:
             img, side = _dem_heap_photo(truth, rng, roll, light, seeds, discarded, geometry)
-        name = f"photos/heap_{i + 1}.jpg"
+        name = f"photos/{prefix}heap_{i + 1}.jpg"
         cv2.imwrite(str(root / name), img, [cv2.IMWRITE_JPEG_QUALITY, 95])
         rows.append({"photo_id": row["photo_id"], "file": name, "side": side, "operator": row["operator"],
                      "date": row["date"]})
@@ -817,31 +817,38 @@ def _dem_heap_photo(truth: Truth, rng, roll, light, seeds, discarded: list, geom
                           "measurable flank")
 
 
-def repose_geometry(meta: dict):
-    """The repose rig's dimensions from meta rows (``repose_rig`` and the rig's keys), as an
-    object of the rig's geometry class; a bad row refused naming its key."""
-    from demcal.simulate.rigs import repose_setup
+def repose_geometries(meta: dict) -> list:
+    """The dimensions of each repose rig meta rows name (``repose_rig``, one rig or several
+    separated by commas, and each rig's keys), as objects of the rigs' geometry classes; a bad
+    row refused naming its key."""
+    from demcal.simulate.rigs import repose_setups
 
     if not isinstance(meta, dict):
         raise InputError(f"repose_rig must be a mapping of workbook meta keys, got {meta!r}")
     try:
-        setup = repose_setup(meta)
+        setups = repose_setups(meta)
     except DemcalError as exc:
         raise InputError(f"repose_rig: {exc}") from None
-    return setup.dimensions()
+    return [s.dimensions() for s in setups]
 
 
-def _meta(truth: Truth, effects, geometry=None) -> pd.DataFrame:
+def repose_geometry(meta: dict):
+    """The first repose rig's dimensions of meta rows (:func:`repose_geometries`)."""
+    return repose_geometries(meta)[0]
+
+
+def _meta(truth: Truth, effects, geometries=()) -> pd.DataFrame:
     from demcal.simulate.rigs.repose import ReposeGeometry
 
     p = truth.params
-    g = geometry or ReposeGeometry()
+    geometries = list(geometries) or [ReposeGeometry()]
     material = "root segments" if p.shape.name == "segment" else f"{p.shape.name} particles"
     rows = [("material", f"Virtual {material} (demcal virtual lab)"), ("contact_material", "steel"),
             ("contact_density_kg_m3", p.wall_density_kg_m3), ("contact_poisson", p.wall_poisson_ratio),
             ("contact_shear_modulus_pa", p.wall_shear_modulus_pa),
             ("particle_shear_modulus_pa", p.shear_modulus_pa),
-            ("repose_rig", rig_of_geometry(g).workbook_name), *g.meta_rows(),
+            ("repose_rig", ", ".join(rig_of_geometry(g).workbook_name for g in geometries)),
+            *(row for g in geometries for row in g.meta_rows()),
             ("shape", p.shape.name)] + ([("time_step_s", p.dt)] if p.dt is not None else []) + (
             [("spheres_per_particle", p.shape.n_spheres)] if hasattr(p.shape, "n_spheres") else []) + [
             ("virtual_lab", "made by simulate.virtual_lab from a known truth (truth.json); planted: "
@@ -850,7 +857,8 @@ def _meta(truth: Truth, effects, geometry=None) -> pd.DataFrame:
 
 
 def check_design(effects, *, photos, n_specimens, n_density, n_drop, n_incline, n_compression, n_photos,
-                 n_tracks, trials_per_specimen, orientation_range_deg, drop_heights_mm, **_) -> None:
+                 n_tracks, trials_per_specimen, orientation_range_deg, drop_heights_mm, repose_rigs=1,
+                 **_) -> None:
     """Refuse a design (the options of ``write_virtual_workbook``) it cannot write, before
     anything is written; the options not checked here (``pairs``, ``surfaces``...) are ignored."""
     effects = tuple(e if isinstance(e, PlantedEffect) else PlantedEffect(str(e)) for e in effects)
@@ -875,6 +883,8 @@ def check_design(effects, *, photos, n_specimens, n_density, n_drop, n_incline, 
     if not drop_heights_mm or any(not h > 0 for h in drop_heights_mm):
         raise InputError(f"drop_heights_mm must be positive heights, got {drop_heights_mm!r}")
     for e in effects:
+        if e.sheet == "repose" and repose_rigs > 1:
+            raise InputError(f"planted effect {e.kind} is in the repose sheet: plant it with one repose rig")
         if e.sheet == "repose" and (photos == "none" or n_photos < 2):
             raise InputError(f"planted effect {e.kind} is in the repose sheet: needs photos and n_photos >= 2")
 
@@ -930,7 +940,9 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
     repose_rig : dict, optional
         The same as workbook meta rows instead (``repose_rig`` and the rig's dimensions, e.g.
         ``{"repose_rig": "lifting_cylinder", "cylinder_diameter_mm": 60, ...}``); not with
-        ``geometry``.
+        ``geometry``. Several rigs (``"repose_rig": "lifted_plate, drum"`` and each one's
+        dimensions) photograph ``n_photos`` heaps each, the repose sheet's ``rig`` column naming
+        the rig of each photo.
     trials_per_specimen : int, optional
         Drop and incline trials per specimen: each sheet's trials go to that many trials on
         each of a random subset of the specimens (with ``Truth.icc`` a clustered design);
@@ -958,29 +970,32 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
     check_design(effects, photos=photos, n_specimens=n_specimens, n_density=n_density, n_drop=n_drop,
                  n_incline=n_incline, n_compression=n_compression, n_photos=n_photos, n_tracks=n_tracks,
                  trials_per_specimen=trials_per_specimen, orientation_range_deg=orientation_range_deg,
-                 drop_heights_mm=drop_heights_mm)
+                 drop_heights_mm=drop_heights_mm,
+                 repose_rigs=1 if repose_rig is None else len(repose_geometries(repose_rig)))
     if photo_size is not None and (len(photo_size) != 2 or min(photo_size) < 120
                                    or not all(isinstance(v, (int, np.integer)) for v in photo_size)):
         raise InputError(f"photo_size must be (height, width) in whole pixels, each >= 120, got {photo_size!r}")
     lo, hi = (float(v) for v in orientation_range_deg)
 
+    geometries = [geometry] if geometry is not None else []
     if repose_rig is not None:
         if geometry is not None:
             raise InputError("give the repose rig as geometry or as repose_rig meta rows, not both")
-        geometry = repose_geometry(repose_rig)
-    stated_geometry = geometry
-    if geometry is None:
+        geometries = repose_geometries(repose_rig)
+    stated = list(geometries)
+    if not geometries:
         from demcal.simulate.rigs.repose import ReposeGeometry
-        geometry = ReposeGeometry.for_particle(truth.params.shape)
-    rig_of_geometry(geometry)                     # a repose rig's dimensions, or refused
-    geometry.check_for(truth.params.shape)
+        geometries = [ReposeGeometry.for_particle(truth.params.shape)]
+    for g in geometries:
+        rig_of_geometry(g)                        # a repose rig's dimensions, or refused
+        g.check_for(truth.params.shape)
 
     path = Path(path)
     xlsx = path.suffix.lower() == ".xlsx"
     root = path.parent if xlsx else path
     root.mkdir(parents=True, exist_ok=True)
     specimens = _specimens(truth, rng, n_specimens)
-    sheets = {"meta": _meta(truth, effects, geometry), "specimens": specimens,
+    sheets = {"meta": _meta(truth, effects, geometries), "specimens": specimens,
               "density": _density(truth, rng, n_density)}
     if truth.params.shape.name == "clump":
         sheets["clump"] = _clump(truth.params.shape)
@@ -1000,10 +1015,18 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
         sheets["compression"] = _compression(truth, rng, specimens, n_compression, root)
     discarded_heaps: list = []
     if photos != "none" and n_photos:
-        sheets["repose"], exp, discarded_heaps = _photos(truth, rng, effects, n_photos, root, photos,
-                                                         seed_base=int(rng.integers(0, 2**31)),
-                                                         geometry=geometry, size=photo_size)
-        expected += exp
+        frames = []
+        for i, g in enumerate(geometries):
+            # every rig photographs n_photos heaps; the first rig's come as a single-rig lab's
+            frame, exp, discarded = _photos(truth, rng, effects, n_photos, root, photos,
+                                            seed_base=int(rng.integers(0, 2**31)), geometry=g,
+                                            size=photo_size, prefix="" if i == 0 else rig_of_geometry(g).workbook_name + "_")
+            if len(geometries) > 1:
+                frame.insert(2, "rig", rig_of_geometry(g).workbook_name)
+            frames.append(frame)
+            expected += exp
+            discarded_heaps += discarded
+        sheets["repose"] = pd.concat(frames, ignore_index=True)
     for e in effects:
         if e.sheet not in sheets or not any(x["kind"] == e.kind for x in expected):
             raise InputError(f"planted effect {e.kind} acts on nothing in this design "
@@ -1015,7 +1038,9 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
                "n_incline": n_incline, "n_compression": n_compression, "n_photos": n_photos,
                "trials_per_specimen": trials_per_specimen,
                "discarded_heaps": discarded_heaps,
-               "geometry": None if stated_geometry is None else stated_geometry.to_dict()}
+               "geometry": stated[0].to_dict() if len(stated) == 1 else None}
+    if len(stated) > 1:
+        options["geometries"] = [g.to_dict() for g in stated]
     result = VirtualWorkbook(path=path, truth=truth, effects=effects, expected=tuple(expected), seed=seed,
                              provenance=Provenance(seed=seed, options=options))
     write_json(root / "truth.json", result.to_dict())

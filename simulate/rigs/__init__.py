@@ -273,34 +273,52 @@ def rig_of_geometry(geometry) -> Rig:
     raise InputError(f"geometry must be the dimensions of a repose rig, got {type(geometry).__name__}")
 
 
-def repose_rig(meta: dict, file=None) -> Rig:
-    """The repose rig a workbook's ``meta`` names (key ``repose_rig``, default
-    ``lifted_plate``).
+def repose_rig_names() -> list:
+    """The workbook names of the registered repose rigs (meta ``repose_rig``, sheet column ``rig``)."""
+    return [r.workbook_name for r in rigs_of_sheet("repose")]
 
-    An unknown name and a dimension of another repose rig than the one named raise
+
+def repose_rigs(meta: dict, file=None) -> list:
+    """The repose rigs a workbook's ``meta`` names (key ``repose_rig``: one name or several
+    separated by commas, default ``lifted_plate``), the first one's photos being the heap the
+    lab's target angle comes from.
+
+    An unknown or repeated name and a dimension of a repose rig not named raise
     ``WorkbookError`` naming the key: the twin must never simulate another heap than the one
     the lab photographed.
     """
     meta = meta or {}
     rigs = {r.workbook_name: r for r in rigs_of_sheet("repose")}
     raw = meta.get("repose_rig")
-    name = str(raw).strip().lower() if raw is not None and str(raw).strip() else "lifted_plate"
-    if name not in rigs:
-        raise WorkbookError(f"meta repose_rig: {name!r} is not a repose rig with a twin, so its heaps cannot be "
-                            f"calibrated against (its photos still measure with demcal measure); repose rigs: "
-                            f"{', '.join(rigs)}", file=file, sheet="meta", column="value", value=raw)
-    chosen = rigs[name]
-    own = set(chosen.geometry.META_KEYS)
-    others = {key: r.workbook_name for r in rigs.values() if r is not chosen for key in r.geometry.META_KEYS}
+    text = str(raw).strip().lower() if raw is not None else ""
+    names = [n.strip() for n in text.split(",")] if text else ["lifted_plate"]
+    for name in names:
+        if name not in rigs:
+            raise WorkbookError(f"meta repose_rig: {name!r} is not a repose rig with a twin, so its heaps cannot "
+                                f"be calibrated against (its photos still measure with demcal measure); repose "
+                                f"rigs: {', '.join(rigs)} (several: separated by commas)",
+                                file=file, sheet="meta", column="value", value=raw)
+        if names.count(name) > 1:
+            raise WorkbookError(f"meta repose_rig: {name!r} is named twice", file=file, sheet="meta",
+                                column="value", value=raw)
+    chosen = [rigs[n] for n in names]
+    own = {key for r in chosen for key in r.geometry.META_KEYS}
+    others = {key: r.workbook_name for r in rigs.values() if r not in chosen for key in r.geometry.META_KEYS}
     for key, value in meta.items():
         if value is None or (isinstance(value, str) and not value.strip()) or key in own:
             continue                              # a blank row of a template says nothing
         other = others.get(key)
         if other is not None:
-            raise WorkbookError(f"meta {key}: a dimension of the {other} rig, but the workbook's heap is "
-                                f"the {name} rig's (meta repose_rig); its dimensions: {', '.join(chosen.geometry.META_KEYS)}",
+            raise WorkbookError(f"meta {key}: a dimension of the {other} rig, which meta repose_rig does not "
+                                f"name ({', '.join(names)}); their dimensions: "
+                                f"{', '.join(k for r in chosen for k in r.geometry.META_KEYS)}",
                                 file=file, sheet="meta", column="key", value=key)
     return chosen
+
+
+def repose_rig(meta: dict, file=None) -> Rig:
+    """The workbook's first repose rig (:func:`repose_rigs`), whose photos give the target."""
+    return repose_rigs(meta, file)[0]
 
 
 @dataclass(frozen=True)
@@ -383,11 +401,15 @@ class ReposeSetup:
         return self.dimensions().describe(noun)
 
 
+def repose_setups(meta: dict, file=None) -> list:
+    """The repose rigs a workbook's ``meta`` names (:func:`repose_rigs`), each with its
+    dimensions read from the same meta (a missing or bad one refused naming its key)."""
+    return [ReposeSetup(r.name, r.geometry.from_meta(meta, file).to_dict()) for r in repose_rigs(meta, file)]
+
+
 def repose_setup(meta: dict, file=None) -> ReposeSetup:
-    """The repose rig a workbook's ``meta`` names (:func:`repose_rig`) with its dimensions
-    read from the same meta (a missing or bad one refused naming its key)."""
-    chosen = repose_rig(meta, file)
-    return ReposeSetup(chosen.name, chosen.geometry.from_meta(meta, file).to_dict())
+    """The workbook's first repose rig with its dimensions (:func:`repose_setups`)."""
+    return repose_setups(meta, file)[0]
 
 
 def rig_function(name: str):
@@ -447,5 +469,5 @@ def check_seed(seed) -> int:
     return value
 
 
-__all__ = ["RIGS", "ReposeSetup", "Rig", "RigResult", "RunTally", "Trial", "TrialGroup", "check_seed", "repose_rig", "repose_rig_named", "repose_setup", "rig", "rig_of_geometry", "rig_function", "rigs_of_sheet",
+__all__ = ["RIGS", "ReposeSetup", "Rig", "RigResult", "RunTally", "Trial", "TrialGroup", "check_seed", "repose_rig", "repose_rig_named", "repose_rig_names", "repose_rigs", "repose_setup", "repose_setups", "rig", "rig_of_geometry", "rig_function", "rigs_of_sheet",
            "run_meta", "run_rig", "run_task", "trial_groups", "trial_rigs", "used_rows"]

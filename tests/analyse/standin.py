@@ -42,6 +42,13 @@ def heap_standin_angle(p: dict) -> float:
             + 30.0 * (p["mu_r_pp"] - 0.53) + 20.0 * (p["mu_s_pp"] - 0.65) - 4.0 * (p["e_pp"] - 0.3))
 
 
+def drum_standin_angle(p: dict) -> float:
+    """Mean angle of the noisy stand-in drum: equal to the heap's at the default truth, steep
+    in mu_r_pp and mu_s_pp in another combination than the heap (the drum's bed slides on
+    itself where the heap's rolls), flat in the rest."""
+    return 36.0 + 30.0 * (p["mu_r_pp"] - 0.53) - 20.0 * (p["mu_s_pp"] - 0.65) + 5.0 * (p["mu_s_pw"] - 0.2)
+
+
 #: Apparent over contact restitution of the stand-in's drop twin (a segment turning part of its
 #: energy into rotation rebounds lower than its contact restitution).
 DROP_RATIO = 0.5
@@ -49,7 +56,8 @@ DROP_RATIO = 0.5
 
 def heap_standin_runner(inputs: dict) -> dict:
     """A heap whose noise is a fresh draw for every (parameters, seed), as the chaotic DEM's
-    is: runs sharing a seed at different points are independent. Drop and incline tasks (the
+    is: runs sharing a seed at different points are independent; a drum task's mean angle is
+    :func:`drum_standin_angle`. Drop and incline tasks (the
     joint calibration's twins) get an apparent restitution of ``DROP_RATIO`` times the contact
     one, with a little orientation scatter, and an incline reading equal to the friction."""
     import hashlib
@@ -66,8 +74,9 @@ def heap_standin_runner(inputs: dict) -> dict:
         key = f"mu_s_{on}" if inputs["mode"] == "slide" else f"mu_r_{on}"
         name = "static_friction_apparent" if inputs["mode"] == "slide" else "rolling_friction_apparent"
         return {"rig": "incline", "observable": {name: p[key]}}
-    angle = heap_standin_angle(inputs["params"]) + rng.normal(0.0, HEAP_NOISE_SD)
-    return {"rig": "repose", "observable": {"angle_deg": angle, "angle_profile_deg": angle},
+    mean = drum_standin_angle if inputs.get("rig") == "drum" else heap_standin_angle
+    angle = mean(inputs["params"]) + rng.normal(0.0, HEAP_NOISE_SD)
+    return {"rig": inputs.get("rig", "repose"), "observable": {"angle_deg": angle, "angle_profile_deg": angle},
             "record": {}, "wall_s": 0.0, "steps": 0, "spheres": 0, "sphere_steps_per_s": 0.0,
             "seed": inputs["seed"]}
 
