@@ -50,6 +50,9 @@ def register(subparsers) -> None:
                    help="simulate the workbook's particle: its shape and sizes, densities and moduli "
                         "(and for the repose rig the carton, lift speed and fill count of its meta); "
                         "--set changes them further")
+    p.add_argument("--repose-rig", metavar="NAME",
+                   help="with a workbook naming several repose rigs (meta repose_rig), the one to "
+                        "simulate (default: the first)")
     add_workbook_options(p)
     added = set()
     for r in map(rig, RIGS):
@@ -100,9 +103,12 @@ def rig_options(args) -> tuple[str, dict, dict]:
     """The registered rig to run for the sheet ``args.rig`` (for ``repose``, the workbook's
     repose rig, meta ``repose_rig``, with its dimensions), its keyword options and the input
     files they came from (path -> SHA-256)."""
-    from demcal.simulate.rigs import repose_rig, repose_setup, rig, rigs_of_sheet
+    from demcal.simulate.rigs import repose_rig, repose_setups, rig, rigs_of_sheet
 
     inputs, geometry = {}, None
+    if getattr(args, "repose_rig", None) and not (args.workbook and args.rig == "repose"):
+        raise InputError("--repose-rig chooses among the repose rigs of a workbook: it needs "
+                         "'demcal simulate repose --workbook PATH'")
     sheet_rigs = rigs_of_sheet(args.rig)
     if any(r.geometry is not None for r in sheet_rigs):      # the rig and its size: the workbook's
         meta = {}
@@ -111,7 +117,11 @@ def rig_options(args) -> tuple[str, dict, dict]:
 
             wb = read_workbook(args.workbook, read_options(args))
             meta = wb.meta
-            setup = repose_setup(meta, file=str(wb.source))
+            setups = {s.workbook_name: s for s in repose_setups(meta, file=str(wb.source))}
+            wanted = getattr(args, "repose_rig", None) or next(iter(setups))
+            if wanted not in setups:
+                raise InputError(f"--repose-rig {wanted}: the workbook's repose rigs are {', '.join(setups)}")
+            setup = setups[wanted]
             geometry = setup.dimensions()
             inputs.update(wb.files)
         chosen = rig(setup.rig) if geometry is not None else repose_rig(meta)

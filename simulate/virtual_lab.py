@@ -74,7 +74,7 @@ from demcal.jsonio import read_json, write_json
 from demcal.provenance import Provenance, run_key
 from demcal.simulate.materials import youngs_modulus
 from demcal.simulate.params import DEMParameters
-from demcal.simulate.rigs import rig as rig_named, rig_of_geometry
+from demcal.simulate.rigs import meta_names, rig as rig_named, rig_of_geometry
 from demcal.units import GRAVITY
 
 #: Effect kinds, the identifiers of the critique catalogue that a workbook can carry.
@@ -842,13 +842,15 @@ def _meta(truth: Truth, effects, geometries=()) -> pd.DataFrame:
 
     p = truth.params
     geometries = list(geometries) or [ReposeGeometry()]
+    rigs = [rig_of_geometry(g) for g in geometries]
+    names = meta_names(rigs)
     material = "root segments" if p.shape.name == "segment" else f"{p.shape.name} particles"
     rows = [("material", f"Virtual {material} (demcal virtual lab)"), ("contact_material", "steel"),
             ("contact_density_kg_m3", p.wall_density_kg_m3), ("contact_poisson", p.wall_poisson_ratio),
             ("contact_shear_modulus_pa", p.wall_shear_modulus_pa),
             ("particle_shear_modulus_pa", p.shear_modulus_pa),
-            ("repose_rig", ", ".join(rig_of_geometry(g).workbook_name for g in geometries)),
-            *(row for g in geometries for row in g.meta_rows()),
+            ("repose_rig", ", ".join(r.workbook_name for r in rigs)),
+            *(row for g, r in zip(geometries, rigs) for row in g.meta_rows(names[r.workbook_name])),
             ("shape", p.shape.name)] + ([("time_step_s", p.dt)] if p.dt is not None else []) + (
             [("spheres_per_particle", p.shape.n_spheres)] if hasattr(p.shape, "n_spheres") else []) + [
             ("virtual_lab", "made by simulate.virtual_lab from a known truth (truth.json); planted: "

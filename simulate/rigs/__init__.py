@@ -278,6 +278,18 @@ def repose_rig_names() -> list:
     return [r.workbook_name for r in rigs_of_sheet("repose")]
 
 
+def meta_names(rigs) -> dict:
+    """How the repose rigs ``rigs`` of one workbook name their dimensions in its meta
+    (``{workbook name: {key: meta key}}``): a key several of them share (``fill_count``) is
+    each one's own, prefixed with its name (``lifted_plate_fill_count``, ``drum_fill_count``)."""
+    count = {}
+    for r in rigs:
+        for key in r.geometry.META_KEYS:
+            count[key] = count.get(key, 0) + 1
+    return {r.workbook_name: {k: f"{r.workbook_name}_{k}" for k in r.geometry.META_KEYS if count[k] > 1}
+            for r in rigs}
+
+
 def repose_rigs(meta: dict, file=None) -> list:
     """The repose rigs a workbook's ``meta`` names (key ``repose_rig``: one name or several
     separated by commas, default ``lifted_plate``), the first one's photos being the heap the
@@ -302,11 +314,17 @@ def repose_rigs(meta: dict, file=None) -> list:
             raise WorkbookError(f"meta repose_rig: {name!r} is named twice", file=file, sheet="meta",
                                 column="value", value=raw)
     chosen = [rigs[n] for n in names]
-    own = {key for r in chosen for key in r.geometry.META_KEYS}
+    renamed = meta_names(chosen)
+    own = {renamed[r.workbook_name].get(key, key) for r in chosen for key in r.geometry.META_KEYS}
+    shared = {key: [n for n, m in renamed.items() if key in m] for m in renamed.values() for key in m}
     others = {key: r.workbook_name for r in rigs.values() if r not in chosen for key in r.geometry.META_KEYS}
     for key, value in meta.items():
         if value is None or (isinstance(value, str) and not value.strip()) or key in own:
             continue                              # a blank row of a template says nothing
+        if key in shared:
+            raise WorkbookError(f"meta {key}: a dimension of each of the rigs {', '.join(shared[key])}; give each "
+                                f"its own: {', '.join(f'{n}_{key}' for n in shared[key])}",
+                                file=file, sheet="meta", column="key", value=key)
         other = others.get(key)
         if other is not None:
             raise WorkbookError(f"meta {key}: a dimension of the {other} rig, which meta repose_rig does not "
@@ -404,7 +422,9 @@ class ReposeSetup:
 def repose_setups(meta: dict, file=None) -> list:
     """The repose rigs a workbook's ``meta`` names (:func:`repose_rigs`), each with its
     dimensions read from the same meta (a missing or bad one refused naming its key)."""
-    return [ReposeSetup(r.name, r.geometry.from_meta(meta, file).to_dict()) for r in repose_rigs(meta, file)]
+    rigs = repose_rigs(meta, file)
+    renamed = meta_names(rigs)
+    return [ReposeSetup(r.name, r.geometry.from_meta(meta, file, renamed[r.workbook_name]).to_dict()) for r in rigs]
 
 
 def repose_setup(meta: dict, file=None) -> ReposeSetup:
@@ -469,5 +489,5 @@ def check_seed(seed) -> int:
     return value
 
 
-__all__ = ["RIGS", "ReposeSetup", "Rig", "RigResult", "RunTally", "Trial", "TrialGroup", "check_seed", "repose_rig", "repose_rig_named", "repose_rig_names", "repose_rigs", "repose_setup", "repose_setups", "rig", "rig_of_geometry", "rig_function", "rigs_of_sheet",
+__all__ = ["RIGS", "ReposeSetup", "Rig", "RigResult", "RunTally", "Trial", "TrialGroup", "check_seed", "meta_names", "repose_rig", "repose_rig_named", "repose_rig_names", "repose_rigs", "repose_setup", "repose_setups", "rig", "rig_of_geometry", "rig_function", "rigs_of_sheet",
            "run_meta", "run_rig", "run_task", "trial_groups", "trial_rigs", "used_rows"]

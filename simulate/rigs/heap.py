@@ -101,23 +101,26 @@ def repose_profile(profile) -> ReposeProfile:
 # a rig's dimensions in the workbook's meta
 
 
-def meta_values(keys: dict, meta: dict, file=None, *, whole=(), required=()) -> dict:
+def meta_values(keys: dict, meta: dict, file=None, *, whole=(), required=(), rename=None) -> dict:
     """Field values from a workbook ``meta`` dict: ``keys`` maps each meta key to (field,
-    factor to SI). A missing or blank key is left out (the field keeps its default) unless it
-    is ``required``; a value that is not a positive number (a whole number for the fields in
-    ``whole``) raises ``WorkbookError`` naming the sheet, the key and the value."""
+    factor to SI), ``rename`` some of those keys to the names the meta gives them. A missing or
+    blank key is left out (the field keeps its default) unless it is ``required``; a value that
+    is not a positive number (a whole number for the fields in ``whole``) raises
+    ``WorkbookError`` naming the sheet, the key and the value."""
     from demcal.errors import WorkbookError
 
+    rename = rename or {}
     values = {}
-    for key, (name, factor) in keys.items():
+    for plain, (name, factor) in keys.items():
+        key = rename.get(plain, plain)
         raw = meta.get(key) if meta else None
 
         def bad(why):
             return WorkbookError(f"meta {key}: {why}", file=file, sheet="meta", column="value", value=raw)
 
         if raw is None or (isinstance(raw, str) and not raw.strip()):
-            if key in required:
-                raise bad(f"missing: the rig needs {', '.join(required)}")
+            if plain in required:
+                raise bad(f"missing: the rig needs {', '.join(rename.get(k, k) for k in required)}")
             continue
         try:
             number = float(raw)
@@ -134,14 +137,16 @@ def meta_values(keys: dict, meta: dict, file=None, *, whole=(), required=()) -> 
     return values
 
 
-def meta_rows(geometry, keys: dict) -> list:
+def meta_rows(geometry, keys: dict, rename=None) -> list:
     """The workbook meta rows (key, value) of ``geometry``'s fields named in ``keys`` (as for
-    :func:`meta_values`), in the workbook's units; a field that is None is left out."""
+    :func:`meta_values`, keys renamed by ``rename``), in the workbook's units; a field that is
+    None is left out."""
+    rename = rename or {}
     rows = []
     for key, (name, factor) in keys.items():
         value = getattr(geometry, name)
         if value is not None:
-            rows.append((key, value if factor == 1 else round(value / factor, 6)))
+            rows.append((rename.get(key, key), value if factor == 1 else round(value / factor, 6)))
     return rows
 
 
@@ -153,18 +158,21 @@ class RigDimensions:
     REQUIRED: tuple = ()
 
     @classmethod
-    def from_meta(cls, meta: dict, file=None):
+    def from_meta(cls, meta: dict, file=None, rename=None):
         """From a workbook ``meta`` dict; a missing required key or a bad value raises
         ``WorkbookError`` naming the sheet, the key and the value (and ``file``); an optional
-        key left out keeps its default."""
-        return cls(**meta_values(cls.META_KEYS, meta, file, whole=("fill_count",), required=cls.REQUIRED))
+        key left out keeps its default. ``rename`` maps keys to the names the meta gives them
+        (a key several rigs of one workbook share: ``simulate.rigs.meta_names``)."""
+        return cls(**meta_values(cls.META_KEYS, meta, file, whole=("fill_count",), required=cls.REQUIRED,
+                                 rename=rename))
 
     def to_dict(self) -> dict:
         return asdict(self)
 
-    def meta_rows(self) -> list:
-        """The workbook meta rows (key, value) that describe these dimensions."""
-        return meta_rows(self, self.META_KEYS)
+    def meta_rows(self, rename=None) -> list:
+        """The workbook meta rows (key, value) that describe these dimensions (keys renamed by
+        ``rename``)."""
+        return meta_rows(self, self.META_KEYS, rename)
 
 
 # ----------------------------------------------------------------------------------------------
