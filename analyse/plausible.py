@@ -346,12 +346,11 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
         "fallback_runs": fallbacks,
     }
     if len(heaps) > 1:
-        out["other_rigs"] = [OtherRig(rig=h.setup.rig, workbook_name=h.setup.workbook_name, quantity=h.quantity,
-                                      geometry=h.setup.geometry, target_deg=h.target, target_sd_deg=h.lab_sd,
-                                      target_n=h.lab_n, target_var=h.target_var,
-                                      **{k: v for k, v in _heap_sections(h, names, config).items()},
-                                      predicted=_predicted(h, x_best), validation=h.validation)
-                             for h in heaps[1:]]
+        out["other_rigs"] = [OtherRig.from_dict(dict(
+            rig=h.setup.rig, workbook_name=h.setup.workbook_name, quantity=h.quantity, geometry=h.setup.geometry,
+            target_deg=h.target, target_sd_deg=h.lab_sd, target_n=h.lab_n, target_var=h.target_var,
+            **_heap_sections(h, names, config), predicted=_predicted(h, x_best), validation=h.validation),
+            f"other_rigs[{h.index - 1}]") for h in heaps[1:]]
     return out
 
 

@@ -192,10 +192,72 @@ def table_identifiability(c: Campaign) -> Table:
                  formats=("", "", ".4g", ".3g", ".4g", ".4g", ".2f", "", ".4g"))
 
 
+def table_by_rig(c: Campaign) -> Table | None:
+    """Table P5b: with several repose rigs, what each rig's heap says alone beside all together."""
+    r = c.results
+    cal = r.calibration
+    if not cal.by_rig:
+        return None
+    rigs = list(cal.by_rig)
+    rows = []
+    for name, p in cal.parameters.items():
+        alone = [cal.by_rig[g][name]["sd_ratio"] for g in rigs]
+        rows.append((_label(c, name)[0], *alone, p.sd_ratio, min(alone) - p.sd_ratio,
+                     *[cal.by_rig[g][name]["ci95"] for g in rigs], p.ci95))
+    return Table("P5b", "What each repose rig says: posterior/prior SD with each rig's heap alone and with all together",
+                 ("Parameter", *[f"{g} alone" for g in rigs], "All together", "Narrowed by combining",
+                  *[f"95 % interval, {g} alone" for g in rigs], "95 % interval, together"),
+                 ("",) * (2 * len(rigs) + 4), tuple(rows),
+                 notes=("Each rig alone: the posterior of the same prior given that rig's angle of repose, on "
+                        "that rig's own surrogate; together: given every rig's (Table P5). Narrowed by combining: "
+                        "the better single rig's posterior/prior SD minus the combined one; a parameter neither "
+                        "rig pins down alone can be pinned down by two rigs whose angles depend on it in other "
+                        "combinations with the rest.",),
+                 sources=(_results_source("calibration.by_rig"), _results_source("calibration.parameters")),
+                 formats=("", *[".2f"] * len(rigs), ".2f", "+.2f", *[".4g"] * (len(rigs) + 1)))
+
+
+def table_other_rigs(c: Campaign) -> Table | None:
+    """Table P7: with several repose rigs, each further rig's target, noise, runs and surrogate."""
+    r = c.results
+    if not r.other_rigs:
+        return None
+    rows = []
+    for o in r.other_rigs:
+        runs = sum(len(p.responses) for p in o.design.points)
+        loo = o.surrogate.leave_one_out
+        rows.append((o.workbook_name, o.target_deg, o.target_sd_deg, o.target_n, o.noise.all_points.sd,
+                     o.noise.replicates, len(o.design.points), runs, loo["rmse"], o.predicted["mean_deg"],
+                     o.predicted["sd_deg"], o.validation.verdict))
+    keys = [run["key"] for o in r.other_rigs for p in o.design.points for run in p.runs]
+    return Table("P7", "The further repose rigs: their lab angles, noise, design runs and surrogates",
+                 ("Rig", "Lab angle", "SD of one heap", "Heaps", "SD of one run", "Runs per point",
+                  "Design points", "Runs", "Leave-one-out RMSE", "Predicted at the recommended point", "SD",
+                  "Validation"),
+                 ("", "deg", "deg", "", "deg", "", "", "", "deg", "deg", "deg", ""), tuple(rows),
+                 notes=("Each further rig's heaps were run at the same noise pair and design as the first rig's "
+                        "(Tables P2, P3), with seeds of their own, then in rounds where its own surrogate was "
+                        "least certain; its validation is in the table after P6 named by the rig.",),
+                 sources=({"kind": "runs", "keys": keys}, _results_source("other_rigs")),
+                 formats=("", ".4g", ".3g", "d", ".3g", "d", "d", "d", ".3g", ".4g", ".2g", ""))
+
+
 def table_equivalence(c: Campaign) -> Table:
     """Table P6: the validation, an equivalence test with the lab that can fail."""
+    return _equivalence(c, c.results.validation, "P6", "Validation at the recommended point: equivalence with "
+                        "the lab (two one-sided tests)", "validation")
+
+
+def tables_other_equivalence(c: Campaign) -> list:
+    """Tables P6b, P6c...: each further repose rig's validation at the recommended point."""
+    return [_equivalence(c, o.validation, f"P6{'bcdefgh'[i]}", f"Validation in the {o.workbook_name} rig: "
+                         "equivalence with the lab's angle in that rig", f"other_rigs[{i}].validation")
+            for i, o in enumerate(c.results.other_rigs or ())]
+
+
+def _equivalence(c: Campaign, v, tid: str, title: str, path: str) -> Table:
+    """An equivalence table of the validation ``v`` (stored at ``path`` in results.json)."""
     r = c.results
-    v = r.validation
     t = v.test
     rows = [(f"Look after {look['n_runs']} runs", look["verdict"], look["difference_ci90"], look["p_tost"])
             for look in t["looks"]]
@@ -212,18 +274,19 @@ def table_equivalence(c: Campaign) -> Table:
              (f"Lab heaps that would give 80 % power with {r.config['validation_cap']} runs",
               v.lab_heaps_for_power, None, None),
              ("Verdict", v.verdict, None, None)]
-    return Table("P6", "Validation at the recommended point: equivalence with the lab (two one-sided tests)",
+    return Table(tid, title,
                  ("Item", "Value", "Interval", "p (TOST) / SD"), ("", "deg", "deg", ""), tuple(rows),
                  notes=(t["note"],
                         "Equivalent: the interval of the difference lies within ± tolerance; different: it lies "
                         "entirely beyond it; otherwise undecided. Runs are added until the verdict is decided "
                         "or the cap is reached. The power rows say whether this validation could have "
                         "shown equivalence at all (none: not within 1000 runs, or 50 heaps)."),
-                 sources=({"kind": "runs", "keys": [run["key"] for run in v.runs]}, _results_source("validation")),
+                 sources=({"kind": "runs", "keys": [run["key"] for run in v.runs]}, _results_source(path)),
                  formats=("", ".4g", ".4g", ".3g"))
 
 
 #: Tables of the plausible workflow, in report order (a builder returning None has nothing to
 #: show for this campaign, e.g. the twins of a heap-only calibration).
 PLAUSIBLE_TABLES = (table_prior, table_twins, table_noise_study, table_design_runs, table_surrogate,
-                    table_identifiability, table_joint_vs_heap, table_equivalence)
+                    table_identifiability, table_joint_vs_heap, table_by_rig, table_equivalence,
+                    tables_other_equivalence, table_other_rigs)

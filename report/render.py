@@ -434,6 +434,9 @@ def rig_text(c: Campaign) -> str:
             setup = repose_setup(c.measurement.get("meta", {}))
         text = setup.describe(nouns)
         text = text[0].upper() + text[1:] + " (workbook meta)"
+        for o in (r.other_rigs or ()) if r is not None else ():
+            other = ReposeSetup(repose_rig_named(o.workbook_name).name, o.geometry).describe(nouns)
+            text += f"; and {other} (the {o.workbook_name} rig's photos)"
     except (DemcalError, TypeError):
         text = "The rig's dimensions come from the workbook meta"
     profile = r.config.get("profile") if r else None

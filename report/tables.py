@@ -196,7 +196,13 @@ def run_stages(results: CampaignResult) -> list[tuple[str, list]]:
                         for name, t in results.calibration.twins.items()}
         for p in results.design.points:
             stages.setdefault(p.stage, []).extend(p.runs)
-        return list(stages.items()) + [("validation", results.validation.runs)]
+        out = list(stages.items()) + [("validation", results.validation.runs)]
+        for o in results.other_rigs or ():          # a further repose rig's stages, named by it
+            rig_stages: dict = {}
+            for p in o.design.points:
+                rig_stages.setdefault(f"{p.stage} ({o.workbook_name})", []).extend(p.runs)
+            out += list(rig_stages.items()) + [(f"validation ({o.workbook_name})", o.validation.runs)]
+        return out
     return [(stage, _part_runs(results, part)) for stage, part in _RUN_STAGES]
 
 
@@ -1304,7 +1310,7 @@ RESULT_TABLES = (table_pb_levels, table_pb_design, table_pb_anova, table_noise, 
 
 #: Ids of the tables :data:`RESULT_TABLES` build, in order.
 RESULT_TABLE_IDS = ("3", "4", "5", "5a", "6", "7", "8", "9", "9a", "9b", "10", "11", "12", "A2",
-                    "P1", "P1a", "P2", "P3", "P4", "P5", "P5a", "P6")
+                    "P1", "P1a", "P2", "P3", "P4", "P5", "P5a", "P5b", "P6", "P6b", "P6c", "P6d", "P7")
 
 
 def build_tables(c: Campaign) -> list[Table]:
@@ -1317,7 +1323,8 @@ def build_tables(c: Campaign) -> list[Table]:
     if c.results is not None and c.results.workflow == "plausible":
         from demcal.report.calibration_tables import PLAUSIBLE_TABLES
 
-        tables += [t for t in (f(c) for f in PLAUSIBLE_TABLES) if t is not None]
+        for built in (f(c) for f in PLAUSIBLE_TABLES):      # a table, none, or one per further rig
+            tables += built if isinstance(built, list) else [built] if built is not None else []
     elif c.results is not None:
         tables += [f(c) for f in RESULT_TABLES]
     tables += critique_tables(c)
