@@ -445,19 +445,40 @@ def derive_results(measurement, config: CampaignConfig, store_dir) -> CampaignRe
     return _derive(measurement, config, _StoredRuns(RunStore(store_dir)))
 
 
-def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
-    """The campaign after the measurement; ``execute(stage, tasks) -> records`` supplies the DEM
-    runs. The workflow's results plus what every campaign records."""
+def _prepare(measurement, config: CampaignConfig) -> tuple:
+    """What a campaign checks and sets up before its first run: the factors with their levels,
+    the DEM parameters before calibration and the repose rigs (a time step above the safe limit,
+    and a heap no photo could read, refused)."""
     if "repose_angle_deg" not in measurement.quantities:
         raise InputError("the campaign needs a target angle of repose: the workbook has no "
                          "'repose' photos and no meta 'target_repose_deg'")
     factors = factor_levels(measurement, config.levels)
     base = base_parameters(measurement).with_(**config.model_extensions)
-    material_time_step(base)          # a time step above the safe limit is refused before any run
+    material_time_step(base)
     setups = repose_setups(measurement)
-    setup = setups[0]
     for s in setups:
-        s.check_for(base.shape, measurement.workbook.get("source"))   # and a heap no photo could read
+        s.check_for(base.shape, measurement.workbook.get("source"))
+    return factors, base, setups
+
+
+def identify_rigs(measurement, config: CampaignConfig, out_dir, runner=None) -> dict:
+    """What each repose rig of the measurement's workbook pins down alone and all together: the
+    plausible workflow up to its sequential runs (``analyse.plausible.derive_plausible`` with
+    ``identify_only``), its runs kept in ``out_dir/runs`` so that a second call reruns nothing."""
+    from demcal.analyse.plausible import derive_plausible
+
+    factors, base, setups = _prepare(measurement, config)
+    execute = _Runner(config, RunStore(Path(out_dir) / "runs"), runner or campaign_runner)
+    found = derive_plausible(measurement, config, execute, factors=factors, base=base, setups=setups,
+                             responses=_responses, run_refs=_run_refs, identify_only=True)
+    return {**found, "stages": list(execute.log)}
+
+
+def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
+    """The campaign after the measurement; ``execute(stage, tasks) -> records`` supplies the DEM
+    runs. The workflow's results plus what every campaign records."""
+    factors, base, setups = _prepare(measurement, config)
+    setup = setups[0]
     if config.workflow == "plausible":
         from demcal.analyse.plausible import derive_plausible
 

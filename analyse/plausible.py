@@ -152,13 +152,15 @@ class _Heap:
         return HeapDatum(self.model, self.target, self.target_var)
 
 
-def derive_plausible(measurement, config, execute, *, factors, base, setups, responses, run_refs) -> dict:
+def derive_plausible(measurement, config, execute, *, factors, base, setups, responses, run_refs,
+                     identify_only: bool = False) -> dict:
     """The workflow of the module docstring; ``execute(stage, tasks) -> records`` supplies the
     DEM runs (the run store, or a replay from it); ``setups`` the workbook's repose rigs
     (``simulate.rigs.ReposeSetup``), the first one's angle ``repose_angle_deg``, each further
     one's the measurement's ``repose_angle_deg.<rig>``. Each rig has its own noise, design and
     surrogate; the posterior is conditioned on every rig's heap at once. Returns what
-    ``results.json`` holds."""
+    ``results.json`` holds; with ``identify_only``, after the sequential runs, only what each rig
+    alone and all together say of each parameter (``analyse.rig_plan``)."""
     from demcal.measure.pipeline import repose_quantity
 
     heaps = [_Heap(i, setup, measurement.quantities[repose_quantity(i, setup.workbook_name)], config)
@@ -247,6 +249,20 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
             heap.rounds.append({"round": r, "u_min": u_min, "points": len(pts)})
             fit(heap)
 
+    if identify_only:
+        together = posterior(first.model, prior, first.target, first.target_var,
+                             discrepancy_var=config.discrepancy_sd ** 2,
+                             seed=np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 1]),
+                             others=[h.datum() for h in heaps[1:]])
+        return {"prior": prior.to_dict(), "by_rig": _each_rig_alone(heaps, prior, config),
+                "together": {n: {"sd_ratio": v["sd_ratio"], "ci95": v["ci95"]} for n, v in together.summary().items()},
+                "rigs": {h.setup.workbook_name: {"target_deg": h.target, "target_sd_deg": h.lab_sd, "heaps": h.lab_n,
+                                                 "run_sd_deg": h.pooled.sd, "replicates": h.k,
+                                                 "runs": sum(len(p["responses"]) for p in h.design),
+                                                 "loo_rmse_deg": h.model.leave_one_out()["rmse"]}
+                         for h in heaps},
+                "twins": {n: c.to_dict() for n, c in constraints.items()}}
+
     # 4. posterior, plausible set, recommended point --------------------------------------------
     def calibrated():
         post = posterior(first.model, prior, first.target, first.target_var,
@@ -292,16 +308,7 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
                        others=[h.datum() for h in heaps[1:]])
         hb = recommend(hp, first.model)
         heap_only = HeapOnly(parameters=_parameter_table(hp, hb), recommended=Point(**hb), ess=hp.ess)
-    by_rig = None
-    if len(heaps) > 1:
-        # what each rig says alone, on its own surrogate and the same prior
-        by_rig = {}
-        for heap in heaps:
-            alone = posterior(heap.model, prior, heap.target, heap.target_var,
-                              discrepancy_var=config.discrepancy_sd ** 2,
-                              seed=heap.stream(config.seed, SEED_STREAMS["surrogate"], 4))
-            by_rig[heap.setup.workbook_name] = {n: {"sd_ratio": v["sd_ratio"], "ci95": v["ci95"]}
-                                                for n, v in alone.summary().items()}
+    by_rig = _each_rig_alone(heaps, prior, config) if len(heaps) > 1 else None
     inside = {n: bool(parameters[n].ci95[0] <= best["values"][n] <= parameters[n].ci95[1]) for n in names}
 
     # 5. validation by equivalence, in every rig ------------------------------------------------
@@ -351,6 +358,18 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
             target_deg=h.target, target_sd_deg=h.lab_sd, target_n=h.lab_n, target_var=h.target_var,
             **_heap_sections(h, names, config), predicted=_predicted(h, x_best), validation=h.validation),
             f"other_rigs[{h.index - 1}]") for h in heaps[1:]]
+    return out
+
+
+def _each_rig_alone(heaps, prior, config) -> dict:
+    """What each rig says alone, on its own surrogate and the same prior: per rig, per parameter,
+    the posterior/prior sd and the 95 % interval."""
+    out = {}
+    for heap in heaps:
+        alone = posterior(heap.model, prior, heap.target, heap.target_var, discrepancy_var=config.discrepancy_sd ** 2,
+                          seed=heap.stream(config.seed, SEED_STREAMS["surrogate"], 4))
+        out[heap.setup.workbook_name] = {n: {"sd_ratio": v["sd_ratio"], "ci95": v["ci95"]}
+                                         for n, v in alone.summary().items()}
     return out
 
 

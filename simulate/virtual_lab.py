@@ -859,7 +859,7 @@ def _meta(truth: Truth, effects, geometries=()) -> pd.DataFrame:
 
 
 def check_design(effects, *, photos, n_specimens, n_density, n_drop, n_incline, n_compression, n_photos,
-                 n_tracks, trials_per_specimen, orientation_range_deg, drop_heights_mm, repose_rigs=1,
+                 n_tracks, trials_per_specimen, orientation_range_deg, drop_heights_mm, repose_rig=None,
                  **_) -> None:
     """Refuse a design (the options of ``write_virtual_workbook``) it cannot write, before
     anything is written; the options not checked here (``pairs``, ``surfaces``...) are ignored."""
@@ -885,7 +885,7 @@ def check_design(effects, *, photos, n_specimens, n_density, n_drop, n_incline, 
     if not drop_heights_mm or any(not h > 0 for h in drop_heights_mm):
         raise InputError(f"drop_heights_mm must be positive heights, got {drop_heights_mm!r}")
     for e in effects:
-        if e.sheet == "repose" and repose_rigs > 1:
+        if e.sheet == "repose" and repose_rig is not None and len(repose_geometries(repose_rig)) > 1:
             raise InputError(f"planted effect {e.kind} is in the repose sheet: plant it with one repose rig")
         if e.sheet == "repose" and (photos == "none" or n_photos < 2):
             raise InputError(f"planted effect {e.kind} is in the repose sheet: needs photos and n_photos >= 2")
@@ -972,8 +972,7 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
     check_design(effects, photos=photos, n_specimens=n_specimens, n_density=n_density, n_drop=n_drop,
                  n_incline=n_incline, n_compression=n_compression, n_photos=n_photos, n_tracks=n_tracks,
                  trials_per_specimen=trials_per_specimen, orientation_range_deg=orientation_range_deg,
-                 drop_heights_mm=drop_heights_mm,
-                 repose_rigs=1 if repose_rig is None else len(repose_geometries(repose_rig)))
+                 drop_heights_mm=drop_heights_mm, repose_rig=repose_rig)
     if photo_size is not None and (len(photo_size) != 2 or min(photo_size) < 120
                                    or not all(isinstance(v, (int, np.integer)) for v in photo_size)):
         raise InputError(f"photo_size must be (height, width) in whole pixels, each >= 120, got {photo_size!r}")

@@ -195,6 +195,7 @@ def _fmt(x: float) -> str:
 
 def run(args) -> int:
     from demcal.simulate.truth_file import read_truth_file
+    from demcal.simulate.rigs import rig_of_geometry
     from demcal.simulate.virtual_lab import EFFECT_DEFAULTS, check_design, write_virtual_workbook
 
     spec = read_truth_file(args.truth)
@@ -204,7 +205,13 @@ def run(args) -> int:
     out = Path(args.out)
     _clear(out, args.force)
     if design["photos"] == "dem" and design["n_photos"]:
-        print(f"pouring {design['n_photos']} heaps in the repose rig for the photos: this takes minutes",
+        from demcal.simulate.virtual_lab import repose_geometries
+
+        rigs = ([r.workbook_name for r in map(rig_of_geometry, repose_geometries(design["repose_rig"]))]
+                if design.get("repose_rig") else ["repose"])
+        print(f"pouring {design['n_photos']} heaps in each of the rigs {', '.join(rigs)} for the photos: this "
+              "takes minutes" if len(rigs) > 1 else
+              f"pouring {design['n_photos']} heaps in the {rigs[0]} rig for the photos: this takes minutes",
               file=sys.stderr)
     vw = write_virtual_workbook(spec.truth, out, effects=effects, rng=args.seed, **design)
     root = out.parent if out.suffix.lower() == ".xlsx" else out

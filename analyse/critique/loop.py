@@ -404,30 +404,37 @@ def _restitution_twins(group, twins, params, specimens, note, state) -> tuple[st
 
 
 def _repose_twins(runner, measurement, results, campaign, params, repose_seeds, discrepancies):
-    from demcal.simulate.rigs import repose_setup, rig, run_task
+    """Each repose rig's photographed angles beside its twin's: the campaign's validation runs in
+    that rig, else ``repose_seeds`` quick runs at ``params``."""
+    from demcal.measure.pipeline import repose_quantity
+    from demcal.simulate.rigs import repose_setups, rig, run_task
 
-    est = measurement.quantities.get("repose_angle_deg")
-    if est is None:
+    if measurement.quantities.get("repose_angle_deg") is None:
         return
-    photo = est.extra.get("photo_estimate") if est.extra.get("override") else None
-    measured = [r["value"] for r in est.per_row if r.get("used", True)] if est.per_row else [est.value]
-    if results is not None:
-        angles, note = repose_validation_angles(campaign, results)
-    elif repose_seeds > 0:
-        setup = repose_setup(measurement.meta, file=measurement.workbook.get("source"))
-        tasks = [setup.task(params, 9000 + i, profile="quick") for i in range(repose_seeds)]
-        twin = rig(setup.rig)
-        angles = [twin.reading(t, r) for t, r in zip(tasks, runner(run_task, tasks, "repose twins"))]
-        note = f"{repose_seeds} quick-profile repose runs"
-    else:
-        discrepancies.append(independent_discrepancy("repose_angle_deg (photo method)", "repose", measured, [],
-                                                     "not simulated: give the campaign folder (its validation "
-                                                     "runs) or repose_seeds"))
-        return
-    if photo is not None:
-        note += "; measured: the photos (the meta target_repose_deg overrides them in the campaign)"
-    discrepancies.append(independent_discrepancy("repose_angle_deg (photo method)", "repose", measured, angles,
-                                                 note))
+    setups = repose_setups(measurement.meta, file=measurement.workbook.get("source"))
+    validations = [None] + [o.validation for o in (results.other_rigs or ())] if results is not None else []
+    for i, setup in enumerate(setups):
+        quantity = repose_quantity(i, setup.workbook_name)
+        est = measurement.quantities[quantity]
+        label = f"{quantity} (photo method)" if i == 0 else f"{quantity} ({setup.workbook_name} photos)"
+        photo = est.extra.get("photo_estimate") if est.extra.get("override") else None
+        measured = [r["value"] for r in est.per_row if r.get("used", True)] if est.per_row else [est.value]
+        if results is not None and i < len(validations):
+            angles, note = repose_validation_angles(campaign, results, validations[i])
+        elif repose_seeds > 0:
+            tasks = [setup.task(params, 9000 + j, profile="quick") for j in range(repose_seeds)]
+            twin = rig(setup.rig)
+            name = "repose" if i == 0 else setup.workbook_name
+            angles = [twin.reading(t, r) for t, r in zip(tasks, runner(run_task, tasks, f"{name} twins"))]
+            note = f"{repose_seeds} quick-profile {name} runs"
+        else:
+            discrepancies.append(independent_discrepancy(label, "repose", measured, [],
+                                                         "not simulated: give the campaign folder (its validation "
+                                                         "runs) or repose_seeds"))
+            continue
+        if photo is not None:
+            note += "; measured: the photos (the meta target_repose_deg overrides them in the campaign)"
+        discrepancies.append(independent_discrepancy(label, "repose", measured, angles, note))
 
 
 # ----------------------------------------------------------------------------------------------

@@ -1,8 +1,11 @@
-"""``demcal plan``: the smallest effect of each catalogue mechanism a lab design would detect.
+"""``demcal plan``: the smallest effect of each catalogue mechanism a lab design would detect;
+with ``--rigs``, what each repose rig of the design pins down alone and together.
 
     demcal plan WORKBOOK_OR_TRUTH [--mechanisms NAME,...] [--reps N] [--seed N] [--power 0.8]
                 [--steps 4] [--photos none|analytic] [--alpha 0.01] [--correction bh|holm]
                 [--json OUT]
+    demcal plan TRUTH --rigs --out DIR [--seed N] [--profile quick|full] [--workers N]
+                [--budget-runs N] [--json OUT]
 
 WORKBOOK_OR_TRUTH is a truth file (``.yaml``, as for ``demcal virtual-lab``) or a lab workbook,
 whose sheets give the design and whose measured values give the truth
@@ -46,6 +49,19 @@ def register(subparsers) -> None:
     p.add_argument("--correction", choices=("bh", "holm"), default="bh",
                    help="the critique's multiple-testing correction (%(default)s)")
     p.add_argument("--json", metavar="OUT", help="write the plan to this JSON file")
+    g = p.add_argument_group("repose rigs (--rigs): what each rig of the truth file's design pins down")
+    g.add_argument("--rigs", action="store_true",
+                   help="instead of the mechanisms: write the truth file's virtual workbook, run each of its "
+                        "repose rigs (design.repose_rig) up to the calibration's sequential runs, and give per "
+                        "parameter the posterior/prior SD with each rig alone and with all together (DEM runs: "
+                        "tens of minutes)")
+    g.add_argument("--out", metavar="DIR", help="folder of the virtual workbook and the runs (kept: a second "
+                                                "plan reruns nothing)")
+    g.add_argument("--profile", choices=("quick", "full"), default="quick",
+                   help="the rigs' run profile (%(default)s)")
+    g.add_argument("--workers", type=int, default=None, help="parallel DEM runs (default: the cores)")
+    g.add_argument("--budget-runs", type=int, default=None,
+                   help="runs of design and sequential rounds per rig (default: the calibration's)")
     add_workbook_options(p)
     p.set_defaults(handler=run)
 
@@ -100,7 +116,40 @@ def _design_text(d: dict) -> str:
     return "; ".join(parts)
 
 
+def run_rigs(args) -> int:
+    """``demcal plan TRUTH --rigs``: the rig plan (``analyse.rig_plan``)."""
+    from dataclasses import replace
+
+    from demcal.analyse.campaign import CampaignConfig
+    from demcal.analyse.rig_plan import plan_rigs
+    from demcal.errors import InputError
+
+    if not args.out:
+        raise InputError("--rigs needs --out DIR: the folder of the virtual workbook and its runs")
+    if args.mechanisms:
+        raise InputError("--mechanisms plans the critique's mechanisms; --rigs plans the repose rigs: give one")
+    config = replace(CampaignConfig(), profile=args.profile)
+    if args.workers is not None:
+        config = replace(config, workers=args.workers)
+    if args.budget_runs is not None:
+        config = replace(config, budget_runs=args.budget_runs)
+    print(f"rig plan of {args.source}: the virtual workbook and the runs in {args.out}, seed {args.seed}")
+    plan = plan_rigs(args.source, args.out, seed=args.seed, config=config)
+    for note in plan.notes:
+        print(f"note: {one_line(note, limit=NOTE_LIMIT)}")
+    print(plan.table())
+    if args.json:
+        print(f"written: {write_json(args.json, plan.to_dict())}")
+    return 0
+
+
 def run(args) -> int:
+    if args.rigs:
+        return run_rigs(args)
+    if args.out or args.budget_runs is not None:
+        from demcal.errors import InputError
+
+        raise InputError("--out and --budget-runs belong to --rigs (the repose rigs' plan)")
     from demcal.analyse.critique.cli import _list
     from demcal.analyse.critique.plan import check_options, plan_design, read_design
 

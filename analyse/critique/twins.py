@@ -296,13 +296,15 @@ def constant_discrepancy(observable: str, sheet: str, measured, simulated: float
                        int(y.size), 1, note)
 
 
-def repose_validation_angles(campaign_dir, results) -> tuple[list, str]:
-    """Angles of the campaign's validation runs (``CampaignResult``), from ``DIR/runs``: the
-    campaign's response (``results.response``), as the calibration read it."""
+def repose_validation_angles(campaign_dir, results, validation=None) -> tuple[list, str]:
+    """Angles of the campaign's validation runs (``CampaignResult``; ``validation``: a further
+    repose rig's, default the first rig's), from ``DIR/runs``: the campaign's response
+    (``results.response``), as the calibration read it."""
     from demcal.simulate.rigs import repose_rig_named
 
     response = (results.response or {}).get("name") or repose_rig_named(results.repose_rig).compared
-    runs = results.validation.runs
+    validation = validation or results.validation
+    runs = validation.runs
     store = RunStore(Path(campaign_dir) / "runs")
     angles, missing = [], []
     for ref in runs:
@@ -312,7 +314,7 @@ def repose_validation_angles(campaign_dir, results) -> tuple[list, str]:
             continue
         angles.append(float(rec["result"]["observable"][response]))
     if not angles:
-        responses = results.validation.responses
+        responses = validation.responses
         note = "validation responses from results.json (run records not found)" if responses else \
             "the campaign has no validation runs"
         return [float(v) for v in responses], note

@@ -174,3 +174,16 @@ def test_a_dimension_two_rigs_share_must_be_named_per_rig(tmp_path):
     from demcal.simulate.rigs import repose_setups
     setups = repose_setups(measure_workbook(path).meta)
     assert [s.geometry["fill_count"] for s in setups] == [500, 700]
+
+
+def test_the_critique_sets_each_rigs_photos_beside_its_validation_runs(two):
+    from demcal.analyse.critique.loop import run_critique
+
+    path, _, res = two
+    c = run_critique(path.parent / "out", twins=True, rigs=("repose",))
+    rows = {d.observable: d for d in c.discrepancies if d.observable.startswith("repose_angle_deg")}
+    assert set(rows) == {"repose_angle_deg (photo method)", "repose_angle_deg.drum (drum photos)"}
+    for row, validation in ((rows["repose_angle_deg (photo method)"], res.validation),
+                            (rows["repose_angle_deg.drum (drum photos)"], res.other_rigs[0].validation)):
+        assert row.n_simulated == validation.n_runs
+        assert row.simulated == pytest.approx(np.mean(validation.responses))
