@@ -1125,9 +1125,15 @@ def table_heap_observables(c: Campaign) -> Table:
                   {True: "beyond the noise", False: "within the noise"}.get(o.beyond_noise, "too few runs"))
                  for h in gains for o in h.observables)
     notes = ["Over the validation runs at each campaign's calibrated point, every run an independent draw; "
-             "difference after - before with Welch's 95 % interval. Outflow fraction: share of the "
-             f"{particle_noun(c.measurement, plural=True)} whose centre ends beyond the end plate; outside pile angle: the pile beyond the carton; crest "
-             "height: the top of the heap's profile."]
+             "difference after - before with Welch's 95 % interval; the observables of the campaign's repose "
+             "rig, lengths in mm."]
+    if gains and c.results is not None:
+        from demcal.simulate.rigs import repose_rig_named
+
+        described = repose_rig_named(c.results.repose_rig).observable_notes
+        shown = list(dict.fromkeys(o.name for h in gains for o in h.observables if o.name in described))
+        if shown:
+            notes.append("; ".join(f"{n}: {described[n]}" for n in shown) + ".")
     if not gains:
         notes.append("None: no extension was recalibrated.")
     return Table("C6", "Heap-side gain: heap observables before and after each accepted extension",

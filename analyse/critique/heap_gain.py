@@ -14,10 +14,11 @@ runs the campaign again with the same workbook, settings and seed and the extens
   paper's procedure gives none). A recalibrated value inside the interval of the campaign under
   critique has moved by less than the parameter's own uncertainty;
 - **the heap observables the calibration does not fit**, over the validation runs of each
-  campaign at its calibrated point: the outflow fraction (share of the segments whose centre
-  ends beyond the end plate), the angle of the pile outside the carton and the crest height of
-  the heap's profile; the difference of the means with Welch's 95 % interval, every run an
-  independent draw of the chaotic heap. The fitted angle is listed too, marked as fitted.
+  campaign at its calibrated point: every observable the campaign's repose rig declares
+  (``simulate.rigs.Rig.observables``; the carton's outflow fraction, outside pile angle and
+  crest height, a cone's base diameter...); the difference of the means with Welch's 95 %
+  interval, every run an independent draw of the chaotic heap. The fitted angle is listed too,
+  marked as fitted.
 """
 
 from __future__ import annotations
@@ -32,13 +33,17 @@ from scipy import stats
 from demcal.analyse.results import CampaignResult, Record
 from demcal.errors import AnalysisError
 
-#: Heap observables of a repose run record: (name, where in the record, scale to the unit, unit, fitted).
-HEAP_OBSERVABLES = (
-    ("outflow fraction", ("observable", "outside_fraction"), 1.0, "-", False),
-    ("outside pile angle", ("observable", "angle_outside_deg"), 1.0, "deg", False),
-    ("crest height", ("record", "crest_height"), 1e3, "mm", False),
-    ("angle of repose (fitted)", ("observable", "angle_deg"), 1.0, "deg", True),
-)
+def heap_observables(rig) -> tuple:
+    """The observables of a repose rig (``simulate.rigs.Rig``) as compared here: (name, scale to
+    the unit shown, unit shown, fitted), lengths in mm, the rig's compared angle marked fitted."""
+    return tuple((name, 1e3 if unit == "m" else 1.0, "mm" if unit == "m" else unit, name == rig.compared)
+                 for name, unit in rig.observables.items())
+
+
+def _rig_of(result: CampaignResult):
+    from demcal.simulate.rigs import repose_rig_named
+
+    return repose_rig_named(result.repose_rig)
 
 
 #: An interval at most this share of its width before the extension counts as narrowed by it.
@@ -178,13 +183,14 @@ def validation_values(campaign_dir, result: CampaignResult) -> dict:
     from demcal.analyse.runs import RunStore
 
     store = RunStore(Path(campaign_dir) / "runs")
-    out = {name: [] for name, *_ in HEAP_OBSERVABLES}
+    observables = heap_observables(_rig_of(result))
+    out = {name: [] for name, *_ in observables}
     for ref in result.validation.runs:
         rec = store.get(ref["key"])
         if rec is None or rec.get("result") is None:
             raise AnalysisError(f"{campaign_dir}: validation run {ref['key'][:12]} is not in its run store")
-        for name, (part, key), scale, _, _ in HEAP_OBSERVABLES:
-            value = (rec["result"].get(part) or {}).get(key)
+        for name, scale, _, _ in observables:
+            value = (rec["result"].get("observable") or {}).get(name)
             if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
                 out[name].append(float(value) * scale)
     return {k: np.asarray(v, dtype=float) for k, v in out.items()}
@@ -231,7 +237,7 @@ def compare_campaigns(before: CampaignResult, before_values: dict, after: Campai
         inside = None if cb is None else bool(cb[0] <= va <= cb[1])
         params.append(ParameterShift(name, vb, va, cb, ca, va - vb, inside))
     obs = []
-    for name, _, _, unit, fitted in HEAP_OBSERVABLES:
+    for name, _, unit, fitted in heap_observables(_rig_of(before)):
         a, b = before_values.get(name, np.array([])), after_values.get(name, np.array([]))
         d, ci = welch_interval(a, b)
         (mb, sb), (ma, sa) = _mean_sd(a), _mean_sd(b)

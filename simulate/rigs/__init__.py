@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import importlib
 import operator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 from demcal.errors import InputError, WorkbookError
@@ -78,6 +78,8 @@ class Rig:
         ``run_task(task) -> dict``, the run's ``RigResult.to_dict()``.
     observables : dict
         Observable name -> unit, as ``RigResult.observable`` holds them.
+    observable_notes : dict
+        Observable name -> what it measures, in the report's words (those the name does not say).
     compared : str or None
         The observable compared with the lab's reading.
     fallbacks : tuple of str
@@ -145,6 +147,7 @@ class Rig:
     task: Callable
     run_task: Callable
     observables: dict
+    observable_notes: dict = field(default_factory=dict)
     compared: str | None = None
     fallbacks: tuple = ()
     geometry: type | None = None

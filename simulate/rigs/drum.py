@@ -422,6 +422,8 @@ RIG = Rig("drum", sheet="repose", run=run_drum, task=task, run_task=run_task,
           compared="angle_deg", fallbacks=("angle_profile_deg",),
           observables={"angle_deg": "deg", "angle_sd_deg": "deg", "angle_profile_deg": "deg", "frames_read": "-",
                        "escaped": "-"},
+          observable_notes={"angle_sd_deg": "sd of the angle over the frames", "frames_read": "frames whose free "
+                            "surface was found", "escaped": heap.CONE_NOTES["escaped"]},
           geometry=DrumGeometry, workbook_name="drum", flanks="drum",
           lab_test="rotating drum, end-on photographs of the free surface in steady rotation", measure=measure_heap,
           analytic_photo=analytic_photo, run_photo=run_photo, liggghts_case=liggghts_case,

@@ -36,7 +36,7 @@ from demcal.errors import InputError
 from demcal.provenance import Provenance
 from demcal.simulate.params import DEMParameters
 from demcal.simulate.rigs import Rig, RigResult, heap, run_meta
-from demcal.simulate.rigs.heap import (BULK_PACKING, CONE_OBSERVABLES, RigDimensions, check_dimensions,
+from demcal.simulate.rigs.heap import (BULK_PACKING, CONE_NOTES, CONE_OBSERVABLES, RigDimensions, check_dimensions,
                                        cone_height, cone_observables, fill_lift_settle, heap_task,
                                        inscribed_half, prepare_run, run_heap_task, run_options,
                                        side_view_angles)
@@ -210,7 +210,7 @@ def liggghts_case(params: DEMParameters, geometry: CylinderGeometry, lift_time: 
 
 RIG = Rig("lifting_cylinder", sheet="repose", run=run_lifting_cylinder, task=task, run_task=run_task,
           compared="angle_deg", fallbacks=("angle_profile_deg", "angle_cone_deg"),
-          observables={**CONE_OBSERVABLES, "escaped": "-"},
+          observables={**CONE_OBSERVABLES, "escaped": "-"}, observable_notes=CONE_NOTES,
           geometry=CylinderGeometry, workbook_name="lifting_cylinder", flanks="both",
           lab_test="lifting cylinder cone, side photograph of both flanks", measure=measure_heap,
           liggghts_case=liggghts_case, cli_arguments=heap.cli_arguments, cli_options=heap.cli_options)

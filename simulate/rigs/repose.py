@@ -277,6 +277,7 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
         "angle_outside_deg": heap.angle_outside_deg,
         "escaped": len(sim.escaped),
         "outside_fraction": float(np.mean(body[act, 0] > L)) if n_act else math.nan,
+        "crest_height_m": heap.crest_height,
     }
     rec = {"profile_x": heap.profile_x, "profile_z": heap.profile_z, "crest_height": heap.crest_height,
            "sphere_positions": pos, "sphere_radii": rad, "sphere_body": sim.sphere_body()[keep],
@@ -327,7 +328,11 @@ RIG = Rig("repose", sheet="repose", run=run_repose, task=task, run_task=run_task
           # slope, then the heap beyond the carton
           fallbacks=("angle_profile_deg", "angle_outside_deg"),
           observables={"angle_deg": "deg", "angle_profile_deg": "deg", "angle_outside_deg": "deg",
-                       "escaped": "-", "outside_fraction": "-"},
+                       "escaped": "-", "outside_fraction": "-", "crest_height_m": "m"},
+          observable_notes={"outside_fraction": "share of the particles whose centre ends beyond the end plate",
+                            "angle_outside_deg": "the pile beyond the carton",
+                            "crest_height_m": "the top of the heap's profile",
+                            "escaped": heap.CONE_NOTES["escaped"]},
           geometry=ReposeGeometry, workbook_name="lifted_plate", flanks="right",
           lab_test="plate withdrawal (pumping plate) heap, side photograph of its flank", measure=measure_heap,
           liggghts_case=liggghts_case, cli_arguments=heap.cli_arguments, cli_options=heap.cli_options)

@@ -109,8 +109,9 @@ def extension_standin_runner(inputs: dict) -> dict:
     outflow = OUTFLOW_BASE + OUTFLOW_SLOPE * (p["e_pw"] - 0.5) + rng.normal(0.0, OUTFLOW_NOISE)
     return {"rig": "repose",
             "observable": {"angle_deg": angle, "angle_profile_deg": angle, "outside_fraction": outflow,
-                           "angle_outside_deg": 25.0 + rng.normal(0.0, 1.0)},
-            "record": {"crest_height": 0.08 + rng.normal(0.0, 0.002)}, "wall_s": 0.0, "steps": 0, "spheres": 0,
+                           "angle_outside_deg": 25.0 + rng.normal(0.0, 1.0),
+                           "crest_height_m": 0.08 + rng.normal(0.0, 0.002)},
+            "record": {}, "wall_s": 0.0, "steps": 0, "spheres": 0,
             "sphere_steps_per_s": 0.0, "seed": inputs["seed"]}
 
 

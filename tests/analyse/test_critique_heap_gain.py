@@ -79,12 +79,15 @@ def test_heap_side_gain_of_shared_damping(flat_lab, tmp_path):
     assert ("e_pw: its 95 % interval narrowed" if e.within_uncertainty else "e_pw moved beyond its uncertainty") \
         in h.conclusion
     # the outflow fraction moves by OUTFLOW_SLOPE x the change of e_pw at the validation points
-    outflow = next(o for o in h.observables if o.name == "outflow fraction")
+    outflow = next(o for o in h.observables if o.name == "outside_fraction")
     expected = OUTFLOW_SLOPE * (after.validation.settings["e_pw"] - before.validation.settings["e_pw"])
     assert outflow.n_before == before.validation.n_runs and outflow.n_after == after.validation.n_runs
     assert outflow.ci95[0] <= expected <= outflow.ci95[1] and outflow.beyond_noise
-    assert not outflow.fitted and next(o for o in h.observables if o.name.startswith("angle of repose")).fitted
-    crest = next(o for o in h.observables if o.name == "crest height")
+    assert not outflow.fitted and next(o for o in h.observables if o.name == "angle_deg").fitted
+    # every observable the carton rig declares, and only those
+    from demcal.simulate.rigs import rig
+    assert [o.name for o in h.observables] == list(rig("repose").observables)
+    crest = next(o for o in h.observables if o.name == "crest_height_m")
     assert crest.unit == "mm" and crest.before == pytest.approx(80.0, abs=1.0)     # 0.08 m in the records
     assert any(s.startswith("Heap-side gain of contact_effective_mass") for s in c.conclusions)
     # critique.json reads back, and the report's tables C5 and C6 show it

@@ -22,7 +22,7 @@ from demcal.errors import InputError, WorkbookError
 from demcal.jsonio import read_json, write_json
 from demcal.simulate.clump import make_template
 from demcal.simulate.params import DEMParameters
-from demcal.simulate.rigs import RIGS, RigResult, run_rig
+from demcal.simulate.rigs import RIGS, RigResult, rig, run_rig
 from demcal.simulate.rigs.drop import release_orientation
 from demcal.simulate.rigs.heap import ReposeProfile, top_profile
 from demcal.simulate.rigs.repose import ReposeGeometry, heap_angles
@@ -259,7 +259,9 @@ def test_tiny_repose_run_makes_a_heap_measured_both_ways():
     res = run_rig("repose", params, seed=2, profile=tiny, geometry=geo)
     assert isinstance(res, RigResult) and res.rig == "repose"
     obs = res.observable
-    assert set(obs) == {"angle_deg", "angle_profile_deg", "angle_outside_deg", "escaped", "outside_fraction"}
+    assert set(obs) == set(rig("repose").observables) == {"angle_deg", "angle_profile_deg", "angle_outside_deg",
+                                                          "escaped", "outside_fraction", "crest_height_m"}
+    assert obs["crest_height_m"] == res.record["crest_height"]
     assert 5.0 < obs["angle_deg"] < 85.0
     assert 5.0 < obs["angle_profile_deg"] < 85.0
     assert obs["outside_fraction"] > 0.0
