@@ -150,6 +150,10 @@ def meta_rows(geometry, keys: dict, rename=None) -> list:
     return rows
 
 
+#: Most particles a repose rig may hold (the workbook's plausible range of ``fill_count``).
+MAX_FILL = 1e6
+
+
 class RigDimensions:
     """What every repose rig's dimensions (a frozen dataclass with ``META_KEYS``, ``meta key ->
     (field, factor to SI)``, and the keys the workbook must give, ``REQUIRED``) share: read from
@@ -165,6 +169,19 @@ class RigDimensions:
         (a key several rigs of one workbook share: ``simulate.rigs.meta_names``)."""
         return cls(**meta_values(cls.META_KEYS, meta, file, whole=("fill_count",), required=cls.REQUIRED,
                                  rename=rename))
+
+    def filled_for(self, shape):
+        """The same dimensions with the fill count for ``shape`` (here: the one given)."""
+        return self
+
+    def check_fill(self, shape) -> None:
+        """Refuse a fill (given, or sized from the rig's volume) of more than ``MAX_FILL``
+        particles, before any memory is taken for it: dimensions that read as metres where
+        millimetres were meant would otherwise ask for petabytes."""
+        count = self.filled_for(shape).fill_count
+        if count is not None and count > MAX_FILL:
+            raise InputError(f"a fill of {count:.4g} particles is more than {MAX_FILL:g}, more than any lab "
+                             f"heap: check the repose rig's dimensions (in mm) and fill count ({self.describe()})")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -515,6 +532,7 @@ def prepare_run(params, seed, geometry, geometry_class, profile, size_distributi
         raise InputError(f"geometry must be a {geometry_class.__name__}, got {type(geometry).__name__}")
     if size_distribution is not None:
         params = with_size_distribution(params, size_distribution)
+    geometry.check_fill(params.shape)
     geometry.check_for(params.shape)
     return seed, params, repose_profile(profile), geometry.filled_for(params.shape)
 

@@ -248,6 +248,7 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
         params = with_size_distribution(params, size_distribution)
     prof = repose_profile(profile)
     base = geometry if geometry is not None else ReposeGeometry()
+    base.check_fill(params.shape)
     if not isinstance(base, ReposeGeometry):
         raise InputError(f"geometry must be a ReposeGeometry, got {type(base).__name__}")
     geo = base.scaled(prof.scale) if prof.scale != 1.0 else base

@@ -187,3 +187,21 @@ def test_the_critique_sets_each_rigs_photos_beside_its_validation_runs(two):
                             (rows["repose_angle_deg.drum (drum photos)"], res.other_rigs[0].validation)):
         assert row.n_simulated == validation.n_runs
         assert row.simulated == pytest.approx(np.mean(validation.responses))
+
+
+@pytest.mark.parametrize("rig, meta", [("drum", {"drum_diameter_mm": 1e6, "drum_width_mm": 1e6, "drum_speed_rpm": 1e-3}),
+                                       ("drum", {"drum_fill_count": 10 ** 12}),
+                                       ("lifted_plate", {"lifted_plate_fill_count": 5 * 10 ** 7})])
+def test_a_fill_no_lab_heap_holds_is_refused_before_any_memory_is_taken(rig, meta):
+    from demcal.simulate.params import DEMParameters
+    from demcal.simulate.rigs import repose_setups, run_rig
+
+    setups = {s.workbook_name: s for s in repose_setups({"repose_rig": "lifted_plate, drum", **DRUM, **meta})}
+    setup = setups.pop(rig)
+    shape = DEMParameters().shape
+    with pytest.raises(WorkbookError, match="more than 1e\\+06, more than any lab heap"):
+        setup.check_for(shape)
+    with pytest.raises(InputError, match="more than any lab heap"):      # and in the run itself
+        run_rig(setup.rig, DEMParameters(), seed=0, geometry=setup.dimensions(), profile="quick")
+    for other in setups.values():                                         # the other rig is fine
+        other.check_for(shape)
