@@ -34,7 +34,7 @@ def _truth(tmp_path, rigs="lifted_plate, drum"):
 
 
 def test_the_plan_says_what_a_second_rig_buys_and_reruns_nothing(tmp_path):
-    config = CampaignConfig(workers=1, progress=False, likelihood="heap")
+    config = CampaignConfig(workers=1, progress=False, likelihood="heap", budget_runs=32)
     plan = plan_rigs(_truth(tmp_path), tmp_path / "plan", seed=3, config=config, runner=two_rig_runner)
     assert list(plan.by_rig) == ["lifted_plate", "drum"]
     # each rig alone narrows both frictions a little; together they pin them down

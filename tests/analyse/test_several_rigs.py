@@ -63,7 +63,8 @@ def _workbook(folder, rigs="lifted_plate, drum", **meta):
 def two(tmp_path_factory):
     folder = tmp_path_factory.mktemp("two_rigs")
     path = _workbook(folder)
-    config = CampaignConfig(workers=1, progress=False, seed=3, likelihood="heap")
+    config = CampaignConfig(workers=1, progress=False, seed=3, likelihood="heap", budget_runs=32, refine_rounds=2,
+                            validation_cap=20)
     return path, config, calibrate(path, folder / "out", config, runner=two_rig_runner)
 
 
@@ -170,9 +171,9 @@ def test_a_dimension_two_rigs_share_must_be_named_per_rig(tmp_path):
     with pytest.raises(InputError, match="fill_count: a dimension of each of the rigs lifted_plate, drum; give each "
                                          "its own: lifted_plate_fill_count, drum_fill_count"):
         _workbook(tmp_path, fill_count=500)
-    path = _workbook(tmp_path, lifted_plate_fill_count=500, drum_fill_count=700)
     from demcal.simulate.rigs import repose_setups
-    setups = repose_setups(measure_workbook(path).meta)
+    setups = repose_setups({"repose_rig": "lifted_plate, drum", **DRUM, "lifted_plate_fill_count": 500,
+                            "drum_fill_count": 700})
     assert [s.geometry["fill_count"] for s in setups] == [500, 700]
 
 
