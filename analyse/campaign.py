@@ -129,6 +129,10 @@ class CampaignConfig:
         ``{"contact_effective_mass": True}``, the model extended (the critique's heap-side gain
         recalibrates this way); the time step ``dt``; the rolling lever; the mass model; the
         segment's sphere count. Empty: the default model.
+    extra_targets : tuple of str
+        ``plausible``: the rigs' other readings to fit beside the angle (``Rig.targets``, e.g.
+        ``crest_height_mm``: every repose rig of the workbook that declares it, from its photos'
+        crest heights, which need their ``scale_mm_per_px``). Empty (default): the angles alone.
     """
 
     profile: str = "quick"
@@ -156,6 +160,7 @@ class CampaignConfig:
     n_significant: tuple = (3, 3)
     progress: bool = True
     model_extensions: dict = field(default_factory=dict)
+    extra_targets: tuple = ()
 
     def __post_init__(self):
         if self.levels not in ("minmax", "sd"):
@@ -187,6 +192,10 @@ class CampaignConfig:
             raise InputError(f"likelihood must be 'joint' or 'heap', got {self.likelihood!r}")
         if not self.discrepancy_sd >= 0:
             raise InputError(f"discrepancy_sd must be >= 0, got {self.discrepancy_sd!r}")
+        if len(set(self.extra_targets)) != len(self.extra_targets):
+            raise InputError(f"extra_targets names a target twice: {', '.join(self.extra_targets)}")
+        if self.extra_targets and self.workflow != "plausible":
+            raise InputError("extra_targets are fitted by the plausible workflow only")
         unknown = sorted(set(self.model_extensions) - set(model_settings()))
         if unknown:
             raise InputError(f"model_extensions: {', '.join(unknown)} not a model setting; valid: "
@@ -458,7 +467,27 @@ def _prepare(measurement, config: CampaignConfig) -> tuple:
     setups = repose_setups(measurement)
     for s in setups:
         s.check_for(base.shape, measurement.workbook.get("source"))
+    _check_extra_targets(measurement, config, setups)
     return factors, base, setups
+
+
+def _check_extra_targets(measurement, config: CampaignConfig, setups) -> None:
+    """Refuse, before any run, an extra target a rig of the workbook cannot mirror or its photos
+    did not measure, naming what is missing."""
+    from demcal.measure.pipeline import repose_quantity
+    from demcal.simulate.rigs import rig
+
+    for name in config.extra_targets:
+        for i, s in enumerate(setups):
+            targets = rig(s.rig).targets
+            if name not in targets:
+                offered = sorted({t for x in setups for t in rig(x.rig).targets})
+                raise InputError(f"extra target {name}: the {s.workbook_name} rig's twin does not read it; "
+                                 f"the workbook's rigs offer {', '.join(offered) or 'none'}")
+            quantity = repose_quantity(i, s.workbook_name, name)
+            if quantity not in measurement.quantities:
+                raise InputError(f"extra target {name}: the workbook has no {quantity}; the {s.workbook_name} rig's "
+                                 "photos need their scale (repose sheet column scale_mm_per_px) on every row")
 
 
 def identify_rigs(measurement, config: CampaignConfig, out_dir, runner=None) -> dict:

@@ -49,7 +49,8 @@ import numpy as np
 from demcal.analyse.equivalence import (default_tolerance, lab_heaps_for_power, runs_for_power,
                                  sequential_equivalence, tost_power)
 from demcal.analyse.noise import pooled_noise, replicates_for, seed_correlation
-from demcal.analyse.results import Calibration, HeapOnly, OtherRig, ParameterEstimate, Point, Validation
+from demcal.analyse.results import (Calibration, ExtraTarget, HeapOnly, OtherRig, ParameterEstimate, Point,
+                                    Validation)
 from demcal.analyse.surrogate import (IMPLAUSIBILITY_CUT, U_STOP, HeapDatum, NoisySurrogate, Prior, next_points,
                                posterior, recommend, recommend_among, space_filling)
 from demcal.errors import AnalysisError
@@ -58,6 +59,8 @@ from demcal.errors import AnalysisError
 SEED_STREAMS = {"noise": 1, "design": 2, "sequential": 3, "validation": 4, "surrogate": 5, "refine": 6}
 #: Marks the seed streams of a workbook's second and further repose rigs.
 RIG_STREAM = 100
+#: Marks the surrogate seeds of a rig's extra targets.
+EXTRA_STREAM = 200
 #: Prior samples kept in results.json for the plausible-set plots.
 KEPT_SAMPLES = 1500
 #: A design point's own replicate variance is shrunk toward the pooled one with this weight
@@ -138,6 +141,7 @@ class _Heap:
         self.design: list = []                    # every design point: x, runs, stage, seeds, refs
         self.rounds: list = []
         self.refinements: list = []
+        self.extras: list = []
         self.stopped = "budget"
 
     def stage(self, name: str) -> str:
@@ -147,6 +151,37 @@ class _Heap:
     def stream(self, *entropy) -> np.random.SeedSequence:
         """A seed sequence of this rig (the first rig's as a single-rig campaign's)."""
         return np.random.SeedSequence(list(entropy) + ([RIG_STREAM, self.index] if self.index else []))
+
+    def datum(self) -> HeapDatum:
+        return HeapDatum(self.model, self.target, self.target_var)
+
+    def data(self) -> list:
+        """Every datum of this rig: its angle, then its extra targets'."""
+        return [self.datum()] + [e.datum() for e in self.extras]
+
+
+class _Extra:
+    """Another reading of a rig's heaps the calibration fits when asked (``config.extra_targets``):
+    the lab's ``quantity`` (e.g. ``crest_height_mm``) and the observable of the rig's own runs
+    that mirrors it, scaled to the lab's unit; its surrogate is fitted to the same design points."""
+
+    def __init__(self, heap, name, quantity, estimate, observable, factor):
+        self.heap, self.name, self.quantity = heap, name, quantity
+        self.observable, self.factor = observable, float(factor)
+        self.target = float(estimate.value)
+        self.lab_sd = float(estimate.sd) if estimate.n >= 2 and math.isfinite(estimate.sd) else None
+        self.lab_n = int(estimate.n) if self.lab_sd is not None else None
+        self.target_var = self.lab_sd ** 2 / self.lab_n if self.lab_sd is not None else 0.0
+        self.unit = estimate.unit
+        self.values: list = []                    # per design point of the rig: the runs' readings
+
+    def read(self, records) -> np.ndarray:
+        """The runs' readings in the lab's unit (NaN where a run has none)."""
+        out = []
+        for r in records:
+            value = (r["result"].get("observable") or {}).get(self.observable)
+            out.append(float(value) * self.factor if value is not None else math.nan)
+        return np.array(out)
 
     def datum(self) -> HeapDatum:
         return HeapDatum(self.model, self.target, self.target_var)
@@ -162,9 +197,15 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
     ``results.json`` holds; with ``identify_only``, after the sequential runs, only what each rig
     alone and all together say of each parameter (``analyse.rig_plan``)."""
     from demcal.measure.pipeline import repose_quantity
+    from demcal.simulate.rigs import rig
 
     heaps = [_Heap(i, setup, measurement.quantities[repose_quantity(i, setup.workbook_name)], config)
              for i, setup in enumerate(setups)]
+    for heap in heaps:
+        for name in config.extra_targets:
+            observable, factor = rig(heap.setup.rig).targets[name]
+            quantity = repose_quantity(heap.index, heap.setup.workbook_name, name)
+            heap.extras.append(_Extra(heap, name, quantity, measurement.quantities[quantity], observable, factor))
     first = heaps[0]
     flank_band = measurement.provenance.options.get("flank_band")
     heap_prior = measured_prior(measurement, factors)
@@ -197,6 +238,8 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
             heap.design.append({"stage": stage, "x": np.asarray(x, dtype=float), "seeds": list(ss),
                                 "responses": np.asarray(y, dtype=float),
                                 "runs": run_refs(records[i:i + len(ss)])})
+            for e in heap.extras:
+                e.values.append(e.read(records[i:i + len(ss)]))
             i += len(ss)
 
     def fit(heap):
@@ -206,6 +249,17 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
         y = np.array([p["responses"].mean() for p in heap.design])
         seed = int(heap.stream(config.seed, SEED_STREAMS["surrogate"]).generate_state(1)[0] % (2 ** 31))
         heap.model = NoisySurrogate(box_low, box_high, seed=seed).fit(x, y, _noise_variances(groups, heap.pooled))
+        for j, e in enumerate(heap.extras, 1):
+            # the points where the runs read it (a heap too flat to show a crest reads none)
+            keep = [k for k, v in enumerate(e.values) if np.isfinite(v).any()]
+            if len(keep) < 3:
+                raise AnalysisError(f"{e.quantity}: fewer than 3 design points of the {heap.setup.workbook_name} "
+                                    f"rig read {e.observable}; it cannot be a target")
+            groups_e = [e.values[k][np.isfinite(e.values[k])] for k in keep]
+            e.pooled = pooled_noise(groups_e)
+            seed_e = int(heap.stream(config.seed, SEED_STREAMS["surrogate"], EXTRA_STREAM, j).generate_state(1)[0] % (2 ** 31))
+            e.model = NoisySurrogate(box_low, box_high, seed=seed_e).fit(
+                x[keep], np.array([g.mean() for g in groups_e]), _noise_variances(groups_e, e.pooled))
 
     # 1. noise at the centre, and the seed correlation --------------------------------------
     a = prior.truncated_mean_sd()[0]
@@ -253,7 +307,7 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
         together = posterior(first.model, prior, first.target, first.target_var,
                              discrepancy_var=config.discrepancy_sd ** 2,
                              seed=np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 1]),
-                             others=[h.datum() for h in heaps[1:]])
+                             others=_others(heaps))
         return {"prior": prior.to_dict(), "by_rig": _each_rig_alone(heaps, prior, config),
                 "together": {n: {"sd_ratio": v["sd_ratio"], "ci95": v["ci95"]} for n, v in together.summary().items()},
                 "rigs": {h.setup.workbook_name: {"target_deg": h.target, "target_sd_deg": h.lab_sd, "heaps": h.lab_n,
@@ -268,7 +322,7 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
         post = posterior(first.model, prior, first.target, first.target_var,
                          discrepancy_var=config.discrepancy_sd ** 2,
                          seed=np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 1]),
-                         others=[h.datum() for h in heaps[1:]])
+                         others=_others(heaps))
         return post, recommend(post, first.model)
 
     post, best = calibrated()
@@ -305,10 +359,10 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
     if constraints:
         hp = posterior(first.model, heap_prior, first.target, first.target_var, discrepancy_var=config.discrepancy_sd ** 2,
                        seed=np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 3]),
-                       others=[h.datum() for h in heaps[1:]])
+                       others=_others(heaps))
         hb = recommend(hp, first.model)
         heap_only = HeapOnly(parameters=_parameter_table(hp, hb), recommended=Point(**hb), ess=hp.ess)
-    by_rig = _each_rig_alone(heaps, prior, config) if len(heaps) > 1 else None
+    by_rig = _each_rig_alone(heaps, prior, config) if len(heaps) > 1 or first.extras else None
     inside = {n: bool(parameters[n].ci95[0] <= best["values"][n] <= parameters[n].ci95[1]) for n in names}
 
     # 5. validation by equivalence, in every rig ------------------------------------------------
@@ -352,6 +406,9 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
         "calibrated_parameters": base.with_(**best["values"]).to_dict(),
         "fallback_runs": fallbacks,
     }
+    extras = [e for h in heaps for e in h.extras]
+    if extras:
+        out["extra_targets"] = [_extra_record(e, x_best, names) for e in extras]
     if len(heaps) > 1:
         out["other_rigs"] = [OtherRig.from_dict(dict(
             rig=h.setup.rig, workbook_name=h.setup.workbook_name, quantity=h.quantity, geometry=h.setup.geometry,
@@ -361,16 +418,45 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
     return out
 
 
+def _others(heaps) -> list:
+    """The data the posterior is conditioned on besides the first rig's angle: its extra targets,
+    and every further rig's angle and extra targets."""
+    return [e.datum() for e in heaps[0].extras] + [d for h in heaps[1:] for d in h.data()]
+
+
 def _each_rig_alone(heaps, prior, config) -> dict:
-    """What each rig says alone, on its own surrogate and the same prior: per rig, per parameter,
-    the posterior/prior sd and the 95 % interval."""
+    """What each rig says alone (its angle, and its extra targets if any), on its own surrogates
+    and the same prior: per rig, per parameter, the posterior/prior sd and the 95 % interval;
+    with extra targets, the first rig's angle alone too (``<rig> angle only``)."""
     out = {}
+    if heaps[0].extras:
+        first = heaps[0]
+        alone = posterior(first.model, prior, first.target, first.target_var, discrepancy_var=config.discrepancy_sd ** 2,
+                          seed=first.stream(config.seed, SEED_STREAMS["surrogate"], 4))
+        out[f"{first.setup.workbook_name} angle only"] = {n: {"sd_ratio": v["sd_ratio"], "ci95": v["ci95"]}
+                                                          for n, v in alone.summary().items()}
     for heap in heaps:
         alone = posterior(heap.model, prior, heap.target, heap.target_var, discrepancy_var=config.discrepancy_sd ** 2,
-                          seed=heap.stream(config.seed, SEED_STREAMS["surrogate"], 4))
+                          seed=heap.stream(config.seed, SEED_STREAMS["surrogate"], 4),
+                          others=[e.datum() for e in heap.extras])
         out[heap.setup.workbook_name] = {n: {"sd_ratio": v["sd_ratio"], "ci95": v["ci95"]}
                                          for n, v in alone.summary().items()}
     return out
+
+
+def _extra_record(e, x_best, names) -> ExtraTarget:
+    """What ``results.json`` keeps of an extra target: the lab's reading, the runs' noise, the
+    surrogate and its prediction at the recommended point, and the validation runs' readings."""
+    m, sd = e.model.predict(np.asarray(x_best, dtype=float)[None, :])
+    v = e.validation_values[np.isfinite(e.validation_values)]
+    return ExtraTarget.from_dict(dict(
+        name=e.name, quantity=e.quantity, rig=e.heap.setup.workbook_name, observable=e.observable, unit=e.unit,
+        target=e.target, target_sd=e.lab_sd, target_n=e.lab_n, target_var=e.target_var, run_sd=e.pooled.sd,
+        point_means=[float(np.nanmean(x)) if np.isfinite(x).any() else None for x in e.values],
+        length_scales=dict(zip(names, e.model.length_scales().tolist())),
+        leave_one_out=e.model.leave_one_out(), predicted={"mean": float(m[0]), "sd": float(sd[0])},
+        validation={"mean": float(v.mean()) if v.size else None, "sd": float(v.std(ddof=1)) if v.size > 1 else None,
+                    "n": int(v.size), "values": e.validation_values.tolist()}), f"extra_targets[{e.quantity}]")
 
 
 def _predicted(heap, x) -> dict:
@@ -415,6 +501,8 @@ def _validate(heap, config, x_best, best, run, run_refs) -> Validation:
         val["responses"] += y.tolist()
         val["seeds"] += ss
         val["runs"] += run_refs(records)
+        for e in heap.extras:
+            e.validation_values = np.concatenate([getattr(e, "validation_values", np.array([])), e.read(records)])
         return y
 
     # the first look comes when the test has 80 % power to decide at the predicted bias (at

@@ -419,6 +419,47 @@ class OtherRig(Record):
     validation: Validation
 
 
+@dataclass(frozen=True)
+class ExtraTarget(Record):
+    """Another reading of a rig's heaps the plausible workflow fitted because it was asked to
+    (``CampaignConfig.extra_targets``), beside the angle (``results["extra_targets"]``).
+
+    Attributes
+    ----------
+    name, quantity, rig, observable, unit : str
+        The target (``crest_height_mm``), the lab's quantity (``crest_height_mm.<rig>`` for a
+        further rig), the rig, the twin's observable that mirrors it and the lab's unit.
+    target, target_sd, target_n, target_var
+        The lab's mean, heap-to-heap sd, heaps and the variance of the mean.
+    run_sd : float
+        Pooled sd of one run's reading.
+    point_means : list
+        The mean reading at each of the rig's design points (None: no run read it).
+    length_scales, leave_one_out : dict
+        Its surrogate's.
+    predicted : dict
+        Its surrogate at the recommended point: ``mean``, ``sd``.
+    validation : dict
+        The validation runs' readings: ``mean``, ``sd``, ``n``, ``values``.
+    """
+
+    name: str
+    quantity: str
+    rig: str
+    observable: str
+    unit: str
+    target: float
+    target_sd: float | None
+    target_n: int | None
+    target_var: float
+    run_sd: float
+    point_means: list
+    length_scales: dict
+    leave_one_out: dict
+    predicted: dict
+    validation: dict
+
+
 # --------------------------------------------------------------------------------------------
 # Working sections of the paper's procedure (``analyse.campaign``); the analysis summaries
 # are the ``to_dict`` of ``ResponseSurface``, ``PlackettBurmanScreening``, ``SteepestClimbPlan``,
@@ -647,6 +688,8 @@ class CampaignResult(Record):
     other_rigs : list of OtherRig or None
         Plausible workflow with several repose rigs: the second and further rigs (the first
         rig's are the sections above).
+    extra_targets : list of ExtraTarget or None
+        Plausible workflow: the rigs' other readings fitted beside the angles, when asked.
     runner, wall_s : str, float or None
         The DEM runner and the campaign's wall time (not re-derived by the audit).
     schema_version : int
@@ -676,13 +719,14 @@ class CampaignResult(Record):
     box_behnken: BoxBehnkenStage | None = None
     optimisation: Optimisation | None = None
     other_rigs: list[OtherRig] | None = None
+    extra_targets: list[ExtraTarget] | None = None
     runner: str | None = None
     wall_s: float | None = None
     repose_rig: str = "lifted_plate"
     schema_version: int = SCHEMA_VERSION
 
     _omit_if_none = ("calibration", "prior", "noise", "design", "surrogate", "plackett_burman",
-                     "significant", "steepest_climb", "box_behnken", "optimisation", "other_rigs", "runner",
+                     "significant", "steepest_climb", "box_behnken", "optimisation", "other_rigs", "extra_targets", "runner",
                      "wall_s")
 
     @classmethod

@@ -54,6 +54,10 @@ def register(subparsers) -> None:
     cal.add_argument("--tolerance", type=float, default=None,
                      help="equivalence tolerance of the validation [deg] (default: the larger of "
                           "1 deg and the lab's heap-to-heap sd)")
+    cal.add_argument("--target", dest="extra_targets", action="append", default=[], metavar="QUANTITY",
+                     help="plausible: fit this other reading of the heaps beside the angle (repeatable): "
+                          "crest_height_mm, the crest height of every repose rig's photos (they need "
+                          "scale_mm_per_px). Default: the angles alone")
     cal.add_argument("--set", dest="sets", action="append", default=[], metavar="NAME=VALUE",
                      help="a model setting for every run (repeatable): an extension, e.g. --set "
                           "contact_effective_mass=true; the time step, --set dt=2e-5 (default: the "
@@ -90,6 +94,8 @@ def _run_calibrate(args) -> int:
         optional["validation_cap"] = args.validation_cap
     if args.sets:
         optional["model_extensions"] = extension_settings(args.sets)
+    if args.extra_targets:
+        optional["extra_targets"] = tuple(args.extra_targets)
     config = CampaignConfig(profile=args.profile, workflow=args.workflow, levels=args.levels,
                             seed=args.seed, replicates=args.replicates, scheduler=args.scheduler,
                             **optional)

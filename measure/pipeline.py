@@ -60,7 +60,8 @@ from demcal.units import GRAVITY
 #: Order of the quantities in outputs (prefixes stand for their families).
 ORDER = ("length_mm", "diameter_mm", "width_mm", "thickness_mm", "mass_g", "particle_density_kg_m3", "envelope_density_kg_m3",
          "restitution.", "static_friction.", "rolling_friction.", "poisson_ratio",
-         "elastic_modulus_pa", "shear_modulus_pa", "repose_angle_deg", "repose_angle_deg.")
+         "elastic_modulus_pa", "shear_modulus_pa", "repose_angle_deg", "repose_angle_deg.", "crest_height_mm",
+         "crest_height_mm.")
 
 
 def _order_key(name: str):
@@ -166,10 +167,11 @@ def _annotated_names(ids: dict) -> dict:
             for r, s in stems.items()}
 
 
-def repose_quantity(index: int, workbook_name: str) -> str:
-    """The quantity of the photos of the workbook's ``index``-th repose rig (meta
-    ``repose_rig``): ``repose_angle_deg`` for the first, ``repose_angle_deg.<rig>`` for the others."""
-    return "repose_angle_deg" if index == 0 else f"repose_angle_deg.{workbook_name}"
+def repose_quantity(index: int, workbook_name: str, quantity: str = "repose_angle_deg") -> str:
+    """The ``quantity`` of the photos of the workbook's ``index``-th repose rig (meta
+    ``repose_rig``): e.g. ``repose_angle_deg`` for the first, ``repose_angle_deg.<rig>`` for the
+    others (and ``crest_height_mm``, ``crest_height_mm.<rig>``)."""
+    return quantity if index == 0 else f"{quantity}.{workbook_name}"
 
 
 def photo_rigs(wb: Workbook) -> dict:
@@ -230,9 +232,12 @@ def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir, max_phot
         rel = f.at[r, "file"]
         side = f.at[r, "side"] if "side" in f else "both"
         annotate_to = None if annotate_dir is None else Path(annotate_dir) / names[r]
+        scale = f.at[r, "scale_mm_per_px"] if "scale_mm_per_px" in f else math.nan
+        # the scale only turns the crest height into mm (an estimator without lengths needs none)
+        extra_args = {} if math.isnan(scale) or side == "drum" else {"scale_mm_per_px": float(scale)}
         try:
             result = estimator(wb.resolve(rel), side=side, annotate_to=annotate_to,
-                               max_pixels=max_photo_pixels)
+                               max_pixels=max_photo_pixels, **extra_args)
         except DemcalError as exc:
             raise WorkbookError(f"photo {wb.resolve(rel)}: {exc}", file=str(sheet.file), sheet=sheet.name,
                                 row=r, column="file", value=rel) from None
@@ -242,6 +247,7 @@ def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir, max_phot
                "flanks": {k: (None if v is None else float(v)) for k, v in dict(result.flanks).items()},
                "base_tilt_deg": None if result.base_tilt_deg is None else float(result.base_tilt_deg),
                "angle_deg_manual": None if math.isnan(manual) else float(manual),
+               "crest_height_mm": _crest_height_mm(result),
                "annotated": None if annotate_to is None else str(annotate_to),
                "covariates": sheet.covariates_of(r)}
         if not 0 < angle < 90:
@@ -270,6 +276,27 @@ def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir, max_phot
         if x:
             extra.setdefault("flank_mean_deg", {})[flank] = float(np.mean(x))
     return replace(est, extra=dict(est.extra, **extra))
+
+
+def _crest_height_mm(result) -> float | None:
+    """The photo's crest height above the floor [mm], when its scale was given."""
+    height = getattr(result, "crest_height_m", None)
+    return float(height) * 1e3 if height is not None and math.isfinite(height) else None
+
+
+def crest_height_estimate(angle: Estimate, name: str) -> Estimate | None:
+    """The crest height [mm] of the heaps of one rig (``angle``: its angle estimate, whose
+    used photos' records hold their crest heights), or None unless every used photo has one
+    (a ``scale_mm_per_px``): a target of the calibration only when asked for
+    (``CampaignConfig.extra_targets``)."""
+    used = [rec for rec in angle.per_row if rec.get("used", True)]
+    heights = [rec.get("crest_height_mm") for rec in used]
+    if not used or any(h is None for h in heights):
+        return None
+    rows = [rec["row"] for rec in used]
+    return summarise(name, heights, rows, unit="mm", source=angle.source,
+                     method="heap photo: height of the smoothed crest above the floor line, times the photo's "
+                            "scale_mm_per_px (measure.repose)")
 
 
 def _segment_of(quantities: dict) -> dict:
@@ -338,6 +365,9 @@ def repose_estimate(wb: Workbook, *, photo_estimator=None, outliers="none", anno
                 name = repose_quantity(i, rig)
                 found[name] = _photo_estimate(wb, estimator, outliers=outliers, annotate_dir=annotate_dir,
                                               max_photo_pixels=max_photo_pixels, rows_of_rig=rows, name=name)
+                crest = crest_height_estimate(found[name], repose_quantity(i, rig, "crest_height_mm"))
+                if crest is not None:
+                    found[crest.name] = crest
     target = wb.meta.get("target_repose_deg")
     if target is None:
         return found, notes

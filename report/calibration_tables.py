@@ -199,20 +199,22 @@ def table_by_rig(c: Campaign) -> Table | None:
     if not cal.by_rig:
         return None
     rigs = list(cal.by_rig)
+    heads = [g if g.endswith(" only") else f"{g} alone" for g in rigs]
     rows = []
     for name, p in cal.parameters.items():
         alone = [cal.by_rig[g][name]["sd_ratio"] for g in rigs]
         rows.append((_label(c, name)[0], *alone, p.sd_ratio, min(alone) - p.sd_ratio,
                      *[cal.by_rig[g][name]["ci95"] for g in rigs], p.ci95))
     return Table("P5b", "What each repose rig says: posterior/prior SD with each rig's heap alone and with all together",
-                 ("Parameter", *[f"{g} alone" for g in rigs], "All together", "Narrowed by combining",
-                  *[f"95 % interval, {g} alone" for g in rigs], "95 % interval, together"),
+                 ("Parameter", *heads, "All together", "Narrowed by combining",
+                  *[f"95 % interval, {h}" for h in heads], "95 % interval, together"),
                  ("",) * (2 * len(rigs) + 4), tuple(rows),
                  notes=("Each rig alone: the posterior of the same prior given that rig's angle of repose, on "
                         "that rig's own surrogate; together: given every rig's (Table P5). Narrowed by combining: "
                         "the better single rig's posterior/prior SD minus the combined one; a parameter neither "
                         "rig pins down alone can be pinned down by two rigs whose angles depend on it in other "
-                        "combinations with the rest.",),
+                        "combinations with the rest. With extra targets (Table P8) a rig alone is its angle and "
+                        "its extra targets; 'angle only' is the first rig's angle by itself.",),
                  sources=(_results_source("calibration.by_rig"), _results_source("calibration.parameters")),
                  formats=("", *[".2f"] * len(rigs), ".2f", "+.2f", *[".4g"] * (len(rigs) + 1)))
 
@@ -240,6 +242,32 @@ def table_other_rigs(c: Campaign) -> Table | None:
                         "least certain; its validation is in the table after P6 named by the rig.",),
                  sources=({"kind": "runs", "keys": keys}, _results_source("other_rigs")),
                  formats=("", ".4g", ".3g", "d", ".3g", "d", "d", "d", ".3g", ".4g", ".2g", ""))
+
+
+def table_extra_targets(c: Campaign) -> Table | None:
+    """Table P8: the rigs' other readings fitted beside the angles (asked for: off by default)."""
+    r = c.results
+    if not r.extra_targets:
+        return None
+    rows = []
+    for e in r.extra_targets:
+        v = e.validation
+        rows.append((e.quantity, e.rig, e.observable, e.target, e.target_sd, e.target_n, e.run_sd,
+                     e.leave_one_out["rmse"], e.predicted["mean"], e.predicted["sd"], v["mean"], v["n"]))
+    kinds = tuple(dict.fromkeys(e.unit for e in r.extra_targets))
+    u = kinds[0] if len(kinds) == 1 else ""
+    return Table("P8", "Extra targets: the heaps' other readings fitted beside the angle",
+                 ("Quantity", "Rig", "Twin's reading", "Lab mean", "SD of one heap", "Heaps", "SD of one run",
+                  "Leave-one-out RMSE", "Predicted at the recommended point", "SD", "Validation runs' mean",
+                  "Validation runs"), ("", "", "", u, u, "", u, u, u, u, u, ""),
+                 tuple(rows),
+                 notes=("Asked for with --target (off by default). The lab's reading comes from the same photos as "
+                        "the angle (the crest height of the smoothed heap boundary above the floor line, times the "
+                        "photo's scale_mm_per_px); the twin's from each run's rendered side view, read the same way. "
+                        "Each has its own surrogate over the rig's design points, and its likelihood joins the "
+                        "angles' (Table P5b).",),
+                 sources=(_results_source("extra_targets"),),
+                 formats=("", "", "", ".4g", ".3g", "d", ".3g", ".3g", ".4g", ".2g", ".4g", "d"))
 
 
 def table_equivalence(c: Campaign) -> Table:
@@ -288,5 +316,5 @@ def _equivalence(c: Campaign, v, tid: str, title: str, path: str) -> Table:
 #: Tables of the plausible workflow, in report order (a builder returning None has nothing to
 #: show for this campaign, e.g. the twins of a heap-only calibration).
 PLAUSIBLE_TABLES = (table_prior, table_twins, table_noise_study, table_design_runs, table_surrogate,
-                    table_identifiability, table_joint_vs_heap, table_by_rig, table_equivalence,
-                    tables_other_equivalence, table_other_rigs)
+                    table_identifiability, table_joint_vs_heap, table_by_rig, table_extra_targets,
+                    table_equivalence, tables_other_equivalence, table_other_rigs)

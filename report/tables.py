@@ -1316,7 +1316,7 @@ RESULT_TABLES = (table_pb_levels, table_pb_design, table_pb_anova, table_noise, 
 
 #: Ids of the tables :data:`RESULT_TABLES` build, in order.
 RESULT_TABLE_IDS = ("3", "4", "5", "5a", "6", "7", "8", "9", "9a", "9b", "10", "11", "12", "A2",
-                    "P1", "P1a", "P2", "P3", "P4", "P5", "P5a", "P5b", "P6", "P6b", "P6c", "P6d", "P7")
+                    "P1", "P1a", "P2", "P3", "P4", "P5", "P5a", "P5b", "P6", "P6b", "P6c", "P6d", "P7", "P8")
 
 
 def build_tables(c: Campaign) -> list[Table]:

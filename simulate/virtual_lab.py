@@ -763,6 +763,9 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
         cv2.imwrite(str(root / name), img, [cv2.IMWRITE_JPEG_QUALITY, 95])
         rows.append({"photo_id": row["photo_id"], "file": name, "side": side, "operator": row["operator"],
                      "date": row["date"]})
+        if mode == "dem" and rig.run_photo is None:
+            # a twin's heap seen from the side at the renderer's scale: its crest height is the truth's
+            rows[-1]["scale_mm_per_px"] = 1e3 / PHOTO_PX_PER_M
     frame = pd.DataFrame(rows)
     for e in tilt:
         q = "flank_difference_deg" if e.quantity == "flanks" else "base_tilt_deg"

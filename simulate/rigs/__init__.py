@@ -80,6 +80,10 @@ class Rig:
         Observable name -> unit, as ``RigResult.observable`` holds them.
     observable_notes : dict
         Observable name -> what it measures, in the report's words (those the name does not say).
+    targets : dict
+        The lab's other readings of the rig's heaps the calibration can fit beside the angle
+        (``CampaignConfig.extra_targets``, off by default): lab quantity (``crest_height_mm``)
+        -> (the observable that mirrors it, factor from its unit to the lab's).
     compared : str or None
         The observable compared with the lab's reading.
     fallbacks : tuple of str
@@ -148,6 +152,7 @@ class Rig:
     run_task: Callable
     observables: dict
     observable_notes: dict = field(default_factory=dict)
+    targets: dict = field(default_factory=dict)
     compared: str | None = None
     fallbacks: tuple = ()
     geometry: type | None = None

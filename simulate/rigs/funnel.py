@@ -304,6 +304,7 @@ RIG = Rig("funnel", sheet="repose", run=run_funnel, task=task, run_task=run_task
           compared="angle_deg", fallbacks=("angle_profile_deg", "angle_cone_deg"),
           observables={**heap.CONE_OBSERVABLES, "in_funnel": "-", "escaped": "-"},
           observable_notes={**heap.CONE_NOTES, "in_funnel": "particles left above the outlet"},
+          targets=heap.CREST_TARGET,
           geometry=FunnelGeometry, workbook_name="funnel", flanks="both",
           lab_test="fixed funnel cone (ISO 4324), side photograph of both flanks", measure=measure_heap,
           liggghts_case=liggghts_case, cli_arguments=heap.cli_arguments, cli_options=heap.cli_options)

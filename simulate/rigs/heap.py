@@ -463,6 +463,9 @@ BULK_PACKING = 0.6
 CONE_OBSERVABLES = {"angle_deg": "deg", "angle_left_deg": "deg", "angle_right_deg": "deg",
                     "angle_profile_deg": "deg", "angle_cone_deg": "deg", "crest_height_m": "m",
                     "base_diameter_m": "m"}
+#: The lab's crest height of a heap photographed from the side (``measure.pipeline``, with the
+#: photos' scale) and the twin's, read the same way (``Rig.targets``).
+CREST_TARGET = {"crest_height_mm": ("crest_height_m", 1e3)}
 #: What a cone's observables measure (``Rig.observable_notes``), and ``escaped``, every heap's.
 CONE_NOTES = {"angle_cone_deg": "atan of twice the crest height over the base diameter",
               "crest_height_m": "the top of the cone's profile", "base_diameter_m": "the cone's base, flank to flank",

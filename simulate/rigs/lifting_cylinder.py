@@ -211,6 +211,7 @@ def liggghts_case(params: DEMParameters, geometry: CylinderGeometry, lift_time: 
 RIG = Rig("lifting_cylinder", sheet="repose", run=run_lifting_cylinder, task=task, run_task=run_task,
           compared="angle_deg", fallbacks=("angle_profile_deg", "angle_cone_deg"),
           observables={**CONE_OBSERVABLES, "escaped": "-"}, observable_notes=CONE_NOTES,
+          targets=heap.CREST_TARGET,
           geometry=CylinderGeometry, workbook_name="lifting_cylinder", flanks="both",
           lab_test="lifting cylinder cone, side photograph of both flanks", measure=measure_heap,
           liggghts_case=liggghts_case, cli_arguments=heap.cli_arguments, cli_options=heap.cli_options)

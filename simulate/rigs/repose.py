@@ -330,6 +330,7 @@ RIG = Rig("repose", sheet="repose", run=run_repose, task=task, run_task=run_task
           fallbacks=("angle_profile_deg", "angle_outside_deg"),
           observables={"angle_deg": "deg", "angle_profile_deg": "deg", "angle_outside_deg": "deg",
                        "escaped": "-", "outside_fraction": "-", "crest_height_m": "m"},
+          targets=heap.CREST_TARGET,
           observable_notes={"outside_fraction": "share of the particles whose centre ends beyond the end plate",
                             "angle_outside_deg": "the pile beyond the carton",
                             "crest_height_m": "the top of the heap's profile",

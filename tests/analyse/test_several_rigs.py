@@ -55,7 +55,8 @@ def two_rig_runner(inputs: dict) -> dict:
 
 def _workbook(folder, rigs="lifted_plate, drum", **meta):
     return write_virtual_workbook(replace(TRUTH, repose_angle_deg=ANGLE), folder / "workbook.xlsx", rng=5,
-                                  repose_rig={"repose_rig": rigs, **DRUM, **meta}, n_photos=6, n_drop=6,
+                                  repose_rig={"repose_rig": rigs, **(DRUM if "drum" in rigs else {}), **meta},
+                                  n_photos=6, n_drop=6,
                                   drop_heights_mm=(400.0,), n_tracks=0).path
 
 
