@@ -457,7 +457,9 @@ def derive_results(measurement, config: CampaignConfig, store_dir) -> CampaignRe
 def _prepare(measurement, config: CampaignConfig) -> tuple:
     """What a campaign checks and sets up before its first run: the factors with their levels,
     the DEM parameters before calibration and the repose rigs (a time step above the safe limit,
-    and a heap no photo could read, refused)."""
+    a rig without its lab angle, and a heap no photo could read, refused)."""
+    from demcal.measure.pipeline import repose_quantity
+
     if "repose_angle_deg" not in measurement.quantities:
         raise InputError("the campaign needs a target angle of repose: the workbook has no "
                          "'repose' photos and no meta 'target_repose_deg'")
@@ -465,6 +467,11 @@ def _prepare(measurement, config: CampaignConfig) -> tuple:
     base = base_parameters(measurement).with_(**config.model_extensions)
     material_time_step(base)
     setups = repose_setups(measurement)
+    for i, s in enumerate(setups[1:], 1):
+        quantity = repose_quantity(i, s.workbook_name)
+        if quantity not in measurement.quantities:
+            raise InputError(f"the campaign needs the angle of every repose rig the workbook names: it has no "
+                             f"{quantity} (no photos of the {s.workbook_name} rig were measured)")
     for s in setups:
         s.check_for(base.shape, measurement.workbook.get("source"))
     _check_extra_targets(measurement, config, setups)
@@ -472,18 +479,19 @@ def _prepare(measurement, config: CampaignConfig) -> tuple:
 
 
 def _check_extra_targets(measurement, config: CampaignConfig, setups) -> None:
-    """Refuse, before any run, an extra target a rig of the workbook cannot mirror or its photos
-    did not measure, naming what is missing."""
+    """Refuse, before any run, an extra target no rig of the workbook mirrors, or one a rig
+    mirrors but its photos did not measure, naming what is missing."""
     from demcal.measure.pipeline import repose_quantity
     from demcal.simulate.rigs import rig
 
     for name in config.extra_targets:
-        for i, s in enumerate(setups):
-            targets = rig(s.rig).targets
-            if name not in targets:
-                offered = sorted({t for x in setups for t in rig(x.rig).targets})
-                raise InputError(f"extra target {name}: the {s.workbook_name} rig's twin does not read it; "
-                                 f"the workbook's rigs offer {', '.join(offered) or 'none'}")
+        reading = [(i, s) for i, s in enumerate(setups) if name in rig(s.rig).targets]
+        if not reading:
+            offered = sorted({t for s in setups for t in rig(s.rig).targets})
+            raise InputError(f"extra target {name}: no repose rig of the workbook "
+                             f"({', '.join(s.workbook_name for s in setups)}) reads it; they offer "
+                             f"{', '.join(offered) or 'none'}")
+        for i, s in reading:
             quantity = repose_quantity(i, s.workbook_name, name)
             if quantity not in measurement.quantities:
                 raise InputError(f"extra target {name}: the workbook has no {quantity}; the {s.workbook_name} rig's "
@@ -532,7 +540,8 @@ def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
                            if fallbacks else "")},
         material=measurement.material,
         target_angle_deg=float(measurement.quantities["repose_angle_deg"].value),
-        config={k_: (list(v) if isinstance(v, tuple) else v) for k_, v in config.__dict__.items()},
+        config={k_: (list(v) if isinstance(v, tuple) else v) for k_, v in config.__dict__.items()
+                if not (k_ == "extra_targets" and not v)},     # as recorded before there were any
         measurement=measurement.to_dict(),
         factors=factors,
         base_parameters=base.to_dict(),

@@ -165,7 +165,7 @@ class _Extra:
     the lab's ``quantity`` (e.g. ``crest_height_mm``) and the observable of the rig's own runs
     that mirrors it, scaled to the lab's unit; its surrogate is fitted to the same design points."""
 
-    def __init__(self, heap, name, quantity, estimate, observable, factor):
+    def __init__(self, heap, name, quantity, estimate, angle, observable, factor):
         self.heap, self.name, self.quantity = heap, name, quantity
         self.observable, self.factor = observable, float(factor)
         self.target = float(estimate.value)
@@ -173,18 +173,35 @@ class _Extra:
         self.lab_n = int(estimate.n) if self.lab_sd is not None else None
         self.target_var = self.lab_sd ** 2 / self.lab_n if self.lab_sd is not None else 0.0
         self.unit = estimate.unit
+        self.lab_cov = _lab_covariance(angle, estimate)
         self.values: list = []                    # per design point of the rig: the runs' readings
 
     def read(self, records) -> np.ndarray:
         """The runs' readings in the lab's unit (NaN where a run has none)."""
+        from demcal.simulate.rigs import rig
+
+        twin = rig(self.heap.setup.rig)
         out = []
         for r in records:
-            value = (r["result"].get("observable") or {}).get(self.observable)
+            value = twin.observed_value(r["result"], self.observable)
             out.append(float(value) * self.factor if value is not None else math.nan)
         return np.array(out)
 
     def datum(self) -> HeapDatum:
-        return HeapDatum(self.model, self.target, self.target_var)
+        """Its likelihood, conditional on its rig's angle (the same photos), with no angle
+        discrepancy (another unit)."""
+        return HeapDatum(self.model, self.target, self.target_var, discrepancy_var=0.0,
+                         given=self.heap.datum(), lab_cov=self.lab_cov)
+
+
+def _lab_covariance(angle, estimate) -> float:
+    """Covariance of the lab's mean angle and mean extra reading of one rig, from the photos
+    that gave both (0 with fewer than 3)."""
+    pairs = [(r["value"], r.get(estimate.name.split(".")[0])) for r in angle.per_row if r.get("used", True)]
+    pairs = np.array([p for p in pairs if p[1] is not None], dtype=float)
+    if len(pairs) < 3:
+        return 0.0
+    return float(np.cov(pairs[:, 0], pairs[:, 1], ddof=1)[0, 1] / len(pairs))
 
 
 def derive_plausible(measurement, config, execute, *, factors, base, setups, responses, run_refs,
@@ -203,9 +220,12 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
              for i, setup in enumerate(setups)]
     for heap in heaps:
         for name in config.extra_targets:
+            if name not in rig(heap.setup.rig).targets:
+                continue                          # a rig whose twin does not read it (a drum's crest)
             observable, factor = rig(heap.setup.rig).targets[name]
             quantity = repose_quantity(heap.index, heap.setup.workbook_name, name)
-            heap.extras.append(_Extra(heap, name, quantity, measurement.quantities[quantity], observable, factor))
+            heap.extras.append(_Extra(heap, name, quantity, measurement.quantities[quantity],
+                                      measurement.quantities[heap.quantity], observable, factor))
     first = heaps[0]
     flank_band = measurement.provenance.options.get("flank_band")
     heap_prior = measured_prior(measurement, factors)
@@ -451,7 +471,8 @@ def _extra_record(e, x_best, names) -> ExtraTarget:
     v = e.validation_values[np.isfinite(e.validation_values)]
     return ExtraTarget.from_dict(dict(
         name=e.name, quantity=e.quantity, rig=e.heap.setup.workbook_name, observable=e.observable, unit=e.unit,
-        target=e.target, target_sd=e.lab_sd, target_n=e.lab_n, target_var=e.target_var, run_sd=e.pooled.sd,
+        target=e.target, target_sd=e.lab_sd, target_n=e.lab_n, target_var=e.target_var, lab_cov=e.lab_cov,
+        run_sd=e.pooled.sd,
         point_means=[float(np.nanmean(x)) if np.isfinite(x).any() else None for x in e.values],
         length_scales=dict(zip(names, e.model.length_scales().tolist())),
         leave_one_out=e.model.leave_one_out(), predicted={"mean": float(m[0]), "sd": float(sd[0])},

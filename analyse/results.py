@@ -431,6 +431,9 @@ class ExtraTarget(Record):
         further rig), the rig, the twin's observable that mirrors it and the lab's unit.
     target, target_sd, target_n, target_var
         The lab's mean, heap-to-heap sd, heaps and the variance of the mean.
+    lab_cov : float
+        Covariance of the lab's mean reading and its rig's mean angle (the same photos): the
+        likelihood of the two is a bivariate normal.
     run_sd : float
         Pooled sd of one run's reading.
     point_means : list
@@ -452,6 +455,7 @@ class ExtraTarget(Record):
     target_sd: float | None
     target_n: int | None
     target_var: float
+    lab_cov: float
     run_sd: float
     point_means: list
     length_scales: dict

@@ -239,18 +239,37 @@ class NoisySurrogate:
 
 @dataclass(frozen=True)
 class HeapDatum:
-    """A further lab heap the posterior is conditioned on (another repose rig): the surrogate of
-    its rig's mean angle, the lab's angle in that rig and the variance of that mean."""
+    """A further lab reading the posterior is conditioned on (another repose rig's angle, or an
+    extra target such as a crest height): the surrogate of the twin's mean reading, the lab's
+    mean and the variance of that mean.
+
+    ``discrepancy_var`` None takes the posterior's (an angle's, deg^2); an extra target in
+    another unit gives its own. A reading taken from the same photos as another (``given``: a
+    crest height and its rig's angle) has lab means that covary by ``lab_cov``: its likelihood is
+    then conditional on the other's residual, so that the two together are a bivariate normal."""
 
     surrogate: NoisySurrogate
     target: float
     target_var: float
+    discrepancy_var: float | None = None
+    given: "HeapDatum | None" = None
+    lab_cov: float = 0.0
+
+    def _moments(self, x, discrepancy_var: float) -> tuple[np.ndarray, np.ndarray]:
+        m, s = self.surrogate.predict(x)
+        extra = discrepancy_var if self.discrepancy_var is None else self.discrepancy_var
+        return m, s ** 2 + self.target_var + extra
 
     def terms(self, x, discrepancy_var: float) -> tuple[np.ndarray, np.ndarray]:
-        """Log-likelihood and implausibility of the heap at the points ``x`` (n, dim)."""
-        m, s = self.surrogate.predict(x)
-        var = s ** 2 + self.target_var + discrepancy_var
-        return -0.5 * (self.target - m) ** 2 / var - 0.5 * np.log(var), np.abs(self.target - m) / np.sqrt(var)
+        """Log-likelihood (conditional on ``given``'s reading when they covary) and marginal
+        implausibility of the reading at the points ``x`` (n, dim)."""
+        m, var = self._moments(x, discrepancy_var)
+        implausibility = np.abs(self.target - m) / np.sqrt(var)
+        if self.given is not None and self.lab_cov != 0.0:
+            mg, vg = self.given._moments(x, discrepancy_var)
+            k = self.lab_cov / vg
+            m, var = m + k * (self.given.target - mg), var - k * self.lab_cov
+        return -0.5 * (self.target - m) ** 2 / var - 0.5 * np.log(var), implausibility
 
 
 @dataclass

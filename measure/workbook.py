@@ -488,6 +488,18 @@ def _drop_empty_rows(frame: pd.DataFrame) -> pd.DataFrame:
 # ----------------------------------------------------------------------------------------------
 # validation
 
+def _rig_dimension(key: str) -> str:
+    """The meta key whose checks apply to ``key``: a repose rig's own name of a dimension
+    several rigs share (``drum_fill_count``, ``simulate.rigs.meta_names``) is checked as that
+    dimension (``fill_count``); any other key as itself."""
+    from demcal.simulate.rigs import repose_rig_names
+
+    for name in repose_rig_names():
+        if key.startswith(name + "_") and key[len(name) + 1:] in META_POSITIVE:
+            return key[len(name) + 1:]
+    return key
+
+
 def _check_choice(column: str, value: str | None) -> str | None:
     """Return an error message if ``value`` is not a valid name for this column."""
     if column == "pair":
@@ -754,19 +766,20 @@ def _parse_meta(frame: pd.DataFrame, file: Path, options: ReadOptions) -> dict:
             return WorkbookError(f"meta {key}: {message}", file=str(file), sheet="meta", row=row,
                                  column="value", value=cell)
 
-        if key in META_POSITIVE or key in ("contact_poisson", "target_repose_deg"):
+        rule = _rig_dimension(key)      # drum_fill_count is checked as fill_count
+        if rule in META_POSITIVE or rule in ("contact_poisson", "target_repose_deg"):
             if value is not None and not isinstance(value, (int, float)):
                 raise bad("not a number")
             if value is not None:
-                if key in META_POSITIVE and not value > 0:
+                if rule in META_POSITIVE and not value > 0:
                     raise bad("must be positive")
-                if key in META_WHOLE and not float(value).is_integer():
+                if rule in META_WHOLE and not float(value).is_integer():
                     raise bad("must be a whole number")
-                if key == "contact_poisson" and not -1 < value < 0.5:
+                if rule == "contact_poisson" and not -1 < value < 0.5:
                     raise bad("a Poisson's ratio must lie in (-1, 0.5)")
-                if key == "target_repose_deg" and not 0 < value < 90:
+                if rule == "target_repose_deg" and not 0 < value < 90:
                     raise bad("angle must lie strictly between 0 and 90 degrees")
-                bounds = options.range_of(key)
+                bounds = options.range_of(key) or options.range_of(rule)
                 if bounds is not None and not bounds[0] <= value <= bounds[1]:
                     raise bad(f"outside the plausible range {bounds[0]:g} to {bounds[1]:g} "
                               f"(docs/workbook.md; --range {key}=LO:HI sets another)")

@@ -398,6 +398,9 @@ def quantity_label(name: str, particle: str = "segment") -> str:
     if name in fixed:
         return fixed[name]
     family, _, what = name.partition(".")
+    if family in ("repose_angle_deg", "crest_height_mm"):      # a further repose rig's, or a crest
+        words = "Angle of repose" if family == "repose_angle_deg" else "Crest height of the heap"
+        return f"{words} ({what + ' ' if what else ''}photos)"
     words = {"restitution": "Restitution coefficient", "static_friction": "Static friction coefficient",
              "rolling_friction": "Rolling friction coefficient"}.get(family, family)
     if family == "restitution":
@@ -407,7 +410,8 @@ def quantity_label(name: str, particle: str = "segment") -> str:
 
 _SYMBOLS = {"length_mm": "L", "diameter_mm": "D", "width_mm": "W", "thickness_mm": "T", "mass_g": "m",
             "particle_density_kg_m3": "ρ", "envelope_density_kg_m3": "ρe", "poisson_ratio": "ν",
-            "elastic_modulus_pa": "E", "shear_modulus_pa": "G", "repose_angle_deg": "θ", "restitution": "e",
+            "elastic_modulus_pa": "E", "shear_modulus_pa": "G", "repose_angle_deg": "θ", "crest_height_mm": "h",
+            "restitution": "e",
             "static_friction": "μs", "rolling_friction": "μr"}
 
 
@@ -512,12 +516,14 @@ def table_physical(c: Campaign) -> Table:
                  formats=("", "", "", "d", ".4g", ".3g", ".4g", ".4g", ".4g", ".3g"))
 
 
-def instrument(sheet: str, measurement: dict) -> str:
-    """The instrument behind a sheet; for the heap photos the workbook's repose rig."""
+def instrument(sheet: str, measurement: dict, quantity: str = "") -> str:
+    """The instrument behind a sheet; for the heap photos the repose rig of the quantity (its
+    ``.<rig>`` suffix, else the workbook's first)."""
     if sheet == "repose":
-        from demcal.simulate.rigs import repose_rig
+        from demcal.simulate.rigs import repose_rig, repose_rig_named
         try:
-            return repose_rig(measurement.get("meta", {})).lab_test
+            named = quantity.partition(".")[2]
+            return (repose_rig_named(named) if named else repose_rig(measurement.get("meta", {}))).lab_test
         except DemcalError:
             return "heap, side photograph"
     return INSTRUMENTS.get(sheet, "")
@@ -532,7 +538,7 @@ def table_methods(c: Campaign) -> Table:
     for name, e in m["quantities"].items():
         sheet = _get(e, "source", "sheet", default="")
         rejected = [f"{r['row']}: {r['reason']}" for r in e.get("rows_rejected", [])]
-        rows.append((quantity_label(name, noun), sheet, instrument(sheet, m), e.get("method", ""),
+        rows.append((quantity_label(name, noun), sheet, instrument(sheet, m, name), e.get("method", ""),
                      row_ranges(e.get("rows_used", [])), "; ".join(rejected) or "none",
                      _get(e, "extra", "outlier_rule", default="")))
         src = _get(e, "source", default={})

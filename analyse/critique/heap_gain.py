@@ -183,14 +183,15 @@ def validation_values(campaign_dir, result: CampaignResult) -> dict:
     from demcal.analyse.runs import RunStore
 
     store = RunStore(Path(campaign_dir) / "runs")
-    observables = heap_observables(_rig_of(result))
+    twin = _rig_of(result)
+    observables = heap_observables(twin)
     out = {name: [] for name, *_ in observables}
     for ref in result.validation.runs:
         rec = store.get(ref["key"])
         if rec is None or rec.get("result") is None:
             raise AnalysisError(f"{campaign_dir}: validation run {ref['key'][:12]} is not in its run store")
         for name, scale, _, _ in observables:
-            value = (rec["result"].get("observable") or {}).get(name)
+            value = twin.observed_value(rec["result"], name)
             if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
                 out[name].append(float(value) * scale)
     return {k: np.asarray(v, dtype=float) for k, v in out.items()}

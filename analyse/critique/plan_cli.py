@@ -4,7 +4,7 @@ with ``--rigs``, what each repose rig of the design pins down alone and together
     demcal plan WORKBOOK_OR_TRUTH [--mechanisms NAME,...] [--reps N] [--seed N] [--power 0.8]
                 [--steps 4] [--photos none|analytic] [--alpha 0.01] [--correction bh|holm]
                 [--json OUT]
-    demcal plan TRUTH --rigs --out DIR [--seed N] [--profile quick|full] [--workers N]
+    demcal plan TRUTH --rigs --out DIR [--seed N] [--profile quick|paper] [--workers N]
                 [--budget-runs N] [--json OUT]
 
 WORKBOOK_OR_TRUTH is a truth file (``.yaml``, as for ``demcal virtual-lab``) or a lab workbook,
@@ -57,7 +57,7 @@ def register(subparsers) -> None:
                         "tens of minutes)")
     g.add_argument("--out", metavar="DIR", help="folder of the virtual workbook and the runs (kept: a second "
                                                 "plan reruns nothing)")
-    g.add_argument("--profile", choices=("quick", "full"), default="quick",
+    g.add_argument("--profile", choices=("quick", "paper"), default="quick",
                    help="the rigs' run profile (%(default)s)")
     g.add_argument("--workers", type=int, default=None, help="parallel DEM runs (default: the cores)")
     g.add_argument("--budget-runs", type=int, default=None,

@@ -84,6 +84,9 @@ class Rig:
         The lab's other readings of the rig's heaps the calibration can fit beside the angle
         (``CampaignConfig.extra_targets``, off by default): lab quantity (``crest_height_mm``)
         -> (the observable that mirrors it, factor from its unit to the lab's).
+    recorded_as : dict
+        Observables that runs stored before they became observables hold in their record:
+        observable -> record key (``Rig.observed_value`` reads either).
     compared : str or None
         The observable compared with the lab's reading.
     fallbacks : tuple of str
@@ -153,6 +156,7 @@ class Rig:
     observables: dict
     observable_notes: dict = field(default_factory=dict)
     targets: dict = field(default_factory=dict)
+    recorded_as: dict = field(default_factory=dict)
     compared: str | None = None
     fallbacks: tuple = ()
     geometry: type | None = None
@@ -179,6 +183,14 @@ class Rig:
         name = self.observed(task) if self.observed is not None else self.compared
         value = result["observable"].get(name)
         return float(value) if value is not None else float("nan")
+
+    def observed_value(self, result: dict, name: str):
+        """Observable ``name`` of a run's ``RigResult.to_dict()`` (None when it has none), read
+        from the record of a run stored before it was an observable (``recorded_as``)."""
+        value = (result.get("observable") or {}).get(name)
+        if value is None and name in self.recorded_as:
+            value = (result.get("record") or {}).get(self.recorded_as[name])
+        return value
 
     def label(self, quantity: str) -> str:
         """The discrepancy table's name of the twin's reading of ``quantity``."""
@@ -326,9 +338,17 @@ def repose_rigs(meta: dict, file=None) -> list:
     own = {renamed[r.workbook_name].get(key, key) for r in chosen for key in r.geometry.META_KEYS}
     shared = {key: [n for n, m in renamed.items() if key in m] for m in renamed.values() for key in m}
     others = {key: r.workbook_name for r in rigs.values() if r not in chosen for key in r.geometry.META_KEYS}
+    prefixed = {f"{r.workbook_name}_{k}": (r.workbook_name, k) for r in rigs.values() for k in r.geometry.META_KEYS}
     for key, value in meta.items():
         if value is None or (isinstance(value, str) and not value.strip()) or key in own:
             continue                              # a blank row of a template says nothing
+        if key in prefixed:
+            rig_name, plain = prefixed[key]
+            mine = renamed.get(rig_name, {}).get(plain, plain) if rig_name in names else None
+            raise WorkbookError(f"meta {key}: " + (f"the {rig_name} rig's {plain} is meta {mine} in this workbook"
+                                                   if mine else f"a dimension of the {rig_name} rig, which meta "
+                                                   f"repose_rig does not name ({', '.join(names)})"),
+                                file=file, sheet="meta", column="key", value=key)
         if key in shared:
             raise WorkbookError(f"meta {key}: a dimension of each of the rigs {', '.join(shared[key])}; give each "
                                 f"its own: {', '.join(f'{n}_{key}' for n in shared[key])}",

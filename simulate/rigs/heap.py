@@ -178,7 +178,10 @@ class RigDimensions:
         """Refuse a fill (given, or sized from the rig's volume) of more than ``MAX_FILL``
         particles, before any memory is taken for it: dimensions that read as metres where
         millimetres were meant would otherwise ask for petabytes."""
-        count = self.filled_for(shape).fill_count
+        try:
+            count = self.filled_for(shape).fill_count
+        except (OverflowError, ValueError):           # a volume beyond any float
+            count = math.inf
         if count is not None and count > MAX_FILL:
             raise InputError(f"a fill of {count:.4g} particles is more than {MAX_FILL:g}, more than any lab "
                              f"heap: check the repose rig's dimensions (in mm) and fill count ({self.describe()})")

@@ -248,9 +248,9 @@ def run_repose(params: DEMParameters, seed: int = 0, *, profile: str = "quick",
         params = with_size_distribution(params, size_distribution)
     prof = repose_profile(profile)
     base = geometry if geometry is not None else ReposeGeometry()
-    base.check_fill(params.shape)
     if not isinstance(base, ReposeGeometry):
         raise InputError(f"geometry must be a ReposeGeometry, got {type(base).__name__}")
+    base.check_fill(params.shape)
     geo = base.scaled(prof.scale) if prof.scale != 1.0 else base
     L, W, H = geo.box_length, geo.box_width, geo.box_height
     fill_margin = min(0.010, 0.1 * W)
@@ -330,7 +330,7 @@ RIG = Rig("repose", sheet="repose", run=run_repose, task=task, run_task=run_task
           fallbacks=("angle_profile_deg", "angle_outside_deg"),
           observables={"angle_deg": "deg", "angle_profile_deg": "deg", "angle_outside_deg": "deg",
                        "escaped": "-", "outside_fraction": "-", "crest_height_m": "m"},
-          targets=heap.CREST_TARGET,
+          targets=heap.CREST_TARGET, recorded_as={"crest_height_m": "crest_height"},
           observable_notes={"outside_fraction": "share of the particles whose centre ends beyond the end plate",
                             "angle_outside_deg": "the pile beyond the carton",
                             "crest_height_m": "the top of the heap's profile",

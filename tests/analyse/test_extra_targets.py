@@ -94,7 +94,8 @@ def test_the_crest_pins_down_what_the_angle_cannot(crest):
 
 def test_an_extra_target_no_rig_reads_is_refused(crest, tmp_path):
     path, m, config, _ = crest
-    with pytest.raises(InputError, match="extra target angle_cone_deg: the lifted_plate rig's twin does not read it"):
+    with pytest.raises(InputError, match=r"extra target angle_cone_deg: no repose rig of the workbook \(lifted_plate\) "
+                                         "reads it; they offer crest_height_mm"):
         calibrate(path, tmp_path / "y", replace(config, extra_targets=("angle_cone_deg",)), runner=crest_runner,
                   measurement=m)
 
@@ -111,3 +112,30 @@ def test_the_report_shows_the_extra_target_and_the_audit_rederives_it(crest):
     assert tables["P8"].rows[0][:2] == ("crest_height_mm", "lifted_plate")
     assert tables["P5b"].columns[1:3] == ("lifted_plate angle only", "lifted_plate alone")
     assert audit(out).ok
+
+
+class _Fixed:
+    """A surrogate whose mean and sd are given."""
+
+    def __init__(self, m, s):
+        self.m, self.s = np.atleast_1d(m), np.atleast_1d(s)
+
+    def predict(self, x):
+        return self.m, self.s
+
+
+def test_a_reading_from_the_angles_photos_is_their_bivariate_normal_with_its_own_discrepancy():
+    from scipy.stats import multivariate_normal, norm
+
+    from demcal.analyse.surrogate import HeapDatum
+
+    angle = HeapDatum(_Fixed(35.0, 0.3), 36.0, 0.2)                    # the posterior's discrepancy
+    crest = HeapDatum(_Fixed(98.0, 0.5), 100.0, 1.5, discrepancy_var=0.0, given=angle, lab_cov=0.4)
+    disc = 0.25                                                         # deg^2: the angle's alone
+    va, vc = 0.3 ** 2 + 0.2 + disc, 0.5 ** 2 + 1.5
+    joint = multivariate_normal([35.0, 98.0], [[va, 0.4], [0.4, vc]]).logpdf([36.0, 100.0])
+    marginal = norm(35.0, np.sqrt(va)).logpdf(36.0)
+    ll, imp = crest.terms(np.zeros((1, 1)), disc)
+    assert ll[0] + angle.terms(np.zeros((1, 1)), disc)[0][0] == pytest.approx(joint + np.log(2 * np.pi), abs=1e-12)
+    assert ll[0] - np.log(2 * np.pi) / 2 == pytest.approx(joint - marginal, abs=1e-12)
+    assert imp[0] == pytest.approx(2.0 / np.sqrt(vc))
