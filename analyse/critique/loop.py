@@ -415,7 +415,9 @@ def _repose_twins(runner, measurement, results, campaign, params, repose_seeds, 
     validations = [None] + [o.validation for o in (results.other_rigs or ())] if results is not None else []
     for i, setup in enumerate(setups):
         quantity = repose_quantity(i, setup.workbook_name)
-        est = measurement.quantities[quantity]
+        est = measurement.quantities.get(quantity)
+        if est is None:                           # the rig's photos were not measured
+            continue
         label = f"{quantity} (photo method)" if i == 0 else f"{quantity} ({setup.workbook_name} photos)"
         photo = est.extra.get("photo_estimate") if est.extra.get("override") else None
         measured = [r["value"] for r in est.per_row if r.get("used", True)] if est.per_row else [est.value]
