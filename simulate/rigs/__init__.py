@@ -25,7 +25,9 @@ returns a :class:`RigResult`; :func:`run_rig` runs one by name. A rig's ``task(p
 ``analyse.runs.run_key``), and :func:`run_task` runs any task on the rig it names.
 
 The repose rigs (the workbook's ``repose`` sheet) are chosen by the meta key ``repose_rig``
-(:func:`repose_rig`): ``lifted_plate`` (the default), ``lifting_cylinder``, ``funnel`` or ``drum``.
+(:func:`repose_rigs`): ``lifted_plate`` (the default), ``lifting_cylinder``, ``funnel`` or ``drum``,
+or several separated by commas (the sheet's ``rig`` column then names each photo's rig, and a
+dimension they share is each rig's own, :func:`meta_names`).
 
 Rigs whose sheets hold single trials (the drop, the incline) also say how the lab's rows become
 twin runs (:class:`TrialGroup`, ``Rig.trial_groups`` and ``Rig.group_tasks``) and what a run
