@@ -66,6 +66,7 @@ REPLICATE_SEED_STRIDE = 10_000
 DEFAULT_WORKFLOW = {"quick": "plausible", "paper": "design-expert"}
 WORKFLOWS = ("plausible", "design-expert")
 
+#: The response's name in the paper's analyses (every repose rig's compared observable).
 RESPONSE = "angle_deg"
 
 
@@ -340,22 +341,17 @@ class _StoredRuns:
         return records
 
 
-def fallback_responses(rig_name: str) -> tuple:
-    """The observables used, in this order, when the photo method finds no slope in a heap of
-    rig ``rig_name`` (``simulate.rigs.Rig.fallbacks``)."""
+def _responses(records, fallbacks: list | None = None) -> np.ndarray:
+    """The response of each run: its rig's compared observable (the photo-method angle), else
+    the first finite one of its rig's fallbacks (``{"key", "used"}`` is then appended to
+    ``fallbacks``); an error when none is finite."""
     from demcal.simulate.rigs import rig
 
-    return rig(rig_name).fallbacks
-
-
-def _responses(records, fallbacks: list | None = None) -> np.ndarray:
-    """The response of each run: the photo-method angle, else the first finite one of its
-    rig's fallbacks (``{"key", "used"}`` is then appended to ``fallbacks``); an error when none
-    is finite."""
     y = []
     for r in records:
         obs = r["result"]["observable"]
-        names = (RESPONSE,) + fallback_responses(r["result"].get("rig", "repose"))
+        twin = rig(r["result"].get("rig", "repose"))
+        names = (twin.compared,) + twin.fallbacks
         for name in names:
             value = obs.get(name)
             if value is not None and math.isfinite(value):
@@ -363,7 +359,7 @@ def _responses(records, fallbacks: list | None = None) -> np.ndarray:
         else:
             raise AnalysisError(f"DEM run {r['key']} gave none of {', '.join(names)} "
                                 f"(run record runs/{r['key']}.json)")
-        if name != RESPONSE and fallbacks is not None:
+        if name != twin.compared and fallbacks is not None:
             fallbacks.append({"key": r["key"], "used": name})
         y.append(float(value))
     return np.array(y)
@@ -514,8 +510,11 @@ def identify_rigs(measurement, config: CampaignConfig, out_dir, runner=None) -> 
 def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
     """The campaign after the measurement; ``execute(stage, tasks) -> records`` supplies the DEM
     runs. The workflow's results plus what every campaign records."""
+    from demcal.simulate.rigs import rig
+
     factors, base, setups = _prepare(measurement, config)
     setup = setups[0]
+    setup_rig = rig(setup.rig)
     if config.workflow == "plausible":
         from demcal.analyse.plausible import derive_plausible
 
@@ -533,7 +532,7 @@ def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
     # renamed key fails where the result is made
     return CampaignResult.from_dict(dict(
         workflow=config.workflow,
-        response={"name": RESPONSE, "fallbacks": list(fallback_responses(setup.rig)),
+        response={"name": setup_rig.compared, "fallbacks": list(setup_rig.fallbacks),
                   "fallback_runs": fallbacks,
                   "note": (f"{len(fallbacks)} run(s) left no slope for the photo method (e.g. the "
                            f"heap spread flat); their response is the fallback named per run"
