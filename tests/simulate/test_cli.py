@@ -53,7 +53,7 @@ def test_simulate_repose_geometry_from_workbook(tmp_path):
     doc = read_json(out)
     assert JSON_KEYS <= set(doc) and doc["profile"] == "quick"
     assert set(doc["observable"]) == {"angle_deg", "angle_profile_deg", "angle_outside_deg", "escaped",
-                                      "outside_fraction"}
+                                      "outside_fraction", "crest_height_m"}
     from demcal.simulate.rigs.heap import PROFILES
     s = PROFILES["quick"].scale
     assert doc["record"]["geometry"]["box_length"] == pytest.approx(0.08 * s)
