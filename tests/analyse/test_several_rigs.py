@@ -153,11 +153,21 @@ def test_both_rigs_validate_and_the_report_shows_each(two):
     assert res.validation.n_runs >= 10 and res.other_rigs[0].validation.n_runs >= 10
     assert res.other_rigs[0].validation.settings == res.validation.settings
     assert "validation in the drum rig" in res.summary() and "each rig alone: lifted_plate" in res.summary()
+    from demcal.report.audit import audit
+    from demcal.report.render import build_report
     from demcal.report.tables import build_tables, load_campaign
-    tables = {t.id: t for t in build_tables(load_campaign(path.parent / "out"))}
+
+    out = path.parent / "out"
+    tables = {t.id: t for t in build_tables(load_campaign(out))}
     assert {"P5b", "P6b", "P7"} <= set(tables)
     assert tables["P5b"].columns[1:4] == ("lifted_plate alone", "drum alone", "All together")
     assert tables["P7"].rows[0][0] == "drum"
+    # every table, the runs of both rigs and the report's text re-derived from the run store
+    build_report(out, pdf=False)
+    checked = audit(out)
+    assert all(t.status == "ok" for t in checked.tables) and not checked.problems
+    assert {a.artefact: a.status for a in checked.artefacts} == {"results.json": "ok", "runs.csv": "ok",
+                                                                 "report.html": "ok", "report.pdf": "missing"}
 
 
 def test_the_design_expert_workflow_refuses_two_rigs(two, tmp_path):
