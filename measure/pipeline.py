@@ -247,9 +247,11 @@ def _photo_estimate(wb: Workbook, estimator, *, outliers, annotate_dir, max_phot
                "flanks": {k: (None if v is None else float(v)) for k, v in dict(result.flanks).items()},
                "base_tilt_deg": None if result.base_tilt_deg is None else float(result.base_tilt_deg),
                "angle_deg_manual": None if math.isnan(manual) else float(manual),
-               "crest_height_mm": _crest_height_mm(result),
                "annotated": None if annotate_to is None else str(annotate_to),
                "covariates": sheet.covariates_of(r)}
+        crest = _crest_height_mm(result)
+        if crest is not None:                     # only a photo with its scale has one
+            rec["crest_height_mm"] = crest
         if not 0 < angle < 90:
             rejected.append({"row": r, "reason": f"the photo estimator found no angle ({angle!r})"})
             continue
