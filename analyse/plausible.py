@@ -68,6 +68,12 @@ KEPT_SAMPLES = 1500
 NOISE_PRIOR_DF = 4
 
 
+def rig_entropy(entropy: list, rig: int) -> list:
+    """``SeedSequence`` entropy of the workbook's ``rig``-th repose rig: the first rig's is
+    ``entropy`` itself, so that a single-rig campaign draws what it always drew."""
+    return list(entropy) + ([RIG_STREAM, rig] if rig else [])
+
+
 class SeedStream:
     """Distinct run seeds per stage from one campaign seed (and, for the workbook's second and
     further repose rigs, the rig's place ``rig``: each rig draws its own seeds)."""
@@ -79,7 +85,7 @@ class SeedStream:
 
     def entropy(self, stage: str) -> list[int]:
         """The ``SeedSequence`` entropy of a stage's stream (the first rig's as ever)."""
-        return [self.seed, SEED_STREAMS[stage]] + ([RIG_STREAM, self.rig] if self.rig else [])
+        return rig_entropy([self.seed, SEED_STREAMS[stage]], self.rig)
 
     def take(self, stage: str, n: int) -> list[int]:
         start = self.used.get(stage, 0)
@@ -150,7 +156,7 @@ class _Heap:
 
     def stream(self, *entropy) -> np.random.SeedSequence:
         """A seed sequence of this rig (the first rig's as a single-rig campaign's)."""
-        return np.random.SeedSequence(list(entropy) + ([RIG_STREAM, self.index] if self.index else []))
+        return np.random.SeedSequence(rig_entropy(entropy, self.index))
 
     def datum(self) -> HeapDatum:
         return HeapDatum(self.model, self.target, self.target_var)
@@ -173,8 +179,9 @@ class _Extra:
         self.lab_n = int(estimate.n) if self.lab_sd is not None else None
         self.target_var = self.lab_sd ** 2 / self.lab_n if self.lab_sd is not None else 0.0
         self.unit = estimate.unit
-        self.lab_cov = _lab_covariance(angle, estimate)
+        self.lab_cov = _lab_covariance(angle, name)
         self.values: list = []                    # per design point of the rig: the runs' readings
+        self.validation_values = np.array([])
 
     def read(self, records) -> np.ndarray:
         """The runs' readings in the lab's unit (NaN where a run has none)."""
@@ -194,10 +201,10 @@ class _Extra:
                          given=self.heap.datum(), lab_cov=self.lab_cov)
 
 
-def _lab_covariance(angle, estimate) -> float:
-    """Covariance of the lab's mean angle and mean extra reading of one rig, from the photos
-    that gave both (0 with fewer than 3)."""
-    pairs = [(r["value"], r.get(estimate.name.split(".")[0])) for r in angle.per_row if r.get("used", True)]
+def _lab_covariance(angle, name: str) -> float:
+    """Covariance of the lab's mean angle and mean reading ``name`` (its per-photo record key)
+    of one rig, from the photos that gave both (0 with fewer than 3)."""
+    pairs = [(r["value"], r.get(name)) for r in angle.per_row if r.get("used", True)]
     pairs = np.array([p for p in pairs if p[1] is not None], dtype=float)
     if len(pairs) < 3:
         return 0.0
@@ -329,7 +336,7 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
                              seed=np.random.SeedSequence([config.seed, SEED_STREAMS["surrogate"], 1]),
                              others=_others(heaps))
         return {"prior": prior.to_dict(), "by_rig": _each_rig_alone(heaps, prior, config),
-                "together": {n: {"sd_ratio": v["sd_ratio"], "ci95": v["ci95"]} for n, v in together.summary().items()},
+                "together": _sd_ratios(together),
                 "rigs": {h.setup.workbook_name: {"target_deg": h.target, "target_sd_deg": h.lab_sd, "heaps": h.lab_n,
                                                  "run_sd_deg": h.pooled.sd, "replicates": h.k,
                                                  "runs": sum(len(p["responses"]) for p in h.design),
@@ -438,6 +445,11 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
     return out
 
 
+def _sd_ratios(post) -> dict:
+    """Per parameter, the posterior/prior sd and the 95 % interval of a posterior."""
+    return {n: {"sd_ratio": v["sd_ratio"], "ci95": v["ci95"]} for n, v in post.summary().items()}
+
+
 def _others(heaps) -> list:
     """The data the posterior is conditioned on besides the first rig's angle: its extra targets,
     and every further rig's angle and extra targets."""
@@ -453,14 +465,12 @@ def _each_rig_alone(heaps, prior, config) -> dict:
         first = heaps[0]
         alone = posterior(first.model, prior, first.target, first.target_var, discrepancy_var=config.discrepancy_sd ** 2,
                           seed=first.stream(config.seed, SEED_STREAMS["surrogate"], 4))
-        out[f"{first.setup.workbook_name} angle only"] = {n: {"sd_ratio": v["sd_ratio"], "ci95": v["ci95"]}
-                                                          for n, v in alone.summary().items()}
+        out[f"{first.setup.workbook_name} angle only"] = _sd_ratios(alone)
     for heap in heaps:
         alone = posterior(heap.model, prior, heap.target, heap.target_var, discrepancy_var=config.discrepancy_sd ** 2,
                           seed=heap.stream(config.seed, SEED_STREAMS["surrogate"], 4),
                           others=[e.datum() for e in heap.extras])
-        out[heap.setup.workbook_name] = {n: {"sd_ratio": v["sd_ratio"], "ci95": v["ci95"]}
-                                         for n, v in alone.summary().items()}
+        out[heap.setup.workbook_name] = _sd_ratios(alone)
     return out
 
 
@@ -523,7 +533,7 @@ def _validate(heap, config, x_best, best, run, run_refs) -> Validation:
         val["seeds"] += ss
         val["runs"] += run_refs(records)
         for e in heap.extras:
-            e.validation_values = np.concatenate([getattr(e, "validation_values", np.array([])), e.read(records)])
+            e.validation_values = np.concatenate([e.validation_values, e.read(records)])
         return y
 
     # the first look comes when the test has 80 % power to decide at the predicted bias (at
