@@ -438,8 +438,9 @@ class ReposeSetup:
         """Refuse, before any run, a rig whose heap of ``shape`` could not be read (a
         ``WorkbookError`` on the meta sheet of ``file``, whose dimensions say so)."""
         try:
-            self.dimensions().check_fill(shape)
-            self.dimensions().check_for(shape)
+            dims = self.dimensions()
+            dims.check_fill(shape)
+            dims.check_for(shape)
         except WorkbookError:
             raise
         except InputError as exc:
