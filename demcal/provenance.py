@@ -23,8 +23,11 @@ from demcal.jsonio import to_jsonable
 #: between its end impacts no longer ends it). Revision 4: a run's parameters carry the particle's
 #: shape (``simulate.shapes``) and time step, so runs of revision 3 and earlier no longer replay.
 #: Revision 5: a size distribution is of any shape (``particle_sizes``, formerly the segments'
-#: ``segment_sizes``); the physics is unchanged, the keys are not.
-MODEL_VERSION = 5
+#: ``segment_sizes``); the physics is unchanged, the keys are not. Revision 6: particle factories
+#: insert in batches (every 50 steps) with a gap of a Verlet skin to the other spheres, and the
+#: neighbour lists are rebuilt on per-sphere allowances (``simulate.neighbours``): the same
+#: physics, but heaps are filled differently and their arithmetic runs in another order.
+MODEL_VERSION = 6
 
 
 def run_key(inputs: dict) -> str:

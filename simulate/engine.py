@@ -45,8 +45,11 @@ The step (``run`` pseudocode; the whole loop runs in numba, returning to Python 
         for each active body: kick (forces, torques, rolling torque with its cap), drift
         move the walls that are in their motion window; t += dt
         sphere positions from the bodies; rebuild the sphere-sphere Verlet list if a sphere
-            moved more than skin/2 since its last rebuild, the sphere-wall list if a sphere and
-            a wall moved more than skin together (contact history carried over)
+            moved beyond its allowance since the last rebuild (at least skin/2: half its gap
+            to the nearest sphere not listed with it), the sphere-wall list if a sphere and the
+            walls moved beyond its wall allowance together (at least skin); contact history
+            carried over; spheres added between steps are admitted without a rebuild when they
+            have room (``simulate.neighbours``)
         contact forces: sphere-sphere pairs, then sphere-wall pairs (Hertz-Mindlin, rolling)
     (kicks are half steps at the start and end of a chunk and whole steps in between: the
      velocity Verlet scheme of ``simulate.integrate``; Python always sees synchronous
@@ -89,7 +92,8 @@ from demcal.simulate.integrate import (damping_inverse_mass, drift, half_kick, m
                                        pair_rolling_scale, quat_from_matrix, quat_multiply,
                                        refresh_rotation)
 from demcal.simulate.materials import MaterialTable
-from demcal.simulate.neighbours import build_pair_list, build_wall_list, grid_shape, padded_cell_count
+from demcal.simulate.neighbours import (admit_spheres, build_pair_list, build_wall_list, grid_shape,
+                                        padded_cell_count)
 from demcal.simulate.timestep import DEFAULT_MAX_FRACTION, check_time_step, rayleigh_time
 from demcal.simulate.walls import WALL_TYPES, pack_walls, wall_distance, wall_distances
 from demcal.units import GRAVITY
@@ -112,11 +116,13 @@ def history_width(velocity_restitution: bool, rolling_model: int) -> int:
 
 
 @kernel
-def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw):
-    """World positions of the spheres; returns the largest squared moves since the last pair
-    list and wall list rebuilds (references ``sx0`` and ``sxw``)."""
-    dmax2 = 0.0
-    dwmax2 = 0.0
+def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sallow, swallow, wmove):
+    """World positions of the spheres; returns whether the pair list and the wall list need a
+    rebuild: a sphere moved beyond its allowance since the last one (``sx0``, ``sallow``), or a
+    sphere plus the walls' largest move ``wmove`` beyond its wall allowance (``sxw``,
+    ``swallow``; ``simulate.neighbours``)."""
+    pairs_stale = False
+    walls_stale = False
     for s in range(n_spheres):
         b = sbody[s]
         if not bactive[b]:
@@ -134,13 +140,14 @@ def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw):
         dy = y - sx0[s, 1]
         dz = z - sx0[s, 2]
         d2 = dx * dx + dy * dy + dz * dz
-        dmax2 = max(dmax2, d2)
+        pairs_stale |= d2 > sallow[s] * sallow[s]
         dx = x - sxw[s, 0]
         dy = y - sxw[s, 1]
         dz = z - sxw[s, 2]
         d2 = dx * dx + dy * dy + dz * dz
-        dwmax2 = max(dwmax2, d2)
-    return dmax2, dwmax2
+        lim = swallow[s] - wmove
+        walls_stale |= (lim <= 0.0) | (d2 > lim * lim)
+    return pairs_stale, walls_stale
 
 
 @kernel
@@ -437,7 +444,7 @@ def _wall_velocities(t, wvel, wspin, wwin, wvel_now, wspin_now):
 def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r, effective_mass,
              need_rebuild, need_forces,
              n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, bactive,
-             n_spheres, sbody, soff, srad, sx, sx0, sxw,
+             n_spheres, sbody, soff, srad, sx, sx0, sxw, sallow, swallow,
              pstart, ppi, pj, ph, wstart, ws, wk, wh,
              wkind, worig, wnorm, wu, wv, whalf, wvel, wspin, wwin, wmat, wx0, wvel_now, wspin_now,
              e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min,
@@ -470,22 +477,22 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
             t += dt
         else:
             _wall_velocities(t + h, wvel, wspin, wwin, wvel_now, wspin_now)
-        dmax2, dwmax2 = _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw)
         wmax2 = 0.0
         for k in range(n_walls):
             dw2 = 0.0
             for a in range(3):
                 dw2 += (worig[k, a] - wx0[k, a]) ** 2
             wmax2 = max(wmax2, dw2)
-        dmax = math.sqrt(dmax2)
-        if need_rebuild or 2.0 * dmax > skin:
+        pairs_stale, walls_stale = _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw,
+                                                   sallow, swallow, math.sqrt(wmax2))
+        if need_rebuild or pairs_stale:
             pstart, ppi, pj, ph = build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo,
-                                                  inv_cell, dims, cell_start, pstart, pj, ph)
+                                                  inv_cell, dims, cell_start, pstart, pj, ph, sallow)
             sx0[:n_spheres] = sx[:n_spheres]
             n_rebuilds += 1
-        if need_rebuild or math.sqrt(dwmax2) + math.sqrt(wmax2) > skin:
+        if need_rebuild or walls_stale:
             wstart, ws, wk, wh = build_wall_list(n_spheres, sx, srad, sbody, bactive, skin, wkind,
-                                                 worig, wnorm, wu, wv, whalf, wstart, wk, wh)
+                                                 worig, wnorm, wu, wv, whalf, wstart, wk, wh, swallow)
             sxw[:n_spheres] = sx[:n_spheres]
             wx0[:] = worig
             n_wall_rebuilds += 1
@@ -582,6 +589,7 @@ _BODY_FIELDS = {  # name: (trailing shape, dtype)
 _SPHERE_FIELDS = {
     "sbody": ((), np.int64), "soff": ((3,), np.float64), "srad": ((), np.float64),
     "sx": ((3,), np.float64), "sx0": ((3,), np.float64), "sxw": ((3,), np.float64),
+    "sallow": ((), np.float64), "swallow": ((), np.float64),
 }
 
 
@@ -669,6 +677,7 @@ class Simulation:
         self._grid = None
         self._need_rebuild = True
         self._need_forces = True
+        self._admit_from = 0          # spheres from here on were added since the lists were made
         self.total_rebuilds = 0
         self.total_wall_rebuilds = 0
 
@@ -841,7 +850,7 @@ class Simulation:
         S["sxw"][s0:s0 + ns] = S["sx"][s0:s0 + ns]
         self.n_bodies = b + 1
         self.n_spheres = s0 + ns
-        self._need_rebuild = True
+        # no rebuild: the next step admits the new spheres into the lists (``_advance``)
         self._check_pairs_defined()
         return b
 
@@ -949,6 +958,12 @@ class Simulation:
         B, S, W = self._b, self._s, self._w
         if self._need_forces:
             refresh_rotation(self.n_bodies, B["bq"], B["bL"], B["bw"], B["bR"], B["binvi"])
+        if self._admit_from < self.n_spheres and not self._need_rebuild:
+            self._need_rebuild = not admit_spheres(
+                self._admit_from, self.n_spheres, S["sx"], S["srad"], S["sbody"], B["bactive"], self.skin,
+                S["sx0"], S["sallow"], S["sxw"], S["swallow"], W["kind"], W["origin"], W["normal"],
+                W["axis_u"], W["axis_v"], W["half"], self._wx0)
+        self._admit_from = self.n_spheres
         pt = self.materials.compile()
         width = history_width(pt.velocity_restitution, pt.rolling_model)
         self._ensure_history_width(width)
@@ -959,8 +974,8 @@ class Simulation:
             self._need_forces,
             self.n_bodies, B["bx"], B["bv"], B["bq"], B["bL"], B["bw"], B["bR"], B["bf"], B["bt"],
             B["brm"], B["brv"], B["brn"], B["binvm"], B["binvi"], B["bmat"], B["bcount"], B["bactive"],
-            self.n_spheres, S["sbody"], S["soff"], S["srad"], S["sx"], S["sx0"], S["sxw"],
-            *self._pairs, *self._wpairs,
+            self.n_spheres, S["sbody"], S["soff"], S["srad"], S["sx"], S["sx0"], S["sxw"], S["sallow"],
+            S["swallow"], *self._pairs, *self._wpairs,
             W["kind"], W["origin"], W["normal"], W["axis_u"], W["axis_v"], W["half"], W["velocity"],
             W["spin"], W["window"], W["material"], self._wx0, self._wvel_now, self._wspin_now,
             pt.e_star, pt.g_star, pt.damping, pt.mu_s, pt.mu_r, pt.log_e, pt.e_exponent, pt.log_v_ref,

@@ -4,10 +4,17 @@ A ``ParticleFactory`` inserts ``n_total`` clumps of one template (or of several,
 template drawn with the given weights: a size distribution) uniformly in time over
 ``[start_time, end_time]`` (EDEM's dynamic factory: e.g. 500 segments in the first second),
 each at a uniformly random position and uniformly random orientation (Shoemake 1992) such
-that every member sphere lies inside the box ``region_lo``-``region_hi`` and overlaps neither
-another sphere nor a wall. A clump that cannot be placed in ``max_attempts`` draws is retried
-at the next chunk (``failed_attempts`` counts the rejected draws); the simulation shortens its
-chunks so that each clump enters when it is due.
+that every member sphere lies inside the box ``region_lo``-``region_hi``, overlaps no wall and
+keeps a gap of the simulation's Verlet skin to every other sphere. A clump that cannot be
+placed in ``max_attempts`` draws is retried at the next chunk (``failed_attempts`` counts the
+rejected draws).
+
+Clumps enter in batches, as LIGGGHTS' ``insert`` fixes do: the simulation stops for the
+factory every ``batch_steps`` steps of the insertion window, and each clump enters at the first
+batch at or after its due time (at most ``batch_steps`` steps late). A batch costs one return
+to Python, and the gap of a skin lets the new spheres join the neighbour lists without a
+rebuild (``simulate.neighbours.admit_spheres``): a fill no longer rebuilds the lists at every
+clump.
 
 Several templates. With ``template`` a sequence of template ids and ``weights`` (default
 equal), the template of each clump is drawn (``Generator.choice``) before its position and
@@ -61,6 +68,8 @@ class ParticleFactory:
         Random draws per clump per insertion attempt.
     weights : sequence of float, optional
         Relative frequency of each template (several templates only); default equal.
+    batch_steps : int
+        Steps between insertion batches (default 50).
 
     Attributes
     ----------
@@ -78,7 +87,7 @@ class ParticleFactory:
 
     def __init__(self, template, n_total: int, region_lo, region_hi, *, seed,
                  start_time: float = 0.0, end_time: float = 1.0, material: str = "particle",
-                 velocity=(0.0, 0.0, 0.0), max_attempts: int = 200, weights=None):
+                 velocity=(0.0, 0.0, 0.0), max_attempts: int = 200, weights=None, batch_steps: int = 50):
         ids = np.atleast_1d(np.asarray(template))
         if ids.ndim != 1 or ids.size == 0 or not np.issubdtype(ids.dtype, np.integer) or np.any(ids < 0):
             raise InputError(f"template must be a template id or a non-empty sequence of ids, got {template!r}")
@@ -113,6 +122,9 @@ class ParticleFactory:
         self.material = material
         self.velocity = np.asarray(velocity, dtype=float).reshape(3)
         self.max_attempts = int(max_attempts)
+        if int(batch_steps) != batch_steps or batch_steps < 1:
+            raise InputError(f"batch_steps must be a positive integer, got {batch_steps!r}")
+        self.batch_steps = int(batch_steps)
         self.bodies: list[int] = []
         self.body_templates: list[int] = []
         self.failed_attempts = 0
@@ -140,15 +152,27 @@ class ParticleFactory:
             return sim.chunk_steps  # behind schedule (region full): retry after a chunk
         k = self.inserted + 1
         t_next = self.start_time + k * (self.end_time - self.start_time) / self.n_total
-        return max(1, int(math.ceil((t_next - sim.time) / sim.dt - 1e-9)))
+        # the first batch at or after it: batches every batch_steps steps from start_time
+        period = self.batch_steps * sim.dt
+        t_batch = self.start_time + math.ceil((t_next - self.start_time) / period - 1e-9) * period
+        return max(1, int(math.ceil((t_batch - sim.time) / sim.dt - 1e-9)))
 
     def insert_due(self, sim) -> int:
         """Insert the clumps due at ``sim.time``; returns how many were placed."""
         placed = 0
         if self.inserted == 0 and self.n_total and not self.bodies:
             sim.reserve(sim.n_bodies + self.n_total)
+        if self.inserted >= self.n_due(sim.time):
+            return 0
+        # the spheres that can touch the region, once per batch (the batch's clumps are added)
+        x, r = sim.sphere_positions(), sim.sphere_radii()
+        keep = sim.active()[sim.sphere_body()] if sim.n_spheres else np.zeros(0, bool)
+        reach = max(sim.templates[k].bounding_radius for k in self.templates) + sim.skin
+        margin = reach + (float(r[keep].max()) if keep.any() else 0.0)
+        keep &= np.all((x > self.region_lo - margin) & (x < self.region_hi + margin), axis=1)
+        nearby = [x[keep], r[keep]]
         while self.inserted < self.n_due(sim.time):
-            if not self._insert_one(sim):
+            if not self._insert_one(sim, nearby):
                 break
             placed += 1
         return placed
@@ -161,15 +185,15 @@ class ParticleFactory:
             self._pending = self.templates[int(self.rng.choice(len(self.templates), p=self.probabilities))]
         return self._pending
 
-    def _insert_one(self, sim) -> bool:
+    def _insert_one(self, sim, nearby) -> bool:
+        """Place the next clump clear of the spheres ``nearby`` (positions, radii; the placed
+        clump's spheres are appended)."""
         template = self._next_template()
         tpl = sim.templates[template]
         packed = sim._w
-        existing = sim.sphere_positions()
-        ex_r = sim.sphere_radii()
-        keep = sim.active()[sim.sphere_body()] if sim.n_spheres else np.zeros(0, bool)
-        existing, ex_r = existing[keep], ex_r[keep]
+        existing, ex_r = nearby
         reach = tpl.bounding_radius
+        gap = sim.skin   # room to join the neighbour lists without a rebuild
         for _ in range(self.max_attempts):
             q = random_quaternions(self.rng, 1)[0]
             pos = self.region_lo + self.rng.random(3) * (self.region_hi - self.region_lo)
@@ -180,10 +204,10 @@ class ParticleFactory:
                 self.failed_attempts += 1
                 continue
             if existing.shape[0]:
-                near = np.abs(existing - pos).max(axis=1) < reach + ex_r.max()
+                near = np.abs(existing - pos).max(axis=1) < reach + ex_r.max() + gap
                 if near.any():
                     d = np.linalg.norm(existing[near][None, :, :] - centres[:, None, :], axis=2)
-                    if np.any(d < tpl.radii[:, None] + ex_r[near][None, :]):
+                    if np.any(d < tpl.radii[:, None] + ex_r[near][None, :] + gap):
                         self.failed_attempts += 1
                         continue
             if packed["kind"].shape[0]:
@@ -192,6 +216,8 @@ class ParticleFactory:
                     self.failed_attempts += 1
                     continue
             body = sim.add_clump(template, pos, q, velocity=self.velocity, material=self.material)
+            nearby[0] = np.concatenate([existing, centres])
+            nearby[1] = np.concatenate([ex_r, tpl.radii])
             self.bodies.append(body)
             self.body_templates.append(template)
             self._pending = None
@@ -203,5 +229,5 @@ class ParticleFactory:
                 "weights": self.probabilities.tolist(), "n_total": self.n_total,
                 "region_lo": self.region_lo.tolist(), "region_hi": self.region_hi.tolist(),
                 "start_time": self.start_time, "end_time": self.end_time, "material": self.material,
-                "velocity": self.velocity.tolist(), "inserted": self.inserted,
+                "velocity": self.velocity.tolist(), "batch_steps": self.batch_steps, "inserted": self.inserted,
                 "failed_attempts": self.failed_attempts}

@@ -6,6 +6,16 @@ only those. The lists stay valid while no sphere has moved more than skin/2 and 
 wall has moved more than skin together (Verlet 1967; Allen & Tildesley 2017, sec. 5.3), which
 the engine checks every step.
 
+Each sphere has its own allowance, at least that much. A rebuild records the gap g_i from
+sphere i to the nearest sphere *not* listed with it (its own clump aside; beyond the 27 cells
+around it, the distance to their faces bounds it), and the list stays valid while each sphere
+has moved less than g_i / 2: a pair not listed closes by at most g_i / 2 + g_j / 2 <= g_ij. A
+sphere falling through empty space, far from everything, may so fall a cell or more between
+rebuilds instead of skin / 2. Its wall allowance is likewise the gap to the nearest wall not
+listed with it (sphere move plus wall move below it). A sphere added between rebuilds is
+admitted into the lists without a rebuild (``admit_spheres``) when its allowances, measured
+from the other spheres' reference positions less their own allowances, are at least skin / 2.
+
 Cells are boxes of side at least 2 R_max + skin over the simulation domain; spheres outside it
 are counted in the nearest boundary cell, so the lists stay correct (only slower) for strays.
 Pairs are found over the 13 forward neighbour cells plus the own cell, then ordered by their
@@ -24,6 +34,8 @@ Allen, M. P., Tildesley, D. J. (2017). Computer Simulation of Liquids, 2nd ed. O
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -50,8 +62,10 @@ def padded_cell_count(dims) -> int:
 
 @kernel
 def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dims, cell_start,
-                    old_start, old_j, old_hist):
-    """Sphere-sphere Verlet list with history carried from the previous list.
+                    old_start, old_j, old_hist, allow):
+    """Sphere-sphere Verlet list with history carried from the previous list, and each
+    sphere's displacement allowance into ``allow`` (half its gap to the nearest sphere not
+    listed with it; see the module docstring).
 
     The grid is padded by one empty cell on every side, so the stencil needs no bounds checks;
     cells are numbered x fastest, so the three cells of a stencil row are one contiguous run of
@@ -63,6 +77,8 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
         Work array (overwritten).
     old_start, old_j, old_hist
         The previous list (rows, partners, tangential history).
+    allow : float64 (>= n_spheres,)
+        Filled with each active sphere's allowance [m] (at least skin / 2).
 
     Returns
     -------
@@ -78,18 +94,33 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
     nz = dims[2] + 2
     n_cells = nx * ny * nz
     scell = np.empty(n_spheres, np.int64)
-    # counting sort of the active spheres into cells
-    cell_start[:] = 0
+    # the largest radius of the spheres present, for the bound beyond a sphere's 27 cells
+    rmax = 0.0
     for s in range(n_spheres):
         if bactive[sbody[s]]:
-            cx = int((sx[s, 0] - lo[0]) * inv_cell[0])
-            cy = int((sx[s, 1] - lo[1]) * inv_cell[1])
-            cz = int((sx[s, 2] - lo[2]) * inv_cell[2])
-            # strays outside the domain go to the nearest boundary cell
-            cx = min(max(cx, 0), dims[0] - 1) + 1
-            cy = min(max(cy, 0), dims[1] - 1) + 1
-            cz = min(max(cz, 0), dims[2] - 1) + 1
-            c = (cz * ny + cy) * nx + cx
+            rmax = max(rmax, srad[s])
+    # counting sort of the active spheres into cells; each sphere's gap bound from the faces
+    # of its 27 cells (any sphere beyond them is at least that far), skin for a stray
+    cell_start[:] = 0
+    kk = np.empty(3, np.int64)
+    far = np.empty(n_spheres)   # the same bound from the faces of the 125 cells around it
+    for s in range(n_spheres):
+        if bactive[sbody[s]]:
+            face = np.inf
+            face5 = np.inf
+            stray = False
+            for a in range(3):
+                u = (sx[s, a] - lo[a]) * inv_cell[a]
+                k = int(u)
+                if u < 0.0 or k > dims[a] - 1:
+                    stray = True    # strays go to the nearest boundary cell
+                k = min(max(k, 0), dims[a] - 1)
+                face = min(face, (u - (k - 1)) / inv_cell[a], (k + 2 - u) / inv_cell[a])
+                face5 = min(face5, (u - (k - 2)) / inv_cell[a], (k + 3 - u) / inv_cell[a])
+                kk[a] = k + 1
+            c = (kk[2] * ny + kk[1]) * nx + kk[0]
+            allow[s] = skin if stray else face - srad[s] - rmax
+            far[s] = skin if stray else face5 - srad[s] - rmax
             scell[s] = c
             cell_start[c + 1] += 1
         else:
@@ -113,6 +144,7 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
     rs = np.empty(m)
     bs = np.empty(m, np.int64)
     cs = np.empty(m, np.int64)
+    gap = np.empty(m)   # gap to the nearest sphere not listed, less skin (cell order)
     for p in range(m):
         s = order[p]
         xs[p] = sx[s, 0]
@@ -121,6 +153,40 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
         rs[p] = srad[s] + 0.5 * skin
         bs[p] = sbody[s]
         cs[p] = scell[s]
+        gap[p] = allow[s] - skin
+    # a sphere with no other sphere in the shell of cells just beyond its 27 has the bound of
+    # the 125 (a sphere falling through empty space); counted by rows of contiguous cells
+    for p in range(m):
+        s = order[p]
+        c = cs[p]
+        cz = c // (nx * ny)
+        cy = (c // nx) % ny
+        cx = c % nx
+        inner = 0
+        outer = 0
+        for z in range(cz - 2, cz + 3):
+            for y in range(cy - 2, cy + 3):
+                if 0 <= z < nz and 0 <= y < ny:
+                    base = (z * ny + y) * nx
+                    x0 = max(cx - 2, 0)
+                    x1 = min(cx + 3, nx)
+                    outer += cell_start[base + x1] - cell_start[base + x0]
+                    if abs(z - cz) <= 1 and abs(y - cy) <= 1:
+                        inner += cell_start[base + cx + 2] - cell_start[base + cx - 1]
+        clear = outer == inner
+        if not clear and outer <= 64:
+            # the shell may hold only the sphere's own clump
+            clear = True
+            for z in range(max(cz - 2, 0), min(cz + 3, nz)):
+                for y in range(max(cy - 2, 0), min(cy + 3, ny)):
+                    base = (z * ny + y) * nx
+                    for k in range(cell_start[base + max(cx - 2, 0)], cell_start[base + min(cx + 3, nx)]):
+                        ck = cs[k]
+                        ring = max(abs(ck // (nx * ny) - cz), abs((ck // nx) % ny - cy), abs(ck % nx - cx))
+                        if ring >= 2 and bs[k] != bs[p]:
+                            clear = False
+        if clear:
+            gap[p] = far[s] - skin
     row = np.empty(5, np.int64)  # first cell of each forward stencil row, relative to the own cell
     row[0] = 0
     row[1] = nx - 1
@@ -159,10 +225,21 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
                 dy = ys[k] - yi
                 dz = zs[k] - zi
                 cut = ri + rs[k]
-                near = (dx * dx + dy * dy + dz * dz < cut * cut) & (bs[k] != bi)
+                d2 = dx * dx + dy * dy + dz * dz
+                other = bs[k] != bi
+                near = (d2 < cut * cut) & other
                 ta[n] = p   # written always, kept only if near (no branch)
                 tb[n] = k
                 n += near
+                if other and not near:
+                    # a root only where it may lower either sphere's gap
+                    reach = cut + max(gap[p], gap[k])
+                    if d2 < reach * reach:
+                        g = math.sqrt(d2) - cut
+                        gap[p] = min(gap[p], g)
+                        gap[k] = min(gap[k], g)
+    for p in range(m):
+        allow[order[p]] = max(0.5 * skin, 0.5 * (gap[p] + skin))
 
     # back to sphere ids, ordered by first sphere (counting sort) into compressed rows
     start = np.zeros(n_spheres + 1, np.int64)
@@ -203,8 +280,10 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
 
 @kernel
 def build_wall_list(n_spheres, sx, srad, sbody, bactive, skin, kind, origin, normal, axis_u, axis_v,
-                    half, old_start, old_wall, old_hist):
-    """Sphere-wall Verlet list (rows by sphere) with history carried over.
+                    half, old_start, old_wall, old_hist, allow):
+    """Sphere-wall Verlet list (rows by sphere) with history carried over, and each active
+    sphere's gap [m] to the nearest wall not listed with it into ``allow`` (at least skin;
+    infinite without walls).
 
     Returns ``start`` (n_spheres + 1,), ``ws`` (sphere of each pair), ``wk`` (wall), ``hist``
     (as wide as ``old_hist``).
@@ -220,6 +299,7 @@ def build_wall_list(n_spheres, sx, srad, sbody, bactive, skin, kind, origin, nor
             y = sx[s, 1]
             z = sx[s, 2]
             reach = srad[s] + skin
+            free = np.inf
             for k in range(n_walls):
                 # distance to a plane or rectangle's plane bounds the distance to the wall
                 # from below (a cylinder has no such plane)
@@ -229,12 +309,16 @@ def build_wall_list(n_spheres, sx, srad, sbody, bactive, skin, kind, origin, nor
                     if kind[k] != PLANE:
                         h = abs(h)
                     if h >= reach:
+                        free = min(free, h - srad[s])
                         continue
                 d, ux, uy, uz = wall_distance(kind, origin, normal, axis_u, axis_v, half, k, x, y, z)
                 if d < reach:
                     ts[n] = s
                     tk[n] = k
                     n += 1
+                else:
+                    free = min(free, d - srad[s])
+            allow[s] = max(free, skin)
         start[s + 1] = n
     ws = ts[:n].copy()
     wk = tk[:n].copy()
@@ -251,3 +335,71 @@ def build_wall_list(n_spheres, sx, srad, sbody, bactive, skin, kind, origin, nor
                     hist[m, c] = old_hist[q, c]
                 break
     return start, ws, wk, hist
+
+
+@kernel
+def admit_spheres(first, n_spheres, sx, srad, sbody, bactive, skin, sx0, allow, sxw, wall_allow,
+                  kind, origin, normal, axis_u, axis_v, half, wall_ref):
+    """Admit spheres ``first``..``n_spheres - 1``, added since the last rebuild, into valid
+    Verlet lists without rebuilding them; returns False if a rebuild is needed instead (the
+    allowances may then have been narrowed: the rebuild sets them all anew).
+
+    A new sphere s is listed with nothing. Against each earlier sphere j (reference position
+    ``sx0[j]``, allowance ``allow[j]``) the pair stays apart while s moves less than
+    |x_s - sx0_j| - R_s - R_j - allow_j, and against the walls while s plus a wall move less
+    than its gap to them less the walls' moves since their reference ``wall_ref``; the smallest
+    of each is its allowance (``allow``, ``wall_allow``), from its position now (``sx0``,
+    ``sxw``). A sphere allowance below skin / 2 is raised to it by narrowing the allowances of
+    the neighbours in the way, if they have not yet moved as far; else, and for a wall allowance
+    below skin / 2, the lists are rebuilt instead.
+    """
+    wmax = 0.0
+    for k in range(kind.shape[0]):
+        d2 = 0.0
+        for a in range(3):
+            d2 += (origin[k, a] - wall_ref[k, a]) ** 2
+        wmax = max(wmax, math.sqrt(d2))
+    least = 0.5 * skin
+    for s in range(first, n_spheres):
+        if not bactive[sbody[s]]:
+            continue
+        w_s = np.inf
+        for k in range(kind.shape[0]):
+            d, ux, uy, uz = wall_distance(kind, origin, normal, axis_u, axis_v, half, k,
+                                          sx[s, 0], sx[s, 1], sx[s, 2])
+            w_s = min(w_s, d - srad[s] - wmax)
+        if w_s < least:
+            return False
+        a_s = np.inf
+        for j in range(s):
+            if sbody[j] != sbody[s] and bactive[sbody[j]]:
+                a_s = min(a_s, _room(s, j, sx, sx0, srad) - allow[j])
+        if a_s < least:
+            # give s skin / 2 by narrowing the neighbours that leave it less: valid while
+            # each has not yet moved that far from its reference
+            for j in range(s):
+                if sbody[j] != sbody[s] and bactive[sbody[j]]:
+                    narrowed = _room(s, j, sx, sx0, srad) - least
+                    if narrowed < allow[j]:
+                        moved2 = 0.0
+                        for a in range(3):
+                            moved2 += (sx[j, a] - sx0[j, a]) ** 2
+                        if narrowed <= 0.0 or moved2 >= narrowed * narrowed:
+                            return False
+                        allow[j] = narrowed
+            a_s = least
+        allow[s] = a_s
+        wall_allow[s] = w_s
+        for a in range(3):
+            sx0[s, a] = sx[s, a]
+            sxw[s, a] = sx[s, a]
+    return True
+
+
+@kernel
+def _room(s, j, sx, sx0, srad):
+    """Gap [m] between sphere s where it is and sphere j at its reference position."""
+    d2 = 0.0
+    for a in range(3):
+        d2 += (sx[s, a] - sx0[j, a]) ** 2
+    return math.sqrt(d2) - srad[s] - srad[j]

@@ -31,12 +31,23 @@ def test_pair_list_equals_brute_force(seed):
     cell_xyz, dims = grid_shape(lo, hi, 2 * srad.max() + skin)
     cell_start = np.zeros(padded_cell_count(dims) + 1, np.int64)
     empty = (np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)))
+    allow = np.zeros(sx.shape[0])
     start, pi, pj, hist = build_pair_list(sx.shape[0], sx, srad, sbody, active, skin, lo,
-                                          1.0 / cell_xyz, dims, cell_start, *empty)
+                                          1.0 / cell_xyz, dims, cell_start, *empty, allow)
     d = np.linalg.norm(sx[:, None] - sx[None], axis=2)
     i, j = np.nonzero(np.triu(d < srad[:, None] + srad[None] + skin, k=1))
     keep = (sbody[i] != sbody[j]) & active[sbody[i]] & active[sbody[j]]
     assert set(zip(pi.tolist(), pj.tolist())) == set(zip(i[keep].tolist(), j[keep].tolist()))
+    # each sphere's allowance is at least skin / 2 and at most half its gap to every sphere of
+    # another clump that is not listed with it: then no unlisted pair can touch before a rebuild
+    gap = d - srad[:, None] - srad[None]
+    unlisted = (sbody[:, None] != sbody[None]) & active[sbody][None] & (gap >= skin)
+    on = active[sbody]
+    nearest = np.where(unlisted, gap, np.inf).min(axis=1)[on]
+    assert np.all(allow[on] >= 0.5 * skin - 1e-15)
+    assert np.all(allow[on] <= 0.5 * nearest + 1e-12)
+    # and it is not only skin / 2: a sphere with room has more
+    assert np.mean(allow[on] > 0.505 * skin) > 0.9
     assert len(pi) == keep.sum()
     assert np.all(pi < pj) and np.all(np.diff(pi) >= 0)
     for row in range(sx.shape[0]):
@@ -44,7 +55,7 @@ def test_pair_list_equals_brute_force(seed):
     # a rebuild carries the history of pairs that persist
     hist[:] = np.arange(3 * len(pi)).reshape(-1, 3)
     start2, pi2, pj2, hist2 = build_pair_list(sx.shape[0], sx, srad, sbody, active, skin, lo,
-                                              1.0 / cell_xyz, dims, cell_start, start, pj, hist)
+                                              1.0 / cell_xyz, dims, cell_start, start, pj, hist, allow)
     np.testing.assert_array_equal(hist2, hist)
 
 
@@ -56,12 +67,20 @@ def test_wall_list_equals_brute_force():
     w = pack_walls(walls, lambda name: 0)
     skin = 0.002
     empty = (np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)))
+    allow = np.zeros(sx.shape[0])
     start, ws, wk, _ = build_wall_list(sx.shape[0], sx, srad, sbody, active, skin, w["kind"],
-                                       w["origin"], w["normal"], w["axis_u"], w["axis_v"], w["half"], *empty)
+                                       w["origin"], w["normal"], w["axis_u"], w["axis_v"], w["half"], *empty,
+                                       allow)
     dist = wall_distances(w, sx)
     s, k = np.nonzero(dist < (srad + skin)[:, None])
     keep = active[sbody[s]]
     assert set(zip(ws.tolist(), wk.tolist())) == set(zip(s[keep].tolist(), k[keep].tolist()))
+    # the wall allowance: at least skin, at most the gap to every wall not listed
+    gap = dist - srad[:, None]
+    on = active[sbody]
+    nearest = np.where(gap >= skin, gap, np.inf).min(axis=1)[on]
+    assert np.all(allow[on] >= skin) and np.all(allow[on] <= nearest + 1e-12)
+    assert np.mean(allow[on] > 2 * skin) > 0.2
 
 
 def _pushed_pair(skin):
@@ -87,3 +106,69 @@ def test_history_survives_rebuilds():
     # the faster segment slid and was dragged by the other: slower than plate friction alone
     # would make it (0.4 - 0.3 g t = 0.22 m/s)
     assert never.velocities()[0, 0] < 0.2
+
+
+def _listed_contacts_missing(sim):
+    """Touching sphere pairs and sphere-wall pairs (brute force) that the lists lack."""
+    n = sim.n_spheres
+    x, r, body = sim.sphere_positions(), sim.sphere_radii(), sim.sphere_body()
+    on = sim.active()[body]
+    d = np.linalg.norm(x[:, None] - x[None], axis=2)
+    i, j = np.nonzero(np.triu(d < r[:, None] + r[None], k=1))
+    keep = (body[i] != body[j]) & on[i] & on[j]
+    _, pi, pj, _ = sim._pairs
+    missing = set(zip(i[keep].tolist(), j[keep].tolist())) - set(zip(pi.tolist(), pj.tolist()))
+    dist = wall_distances(sim._w, x[:n])
+    s, k = np.nonzero(dist < r[:, None])
+    _, ws, wk, _ = sim._wpairs
+    missing_walls = set(zip(s[on[s]].tolist(), k[on[s]].tolist())) - set(zip(ws.tolist(), wk.tolist()))
+    return missing, missing_walls
+
+
+def test_a_filling_box_never_misses_a_contact_between_rebuilds():
+    """Segments poured into a box, then pushed by a moving plate: with per-sphere allowances
+    and spheres admitted without a rebuild, every touching pair is listed at every step, and
+    the fill rebuilds far less often than once per insertion."""
+    from demcal.simulate.factory import ParticleFactory
+    from demcal.simulate.walls import box_rectangles
+    params = DEMParameters()
+    sim = simulation(params, dt=5e-5, gravity=(0.0, 0.0, -9.81), lo=(-0.1, -0.1, -0.02), hi=(0.1, 0.1, 0.3))
+    sim.chunk_steps = 1
+    tpl = sim.add_template(segment_template(0.025, 0.011, 5, 912.0))
+    sim.add_walls(box_rectangles((-0.05, -0.03, 0.0), (0.05, 0.03, 0.25), faces=("x-", "x+", "y-", "y+", "z-")))
+    # a plate inside the x+ face pushes into the heap once it has formed
+    pusher = sim.add_wall(Rectangle((0.048, 0.0, 0.1), (0, 1, 0), (0, 0, 1), 0.03, 0.1, material="steel"))
+    sim.set_wall_motion(pusher, (-0.1, 0.0, 0.0), 0.15, 0.3)
+    sim.add_factory(ParticleFactory(tpl, 60, (-0.045, -0.025, 0.08), (0.045, 0.025, 0.24), seed=4,
+                                    start_time=0.0, end_time=0.15))
+    checked = []
+
+    def check(s):
+        checked.append(_listed_contacts_missing(s))
+
+    sim.run(duration=0.3, progress=check)
+    assert len(checked) == 6000 and sim.n_bodies == 60
+    assert all(not a and not b for a, b in checked)
+
+
+def test_a_clump_falling_through_empty_space_needs_few_rebuilds_and_a_new_one_none():
+    """A segment falls 0.2 m from rest beside another far away: under the plain criterion
+    (skin / 2 = 1.1 mm per rebuild) that is some 180 rebuilds. With nothing in the 125 cells
+    around it (cells of 2 R + skin = 13.2 mm), each sphere's gap to anything beyond them is at
+    least 2 cells less its radius and the largest, 15.4 mm: it falls 7.7 mm or more between
+    rebuilds, so at most 26. A segment added with room joins the lists without a rebuild."""
+    sim = simulation(DEMParameters(), dt=5e-5, gravity=(0.0, 0.0, -9.81), lo=(-0.3, -0.3, -0.05),
+                     hi=(0.3, 0.3, 0.4))
+    tpl = sim.add_template(segment_template(0.025, 0.011, 5, 912.0))
+    floor(sim)
+    sim.add_clump(tpl, (0.0, 0.0, 0.3))
+    sim.add_clump(tpl, (0.2, 0.2, 0.3))
+    sim.run(n_steps=1)
+    before = sim.total_rebuilds
+    sim.run(duration=0.2)                         # falls 0.196 m
+    assert 0.09 < sim.positions()[0, 2] < 0.11
+    assert sim.total_rebuilds - before <= 26
+    before = sim.total_rebuilds
+    sim.add_clump(tpl, (-0.2, -0.2, 0.3))
+    sim.run(n_steps=1)
+    assert sim.total_rebuilds == before

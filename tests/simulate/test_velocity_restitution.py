@@ -126,14 +126,19 @@ def test_elastic_below_the_yield_speed_johnson1985():
 
 
 def test_first_touch_speed_survives_list_rebuilds():
-    # a frictionless sphere slides across the plate at 0.5 m/s (past the skin every 4 ms)
-    # while resting on it: its contact keeps the speed it was first met with
+    # a frictionless sphere slides across the plate at 0.5 m/s while resting on it, the lists
+    # rebuilt after every 10 steps: its contact keeps the speed it was first met with
     params = DEMParameters(e_pw=E_REF, e_pw_exponent=N, e_pw_v_min=0.2, mu_s_pw=0.0)
     sim = _bouncing_sphere(params, vx=0.5)
     sim.run(duration=0.8)
     first = sim.contact_history()["walls"]["impact_speed"]
     rebuilds = sim.total_wall_rebuilds
-    sim.run(duration=0.2)
+    sim.chunk_steps = 10
+
+    def rebuild(s):
+        s._need_rebuild = True
+
+    sim.run(duration=0.2, progress=rebuild)
     assert sim.total_wall_rebuilds > rebuilds + 20
     assert sim.contact_history()["walls"]["impact_speed"] == first
     assert first.shape == (1,) and 0.0 < first[0] < 0.2
