@@ -58,6 +58,7 @@ from demcal.analyse.screening import plackett_burman_screening
 from demcal.errors import AnalysisError, InputError
 from demcal.jsonio import write_json
 from demcal.provenance import Provenance
+from demcal.simulate.scenes import compile_kernels
 from demcal.simulate.timestep import material_time_step
 
 #: Seed offset between the replicates of one design point.
@@ -306,7 +307,8 @@ class _Runner:
 
     def __call__(self, stage: str, tasks: list[dict]) -> list[dict]:
         out = run_all(tasks, self.runner, self.store, workers=self.config.workers,
-                      scheduler=self.config.scheduler, desc=stage, progress=self.config.progress)
+                      scheduler=self.config.scheduler, desc=stage, progress=self.config.progress,
+                      prepare=compile_kernels if self.runner is campaign_runner else None)
         failed = [r for r in out.records if r["status"] != "ok"]
         self.log.append({"stage": stage, "runs": len(tasks), "ran": out.ran, "reused": out.reused,
                          "failed": len(failed)})

@@ -95,7 +95,7 @@ class RunOutcome:
 
 def run_all(tasks: Iterable[dict], runner: Callable[[dict], dict], store: RunStore, *,
             workers: int = 1, scheduler: str | None = None, desc: str = "DEM runs",
-            progress: bool = True) -> RunOutcome:
+            progress: bool = True, prepare: Callable[[], object] | None = None) -> RunOutcome:
     """Run every task not yet finished in ``store``; return all records in task order.
 
     Parameters
@@ -109,6 +109,10 @@ def run_all(tasks: Iterable[dict], runner: Callable[[dict], dict], store: RunSto
         Local worker processes (1 runs in this process). Ignored when ``scheduler`` is given.
     scheduler : str, optional
         Address of a Dask distributed scheduler (e.g. ``tcp://127.0.0.1:8786``).
+    prepare : callable, optional
+        Called here once before local worker processes start, when there are runs to make
+        (``simulate.scenes.compile_kernels``: the workers then load the compiled DEM instead
+        of each compiling it at the same time).
     """
     tasks = [to_jsonable(t) for t in tasks]
     keys = [run_key(t) for t in tasks]
@@ -132,6 +136,8 @@ def run_all(tasks: Iterable[dict], runner: Callable[[dict], dict], store: RunSto
     attempts = {key: 0 for key, _ in pending}
     queue = list(pending)
     try:
+        if prepare is not None and pending and workers > 1 and not scheduler:
+            prepare()
         with _executor(workers, scheduler) as submit:
             while queue:
                 futures = {submit(_execute, runner, task): (key, task) for key, task in queue}

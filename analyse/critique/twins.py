@@ -43,6 +43,7 @@ from scipy import stats
 from demcal.analyse.runs import RunStore, run_all, run_key
 from demcal.errors import SimulationError
 from demcal.jsonio import restore_nan
+from demcal.simulate.scenes import compile_kernels
 
 
 def twin_parameters(measurement, results=None):
@@ -97,7 +98,8 @@ class TwinRunner:
     def __call__(self, function, tasks: list, desc: str) -> list:
         if not tasks:
             return []
-        out = run_all(tasks, function, self.store, workers=self.workers, desc=desc, progress=self.progress)
+        out = run_all(tasks, function, self.store, workers=self.workers, desc=desc, progress=self.progress,
+                      prepare=compile_kernels)
         self.log.append({"stage": desc, "runs": len(tasks), "ran": out.ran, "reused": out.reused,
                          "failed": out.failed})
         bad = [r for r in out.records if r["status"] != "ok"]

@@ -134,3 +134,26 @@ def test_dask_local_cluster(tmp_path):
                       scheduler=cluster.scheduler_address, progress=False)
     assert [r["result"]["y"] for r in out.records] == [0, 1, 4, 9]
     assert all(r["status"] == "ok" for r in out.records)
+
+
+def test_prepare_runs_once_here_before_local_workers_and_only_when_needed(tmp_path):
+    """``prepare`` (the campaign's: load or compile the DEM kernels) runs in this process
+    before the worker processes start, and not at all when every run is already stored or the
+    runs are made here."""
+    calls = []
+    tasks = [{"x": x, "seed": 0} for x in range(4)]
+    store = RunStore(tmp_path / "runs")
+    run_all(tasks, square_runner, store, workers=2, progress=False, prepare=lambda: calls.append(os.getpid()))
+    assert calls == [os.getpid()]
+    run_all(tasks, square_runner, store, workers=2, progress=False, prepare=lambda: calls.append("again"))
+    run_all([{"x": 9, "seed": 0}], square_runner, RunStore(tmp_path / "one"), workers=1, progress=False,
+            prepare=lambda: calls.append("inline"))
+    assert calls == [os.getpid()]
+
+
+def test_compile_kernels_loads_the_engine_once_per_process():
+    from demcal.simulate import scenes
+    scenes.compile_kernels()
+    assert scenes._KERNELS_LOADED == [True]
+    scenes.compile_kernels()
+    assert scenes._KERNELS_LOADED == [True]
