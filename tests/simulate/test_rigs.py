@@ -441,10 +441,12 @@ def test_funnel_pours_a_cone_under_its_outlet_read_on_both_flanks():
     top = rec["profile_z"] > rec["profile_z"].max() - 0.003        # the crest, a seed's half-width deep
     assert abs(rec["profile_x"][top].mean()) < 0.01
     assert obs["angle_deg"] == pytest.approx((obs["angle_left_deg"] + obs["angle_right_deg"]) / 2)
-    # one cone's flanks differ by chance: over seeds 1-7 left minus right scattered with sd
-    # 2.7 deg about zero (-5.4 to 2.3), so one cone may differ by up to 3.29 sd (99.9 %)
-    assert abs(obs["angle_left_deg"] - obs["angle_right_deg"]) < 9.0
-    assert obs["angle_profile_deg"] == pytest.approx(obs["angle_deg"], abs=1.5)
+    # one cone's flanks differ by chance: over seeds 1-10 left minus right scattered with sd
+    # 2.5 deg about zero (-5.4 to 2.6), so one cone may differ by up to 3.29 sd (99.9 %); the
+    # profile of the same spheres read 0.8 +- 0.7 deg steeper than the photo (-0.4 to 2.2),
+    # so within 3.29 sd of that
+    assert abs(obs["angle_left_deg"] - obs["angle_right_deg"]) < 8.5
+    assert -1.6 < obs["angle_profile_deg"] - obs["angle_deg"] < 3.2
     assert 12.0 < obs["angle_deg"] < 35.0
     # another code's final spheres are measured the same way (the LIGGGHTS check uses this)
     again = measure_heap(rec["sphere_positions"], rec["sphere_radii"], geo.to_dict())
