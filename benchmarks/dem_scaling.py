@@ -17,13 +17,13 @@ import argparse
 import json
 import math
 import os
-import platform
 import sys
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from benchmarks.dem_throughput import BENCHMARK_PARAMETERS  # noqa: E402
+from benchmarks.repose_vs_liggghts import machine, versions  # noqa: E402
 from demcal.simulate.params import DEMParameters  # noqa: E402
 from demcal.simulate.scenes import build_paper_repose_case  # noqa: E402
 
@@ -82,7 +82,7 @@ def main(argv=None) -> int:
                   f"{row['settled']['sphere_steps_per_s'] / base:.2f}")
     if args.json:
         with open(args.json, "w") as fh:
-            json.dump({"machine": platform.processor() or platform.machine(), "cores": os.cpu_count(),
+            json.dump({"machine": machine(), "versions": versions(),
                        "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "rows": rows}, fh, indent=1)
     return 0
 

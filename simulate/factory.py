@@ -167,12 +167,13 @@ class ParticleFactory:
         # the spheres that can touch the region, once per batch (the batch's clumps are added)
         x, r = sim.sphere_positions(), sim.sphere_radii()
         keep = sim.active()[sim.sphere_body()] if sim.n_spheres else np.zeros(0, bool)
-        reach = max(sim.templates[k].bounding_radius for k in self.templates) + sim.skin
+        gap = sim.skin   # room to join the neighbour lists without a rebuild
+        reach = max(sim.templates[k].bounding_radius for k in self.templates) + gap
         margin = reach + (float(r[keep].max()) if keep.any() else 0.0)
         keep &= np.all((x > self.region_lo - margin) & (x < self.region_hi + margin), axis=1)
         nearby = [x[keep], r[keep]]
         while self.inserted < self.n_due(sim.time):
-            if not self._insert_one(sim, nearby):
+            if not self._insert_one(sim, nearby, gap):
                 break
             placed += 1
         return placed
@@ -185,15 +186,14 @@ class ParticleFactory:
             self._pending = self.templates[int(self.rng.choice(len(self.templates), p=self.probabilities))]
         return self._pending
 
-    def _insert_one(self, sim, nearby) -> bool:
-        """Place the next clump clear of the spheres ``nearby`` (positions, radii; the placed
-        clump's spheres are appended)."""
+    def _insert_one(self, sim, nearby, gap: float) -> bool:
+        """Place the next clump at least ``gap`` [m] clear of the spheres ``nearby``
+        (positions, radii; the placed clump's spheres are appended)."""
         template = self._next_template()
         tpl = sim.templates[template]
         packed = sim._w
         existing, ex_r = nearby
         reach = tpl.bounding_radius
-        gap = sim.skin   # room to join the neighbour lists without a rebuild
         for _ in range(self.max_attempts):
             q = random_quaternions(self.rng, 1)[0]
             pos = self.region_lo + self.rng.random(3) * (self.region_hi - self.region_lo)

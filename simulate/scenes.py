@@ -17,6 +17,7 @@ drawn with the size's count as weight.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import Counter
 
@@ -118,14 +119,10 @@ def particle_templates(sim: Simulation, params: DEMParameters, size_distribution
     return ids, np.array(list(counts.values()), dtype=float)
 
 
-_KERNELS_LOADED = []
-
-
+@functools.cache
 def compile_kernels() -> None:
     """Load the engine's compiled kernels into this process, compiling them first if this
     installation has none yet (about 20 s, once: they are cached on disk), by one step of a
     two-segment paper case; a second call does nothing. Called before local worker processes
     start, so that they load the kernels instead of each compiling them at the same time."""
-    if not _KERNELS_LOADED:
-        build_paper_repose_case(DEMParameters(), seed=0, n_clumps=2, fill_time=0.0).run(n_steps=1)
-        _KERNELS_LOADED.append(True)
+    build_paper_repose_case(DEMParameters(), seed=0, n_clumps=2, fill_time=0.0).run(n_steps=1)

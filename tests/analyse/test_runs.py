@@ -151,9 +151,19 @@ def test_prepare_runs_once_here_before_local_workers_and_only_when_needed(tmp_pa
     assert calls == [os.getpid()]
 
 
-def test_compile_kernels_loads_the_engine_once_per_process():
+def test_compile_kernels_runs_the_engine_once_per_process(monkeypatch):
     from demcal.simulate import scenes
-    scenes.compile_kernels()
-    assert scenes._KERNELS_LOADED == [True]
-    scenes.compile_kernels()
-    assert scenes._KERNELS_LOADED == [True]
+    steps = []
+
+    class Case:
+        def run(self, n_steps):
+            steps.append(n_steps)
+
+    monkeypatch.setattr(scenes, "build_paper_repose_case", lambda *a, **k: Case())
+    scenes.compile_kernels.cache_clear()
+    try:
+        scenes.compile_kernels()
+        scenes.compile_kernels()
+    finally:
+        scenes.compile_kernels.cache_clear()
+    assert steps == [1]
