@@ -37,6 +37,7 @@ from tqdm.auto import tqdm
 from demcal.errors import InputError
 from demcal.jsonio import read_json, to_jsonable, write_json
 from demcal.provenance import Provenance, run_key
+from demcal.simulate.threads import limit_threads_per_run, threads_limited_to
 
 #: How many times a failed run is attempted in all (the first try and one retry).
 MAX_ATTEMPTS = 2
@@ -72,11 +73,14 @@ class RunStore:
         return [read_json(p) for p in sorted(self.root.glob("*.json"))]
 
 
-def _execute(runner: Callable[[dict], dict], inputs: dict) -> tuple[str, dict | None, str | None, float]:
-    """Run one set of inputs in a worker; never raises, so one failure cannot sink the pool."""
+def _execute(runner: Callable[[dict], dict], inputs: dict,
+             threads: int | None = None) -> tuple[str, dict | None, str | None, float]:
+    """Run one set of inputs in a worker (its DEM on at most ``threads`` threads); never
+    raises, so one failure cannot sink the pool."""
     t0 = time.perf_counter()
     try:
-        result = runner(inputs)
+        with threads_limited_to(threads):
+            result = runner(inputs)
         return "ok", to_jsonable(result), None, time.perf_counter() - t0
     except Exception as exc:  # recorded in the run store, reported by the campaign
         tb = traceback.format_exception_only(type(exc), exc)[-1].strip()
@@ -181,11 +185,14 @@ class _executor:
                 self._client = Client(self.scheduler, timeout="10s")
             except OSError as exc:
                 raise InputError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from exc
-            return lambda fn, *args: self._client.submit(fn, *args, pure=False)
+            # a Dask worker runs tasks on threads of its own: each run's DEM on one
+            return lambda fn, *args: self._client.submit(fn, *args, 1, pure=False)
         if self.workers <= 1:
-            return _inline_submit
-        # spawn: worker processes must not inherit numba/threading state from the parent
-        self._pool = cf.ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"))
+            return _inline_submit  # one run at a time: a large one may use every core
+        # spawn: worker processes must not inherit numba/threading state from the parent; the
+        # cores are shared among the runs, so each run's DEM stays on one thread
+        self._pool = cf.ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"),
+                                            initializer=limit_threads_per_run, initargs=(1,))
         return self._pool.submit
 
     def __exit__(self, *exc):

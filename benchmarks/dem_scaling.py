@@ -1,14 +1,18 @@
-"""DEM throughput against the number of spheres, fill and settled phases apart, on one core.
+"""DEM throughput against the number of spheres, fill and settled phases apart, on one core (or
+on ``--threads`` threads).
 
 The paper's repose case (``benchmarks/dem_throughput.py``) with its carton scaled in x and y so
 that the fill depth stays the same: 2,500 spheres (500 five-sphere segments) in 200 x 100 mm,
 20,000 in 566 x 283 mm, 100,000 in 1265 x 632 mm. The factory inserts the segments over the
 first ``--fill-time`` seconds; the *fill* phase is the first 0.6 s simulated, the *settled*
 phase the 0.15 s after it. Per phase: sphere-steps per second (spheres present at each step),
-pair-list and wall-list rebuilds, and rebuilds per 1000 steps.
+pair-list and wall-list rebuilds, and rebuilds per 1000 steps. By default each run is what
+demcal chooses by size (from 8,192 spheres the contacts in fixed ranges, ``simulate.forces``)
+kept on one thread; ``--threads 1 2`` runs each size on 1, then 2 threads.
 
     python benchmarks/dem_scaling.py                         # 2,500 and 20,000 spheres
     python benchmarks/dem_scaling.py --spheres 2500 20000 100000
+    python benchmarks/dem_scaling.py --spheres 20000 --threads 1 2   # one run on 1, then 2 threads
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ from benchmarks.dem_throughput import BENCHMARK_PARAMETERS  # noqa: E402
 from benchmarks.repose_vs_liggghts import machine, versions  # noqa: E402
 from demcal.simulate.params import DEMParameters  # noqa: E402
 from demcal.simulate.scenes import build_paper_repose_case  # noqa: E402
+from demcal.simulate.threads import threads_limited_to  # noqa: E402
 
 FILL_PHASE, SETTLED_PHASE = 0.6, 0.15
 
@@ -41,16 +46,19 @@ def phase(sim, duration: float) -> dict:
             "spheres_at_end": summary.n_spheres}
 
 
-def case(n_spheres: int, fill_time: float, seed: int) -> dict:
+def case(n_spheres: int, fill_time: float, seed: int, threads: int | None) -> dict:
     params = DEMParameters().with_(**BENCHMARK_PARAMETERS)
     n_clumps = n_spheres // 5
     scale = math.sqrt(n_clumps / 500)
     sim = build_paper_repose_case(params, seed=seed, n_clumps=n_clumps, box_length=0.2 * scale,
                                   box_width=0.1 * scale, fill_time=fill_time, lift_time=100.0)
-    sim.run(n_steps=1)      # load the kernels before timing
-    fill = phase(sim, FILL_PHASE)
-    settled = phase(sim, SETTLED_PHASE)
-    return {"spheres": n_spheres, "fill": fill, "settled": settled,
+    sim.threads = threads
+    with threads_limited_to(1 if threads is None else None):
+        used = sim.threads_in_use() if threads else "by size, 1"
+        sim.run(n_steps=1)      # load the kernels before timing
+        fill = phase(sim, FILL_PHASE)
+        settled = phase(sim, SETTLED_PHASE)
+    return {"spheres": n_spheres, "threads": threads, "threads_used": used, "fill": fill, "settled": settled,
             "fill_over_settled_throughput": fill["sphere_steps_per_s"] / settled["sphere_steps_per_s"],
             "fill_over_settled_rebuild_rate": (fill["pair_rebuilds_per_1000_steps"]
                                                / max(settled["pair_rebuilds_per_1000_steps"], 1e-9))}
@@ -61,25 +69,34 @@ def main(argv=None) -> int:
     parser.add_argument("--spheres", type=int, nargs="+", default=[2500, 20000])
     parser.add_argument("--fill-time", type=float, default=0.5, help="insertion window [s]")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--threads", type=int, nargs="+", default=[None],
+                        help="threads of each run (default: demcal's choice by size, on one thread)")
     parser.add_argument("--json", default=None, help="write the numbers to this file")
     args = parser.parse_args(argv)
     rows = []
-    for n in args.spheres:
+    for n, threads in ((n, t) for n in args.spheres for t in args.threads):
         t0 = time.perf_counter()
-        row = case(n, args.fill_time, args.seed)
+        row = case(n, args.fill_time, args.seed, threads)
         row["elapsed_s"] = time.perf_counter() - t0
         rows.append(row)
         f, s = row["fill"], row["settled"]
-        print(f"{n:>7} spheres | fill {f['sphere_steps_per_s']:.3g} sphere-steps/s, {f['pair_rebuilds']} "
+        print(f"{n:>7} spheres, threads {row['threads_used']} | {row['elapsed_s']:.1f} s | fill {f['sphere_steps_per_s']:.3g} sphere-steps/s, {f['pair_rebuilds']} "
               f"rebuilds in {f['steps']} steps ({f['wall_rebuilds']} wall) | settled "
               f"{s['sphere_steps_per_s']:.3g}, {s['pair_rebuilds']} in {s['steps']} ({s['wall_rebuilds']} wall) "
               f"| fill/settled throughput {row['fill_over_settled_throughput']:.2f}, rebuild rate "
               f"{row['fill_over_settled_rebuild_rate']:.2f}", flush=True)
-    if len(rows) > 1:
-        base = rows[0]["settled"]["sphere_steps_per_s"]
-        for row in rows[1:]:
-            print(f"settled throughput at {row['spheres']} / at {rows[0]['spheres']}: "
-                  f"{row['settled']['sphere_steps_per_s'] / base:.2f}")
+    for row in rows[1:]:
+        base = rows[0]
+        if row["threads"] == base["threads"]:
+            print(f"settled throughput at {row['spheres']} / at {base['spheres']}: "
+                  f"{row['settled']['sphere_steps_per_s'] / base['settled']['sphere_steps_per_s']:.2f}")
+        elif row["spheres"] == base["spheres"]:
+            def run_s(r):
+                return r["fill"]["wall_s"] + r["settled"]["wall_s"]
+            print(f"{row['threads']} threads / {base['threads']}: the run (fill and settled) "
+                  f"{run_s(base) / run_s(row):.2f}x faster; fill {row['fill']['sphere_steps_per_s'] / base['fill']['sphere_steps_per_s']:.2f}x, "
+                  f"settled {row['settled']['sphere_steps_per_s'] / base['settled']['sphere_steps_per_s']:.2f}x; "
+                  f"whole process {base['elapsed_s'] / row['elapsed_s']:.2f}x")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump({"machine": machine(), "versions": versions(),

@@ -31,7 +31,7 @@ INLINE_FLAGS = dict(JIT_FLAGS, inline="always")
 
 #: Source files whose code ends up in the cached kernels.
 KERNEL_SOURCES = ("_jit.py", "contact/hertz_mindlin.py", "contact/rolling.py", "integrate.py",
-                  "walls.py", "neighbours.py", "engine.py")
+                  "walls.py", "neighbours.py", "forces.py", "engine.py")
 
 
 def refresh_stale_cache() -> None:
@@ -58,6 +58,11 @@ refresh_stale_cache()
 def kernel(fn):
     """Compile ``fn`` with the shared flags."""
     return numba.njit(**JIT_FLAGS)(fn)
+
+
+def threaded_kernel(fn):
+    """Compile ``fn`` with the shared flags and ``numba.prange`` loops run on threads."""
+    return numba.njit(parallel=True, **JIT_FLAGS)(fn)
 
 
 def evaluator(fn):

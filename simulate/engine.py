@@ -56,6 +56,14 @@ The step (``run`` pseudocode; the whole loop runs in numba, returning to Python 
      positions and velocities)
     every chunk: stop with SimulationError on non-finite state or runaway kinetic energy;
         deactivate and record bodies outside the domain; run the factories
+    every ``sort_every`` steps (4,096 spheres or more): sort the bodies and spheres in memory
+        along a Morton curve, lists and history renumbered (ids and readers keep their order)
+
+Threads. From 8,192 spheres (``simulate.threads``) the kicks, the sphere positions and the
+contact forces run on numba's threads, the contacts split into fixed ranges
+(``simulate.forces.contact_forces_ranged``), and the list rebuilds' per-sphere passes too: a
+run gives the same result on any number of threads. A campaign's worker processes run theirs
+on one thread each; a single large run uses every core.
 
 Engine hooks (off by default, switched by the material table, so that ``MaterialTable.
 from_parameters`` carries them from ``DEMParameters``; ``simulate.extensions.ENGINE_HOOKS``):
@@ -80,20 +88,22 @@ import math
 import time as _time
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from demcal.errors import InputError, SimulationError
-from demcal.simulate._jit import kernel
+from demcal.simulate._jit import evaluator, kernel, threaded_kernel
 from demcal.simulate.clump import ClumpTemplate
-from demcal.simulate.contact.hertz_mindlin import impact_damping, normal_force, tangential_force
-from demcal.simulate.contact.rolling import (EPSD, LIGGGHTS_REFF, constant_torque, epsd_torque,
-                                             kick_mode, lever_index, rolling_lever)
-from demcal.simulate.integrate import (damping_inverse_mass, drift, half_kick, matrix_from_quat,
-                                       pair_rolling_scale, quat_from_matrix, quat_multiply,
+from demcal.simulate.contact.rolling import kick_mode, lever_index
+from demcal.simulate.forces import (HIST_IMPACT_SPEED, HIST_ROLLING, contact_forces, contact_forces_ranged,
+                                    history_width, odd_history_columns)
+from demcal.simulate.integrate import (drift, half_kick, matrix_from_quat, quat_from_matrix, quat_multiply,
                                        refresh_rotation)
 from demcal.simulate.materials import MaterialTable
-from demcal.simulate.neighbours import (admit_spheres, build_pair_list, build_wall_list, grid_shape,
-                                        padded_cell_count)
+from demcal.simulate.neighbours import (admit_spheres, ascending_pairs, build_pair_list, build_wall_list,
+                                        grid_shape, morton_keys, padded_cell_count, renumber_pair_list,
+                                        renumber_wall_list)
+from demcal.simulate.threads import THREADS_MIN_SPHERES, threads_per_run
 from demcal.simulate.timestep import DEFAULT_MAX_FRACTION, check_time_step, rayleigh_time
 from demcal.simulate.walls import WALL_TYPES, pack_walls, wall_distance, wall_distances
 from demcal.units import GRAVITY
@@ -101,311 +111,72 @@ from demcal.units import GRAVITY
 # ----------------------------------------------------------------------------------------------
 # kernels
 
-#: Columns of a contact's history row: the tangential spring displacement [m] (always), the
-#: normal approach speed at first touch [m/s] (velocity-dependent restitution) and the rolling
-#: spring torque [N m] (spring-dashpot rolling). The rows are only as wide as the hooks in use
-#: need (``history_width``), so the default path carries 3 columns as before.
-HIST_TANGENTIAL, HIST_IMPACT_SPEED, HIST_ROLLING = 0, 3, 4
-
-
-def history_width(velocity_restitution: bool, rolling_model: int) -> int:
-    """Columns of contact history the engine hooks in use need (3, 4 or 7)."""
-    if rolling_model == EPSD:
-        return HIST_ROLLING + 3
-    return HIST_IMPACT_SPEED + 1 if velocity_restitution else HIST_IMPACT_SPEED
+@evaluator
+def _place_sphere(s, b, soff, bx, bR, sx, sx0, sxw, sallow, swallow, wmove):
+    """World position of sphere ``s`` of body ``b``; whether it moved beyond its allowance since
+    the last pair-list rebuild (``sx0``, ``sallow``), and whether it plus the walls' largest
+    move ``wmove`` went beyond its wall allowance (``sxw``, ``swallow``; ``simulate.neighbours``)."""
+    ox = soff[s, 0]
+    oy = soff[s, 1]
+    oz = soff[s, 2]
+    x = bx[b, 0] + bR[b, 0, 0] * ox + bR[b, 0, 1] * oy + bR[b, 0, 2] * oz
+    y = bx[b, 1] + bR[b, 1, 0] * ox + bR[b, 1, 1] * oy + bR[b, 1, 2] * oz
+    z = bx[b, 2] + bR[b, 2, 0] * ox + bR[b, 2, 1] * oy + bR[b, 2, 2] * oz
+    sx[s, 0] = x
+    sx[s, 1] = y
+    sx[s, 2] = z
+    dx = x - sx0[s, 0]
+    dy = y - sx0[s, 1]
+    dz = z - sx0[s, 2]
+    d2 = dx * dx + dy * dy + dz * dz
+    pair_stale = d2 > sallow[s] * sallow[s]
+    dx = x - sxw[s, 0]
+    dy = y - sxw[s, 1]
+    dz = z - sxw[s, 2]
+    d2 = dx * dx + dy * dy + dz * dz
+    lim = swallow[s] - wmove
+    return pair_stale, (lim <= 0.0) | (d2 > lim * lim)
 
 
 @kernel
 def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sallow, swallow, wmove):
     """World positions of the spheres; returns whether the pair list and the wall list need a
-    rebuild: a sphere moved beyond its allowance since the last one (``sx0``, ``sallow``), or a
-    sphere plus the walls' largest move ``wmove`` beyond its wall allowance (``sxw``,
-    ``swallow``; ``simulate.neighbours``)."""
+    rebuild (``_place_sphere``)."""
     pairs_stale = False
     walls_stale = False
     for s in range(n_spheres):
         b = sbody[s]
-        if not bactive[b]:
-            continue
-        ox = soff[s, 0]
-        oy = soff[s, 1]
-        oz = soff[s, 2]
-        x = bx[b, 0] + bR[b, 0, 0] * ox + bR[b, 0, 1] * oy + bR[b, 0, 2] * oz
-        y = bx[b, 1] + bR[b, 1, 0] * ox + bR[b, 1, 1] * oy + bR[b, 1, 2] * oz
-        z = bx[b, 2] + bR[b, 2, 0] * ox + bR[b, 2, 1] * oy + bR[b, 2, 2] * oz
-        sx[s, 0] = x
-        sx[s, 1] = y
-        sx[s, 2] = z
-        dx = x - sx0[s, 0]
-        dy = y - sx0[s, 1]
-        dz = z - sx0[s, 2]
-        d2 = dx * dx + dy * dy + dz * dz
-        pairs_stale |= d2 > sallow[s] * sallow[s]
-        dx = x - sxw[s, 0]
-        dy = y - sxw[s, 1]
-        dz = z - sxw[s, 2]
-        d2 = dx * dx + dy * dy + dz * dz
-        lim = swallow[s] - wmove
-        walls_stale |= (lim <= 0.0) | (d2 > lim * lim)
+        if bactive[b]:
+            p, w = _place_sphere(s, b, soff, bx, bR, sx, sx0, sxw, sallow, swallow, wmove)
+            pairs_stale |= p
+            walls_stale |= w
     return pairs_stale, walls_stale
 
 
-@kernel
-def _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass, n_bodies, bx, bv, bw, bR,
-                    bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph,
-                    ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat,
-                    e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min):
-    """Contact forces, torques and rolling torques on every body from the Verlet lists.
-
-    ``hist_dt`` is the time step used to accumulate tangential displacement (0 for a force
-    evaluation that must not advance the contact history). A pair with ``e_exp`` != 0 takes
-    its dashpots from e(v) at its first-touch approach speed (history column
-    ``HIST_IMPACT_SPEED``); ``rolling_model`` ``EPSD`` replaces the constant torque by the
-    spring-dashpot torque (history columns ``HIST_ROLLING``..+2, damping ratio ``eta_r``),
-    summed into ``brv`` with its limits mu_r F_n R_r in ``brm``. With the constant torque and
-    the LIGGGHTS lever a particle pair's rolling torque goes into ``bt`` as an equal and
-    opposite pair, capped over the step ``dt`` for both bodies alike; wall contacts sum theirs
-    into ``brv``, ``brm`` and ``brn`` (normals weighted by magnitude) for the kick's static stop.
-
-    ``effective_mass`` (the ``contact_effective_mass`` extension) gives the normal dashpot of
-    each contact the smaller of the body's mass over its number of touching contacts this step
-    (counted into ``bcount``) and the rigid-body effective mass at the contact
-    (``damping_inverse_mass``): n simultaneous contacts of one body then damp like one contact
-    of n times the stiffness, and one off-centre contact damps the mass it actually moves,
-    instead of each damping with the whole mass (Kodam et al. 2010; Stronge 2000, ch. 3).
-    """
-    pw = ph.shape[1]
-    ww = wh.shape[1]
-    store = hist_dt > 0.0
-    if effective_mass:
-        _count_contacts(n_bodies, bcount, sbody, sx, srad, ppi, pj, ws, wk, wkind, worig, wnorm,
-                        wu, wv, whalf)
-    for b in range(n_bodies):
-        bf[b, 0] = 0.0
-        bf[b, 1] = 0.0
-        bf[b, 2] = 0.0
-        bt[b, 0] = 0.0
-        bt[b, 1] = 0.0
-        bt[b, 2] = 0.0
-        brm[b] = 0.0
-        brv[b, 0] = 0.0
-        brv[b, 1] = 0.0
-        brv[b, 2] = 0.0
-        brn[b, 0] = 0.0
-        brn[b, 1] = 0.0
-        brn[b, 2] = 0.0
-    # ---- sphere-sphere
-    for k in range(ppi.shape[0]):
-        i = ppi[k]
-        j = pj[k]
-        xi = sx[i, 0]
-        yi = sx[i, 1]
-        zi = sx[i, 2]
-        dx = sx[j, 0] - xi
-        dy = sx[j, 1] - yi
-        dz = sx[j, 2] - zi
-        ri = srad[i]
-        rj = srad[j]
-        rsum = ri + rj
-        d2 = dx * dx + dy * dy + dz * dz
-        if d2 >= rsum * rsum:
-            ph[k, 0] = 0.0
-            ph[k, 1] = 0.0
-            ph[k, 2] = 0.0
-            for c in range(3, pw):
-                ph[k, c] = 0.0
-            continue
-        d = math.sqrt(d2)
-        inv = 1.0 / d
-        nx = dx * inv
-        ny = dy * inv
-        nz = dz * inv
-        overlap = rsum - d
-        a = ri - 0.5 * overlap  # contact point: middle of the overlap, along n from i
-        px = xi + nx * a
-        py = yi + ny * a
-        pz = zi + nz * a
-        bi = sbody[i]
-        bj = sbody[j]
-        aix = px - bx[bi, 0]
-        aiy = py - bx[bi, 1]
-        aiz = pz - bx[bi, 2]
-        ajx = px - bx[bj, 0]
-        ajy = py - bx[bj, 1]
-        ajz = pz - bx[bj, 2]
-        wxi = bw[bi, 0]
-        wyi = bw[bi, 1]
-        wzi = bw[bi, 2]
-        wxj = bw[bj, 0]
-        wyj = bw[bj, 1]
-        wzj = bw[bj, 2]
-        # velocity of i relative to j at the contact point
-        vrx = bv[bi, 0] + wyi * aiz - wzi * aiy - (bv[bj, 0] + wyj * ajz - wzj * ajy)
-        vry = bv[bi, 1] + wzi * aix - wxi * aiz - (bv[bj, 1] + wzj * ajx - wxj * ajz)
-        vrz = bv[bi, 2] + wxi * aiy - wyi * aix - (bv[bj, 2] + wxj * ajy - wyj * ajx)
-        vn = vrx * nx + vry * ny + vrz * nz
-        vtx = vrx - vn * nx
-        vty = vry - vn * ny
-        vtz = vrz - vn * nz
-        mi = bmat[bi]
-        mj = bmat[bj]
-        r_star = ri * rj / rsum
-        m_star = 1.0 / (binvm[bi] + binvm[bj])
-        m_damp = m_star
-        if effective_mass:
-            m_damp = 1.0 / (damping_inverse_mass(bR, binvi, binvm, bcount, bi, aix, aiy, aiz, nx, ny, nz)
-                            + damping_inverse_mass(bR, binvi, binvm, bcount, bj, ajx, ajy, ajz, nx, ny, nz))
-        cd = damp[mi, mj]
-        if e_exp[mi, mj] != 0.0:
-            cd = impact_damping(ph, k, HIST_IMPACT_SPEED, vn, log_e[mi, mj], e_exp[mi, mj],
-                                log_v_ref[mi, mj], v_min[mi, mj], store)
-        f_n, f_el, sqrt_rd = normal_force(e_star[mi, mj], r_star, m_damp, cd, overlap, vn)
-        ftx, fty, ftz = tangential_force(ph, k, nx, ny, nz, vtx, vty, vtz, g_star[mi, mj],
-                                         m_star, cd, mu_s[mi, mj], sqrt_rd, f_n, hist_dt)
-        fx = ftx - f_n * nx
-        fy = fty - f_n * ny
-        fz = ftz - f_n * nz
-        bf[bi, 0] += fx
-        bf[bi, 1] += fy
-        bf[bi, 2] += fz
-        bf[bj, 0] -= fx
-        bf[bj, 1] -= fy
-        bf[bj, 2] -= fz
-        bt[bi, 0] += aiy * fz - aiz * fy
-        bt[bi, 1] += aiz * fx - aix * fz
-        bt[bi, 2] += aix * fy - aiy * fx
-        bt[bj, 0] -= ajy * fz - ajz * fy
-        bt[bj, 1] -= ajz * fx - ajx * fz
-        bt[bj, 2] -= ajx * fy - ajy * fx
-        mr = mu_r[mi, mj]
-        if mr > 0.0:
-            wrx = wxi - wxj
-            wry = wyi - wyj
-            wrz = wzi - wzj
-            if rolling_model == EPSD:
-                tx, ty, tz, m_max = epsd_torque(mr, f_el, e_star[mi, mj], sqrt_rd, r_star, ri, rj,
-                                                binvm[bi], binvm[bj], eta_r, ph, k, HIST_ROLLING,
-                                                wrx, wry, wrz, nx, ny, nz, hist_dt)
-                brv[bi, 0] += tx
-                brv[bi, 1] += ty
-                brv[bi, 2] += tz
-                brv[bj, 0] -= tx
-                brv[bj, 1] -= ty
-                brv[bj, 2] -= tz
-                brm[bi] += m_max
-                brm[bj] += m_max
-            elif lever_mode == LIGGGHTS_REFF:
-                # resists only the rolling relative to the neighbour (a body turning with its
-                # neighbours keeps turning): an ordinary pair torque, capped alike for both
-                tx, ty, tz, m = constant_torque(mr, f_el, r_star, wrx, wry, wrz, nx, ny, nz)
-                s = pair_rolling_scale(bR, binvi, bi, bj, tx, ty, tz, m, wrx, wry, wrz, dt)
-                bt[bi, 0] += s * tx
-                bt[bi, 1] += s * ty
-                bt[bi, 2] += s * tz
-                bt[bj, 0] -= s * tx
-                bt[bj, 1] -= s * ty
-                bt[bj, 2] -= s * tz
-            else:
-                brm[bi] += mr * f_el * rolling_lever(lever_mode, aix, aiy, aiz, a, r_star)
-                brm[bj] += mr * f_el * rolling_lever(lever_mode, ajx, ajy, ajz, rj - 0.5 * overlap, r_star)
-    # ---- sphere-wall
-    for q in range(ws.shape[0]):
-        i = ws[q]
-        k = wk[q]
-        xi = sx[i, 0]
-        yi = sx[i, 1]
-        zi = sx[i, 2]
-        ri = srad[i]
-        d, nx, ny, nz = wall_distance(wkind, worig, wnorm, wu, wv, whalf, k, xi, yi, zi)
-        overlap = ri - d
-        if overlap <= 0.0:
-            wh[q, 0] = 0.0
-            wh[q, 1] = 0.0
-            wh[q, 2] = 0.0
-            for c in range(3, ww):
-                wh[q, c] = 0.0
-            continue
-        a = ri - 0.5 * overlap
-        bi = sbody[i]
-        aix = xi - nx * a - bx[bi, 0]
-        aiy = yi - ny * a - bx[bi, 1]
-        aiz = zi - nz * a - bx[bi, 2]
-        wxi = bw[bi, 0]
-        wyi = bw[bi, 1]
-        wzi = bw[bi, 2]
-        # velocity of the sphere relative to the wall's surface at the contact point (``wcv``:
-        # the wall's translation, and a spinning wall's spin x (p - centre))
-        vrx = bv[bi, 0] + wyi * aiz - wzi * aiy - wcv[q, 0]
-        vry = bv[bi, 1] + wzi * aix - wxi * aiz - wcv[q, 1]
-        vrz = bv[bi, 2] + wxi * aiy - wyi * aix - wcv[q, 2]
-        vn = vrx * nx + vry * ny + vrz * nz
-        vtx = vrx - vn * nx
-        vty = vry - vn * ny
-        vtz = vrz - vn * nz
-        mi = bmat[bi]
-        mk = wmat[k]
-        m_star = 1.0 / binvm[bi]
-        m_damp = m_star
-        if effective_mass:
-            m_damp = 1.0 / damping_inverse_mass(bR, binvi, binvm, bcount, bi, aix, aiy, aiz, nx, ny, nz)
-        cd = damp[mi, mk]
-        if e_exp[mi, mk] != 0.0:
-            cd = impact_damping(wh, q, HIST_IMPACT_SPEED, -vn, log_e[mi, mk], e_exp[mi, mk],
-                                log_v_ref[mi, mk], v_min[mi, mk], store)
-        f_n, f_el, sqrt_rd = normal_force(e_star[mi, mk], ri, m_damp, cd, overlap, -vn)
-        ftx, fty, ftz = tangential_force(wh, q, nx, ny, nz, vtx, vty, vtz, g_star[mi, mk],
-                                         m_star, cd, mu_s[mi, mk], sqrt_rd, f_n, hist_dt)
-        fx = ftx + f_n * nx
-        fy = fty + f_n * ny
-        fz = ftz + f_n * nz
-        bf[bi, 0] += fx
-        bf[bi, 1] += fy
-        bf[bi, 2] += fz
-        bt[bi, 0] += aiy * fz - aiz * fy
-        bt[bi, 1] += aiz * fx - aix * fz
-        bt[bi, 2] += aix * fy - aiy * fx
-        mr = mu_r[mi, mk]
-        if mr > 0.0:
-            # a wall neither turns nor moves under the torque: R_r and I_r are the sphere's
-            if rolling_model == EPSD:
-                tx, ty, tz, m = epsd_torque(mr, f_el, e_star[mi, mk], sqrt_rd, ri, ri, ri, binvm[bi],
-                                            0.0, eta_r, wh, q, HIST_ROLLING, wxi, wyi, wzi, nx, ny, nz,
-                                            hist_dt)
-            elif lever_mode == LIGGGHTS_REFF:
-                tx, ty, tz, m = constant_torque(mr, f_el, ri, wxi, wyi, wzi, nx, ny, nz)
-            else:
-                tx = ty = tz = 0.0
-                m = mr * f_el * rolling_lever(lever_mode, aix, aiy, aiz, a, ri)
-            brv[bi, 0] += tx
-            brv[bi, 1] += ty
-            brv[bi, 2] += tz
-            brm[bi] += m
-            brn[bi, 0] += m * nx
-            brn[bi, 1] += m * ny
-            brn[bi, 2] += m * nz
+@threaded_kernel
+def _update_spheres_threaded(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sallow, swallow, wmove):
+    """``_update_spheres`` over threads."""
+    n_pairs_stale = 0
+    n_walls_stale = 0
+    for s in numba.prange(n_spheres):
+        b = sbody[s]
+        if bactive[b]:
+            p, w = _place_sphere(s, b, soff, bx, bR, sx, sx0, sxw, sallow, swallow, wmove)
+            n_pairs_stale += p
+            n_walls_stale += w
+    return n_pairs_stale > 0, n_walls_stale > 0
 
 
-@kernel
-def _count_contacts(n_bodies, bcount, sbody, sx, srad, ppi, pj, ws, wk, wkind, worig, wnorm, wu, wv,
-                    whalf):
-    """Number of touching sphere-sphere and sphere-wall contacts of each body, into ``bcount``."""
-    for b in range(n_bodies):
-        bcount[b] = 0
-    for k in range(ppi.shape[0]):
-        i = ppi[k]
-        j = pj[k]
-        rsum = srad[i] + srad[j]
-        d2 = 0.0
-        for a in range(3):
-            d2 += (sx[j, a] - sx[i, a]) ** 2
-        if d2 < rsum * rsum:
-            bcount[sbody[i]] += 1
-            bcount[sbody[j]] += 1
-    for q in range(ws.shape[0]):
-        i = ws[q]
-        d, nx, ny, nz = wall_distance(wkind, worig, wnorm, wu, wv, whalf, wk[q], sx[i, 0], sx[i, 1], sx[i, 2])
-        if srad[i] - d > 0.0:
-            bcount[sbody[i]] += 1
+@threaded_kernel
+def _kick_drift_threaded(n_bodies, tau, dt, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv,
+                         brn, binvm, binvi):
+    """Kick every active body over ``tau``, then (``dt`` > 0) drift it over ``dt``, over threads
+    (each body its own)."""
+    for b in numba.prange(n_bodies):
+        if bactive[b]:
+            half_kick(b, tau, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, mode)
+            if dt > 0.0:
+                drift(b, dt, bx, bv, bq, bL, bw, bR, binvi)
 
 
 @kernel
@@ -442,7 +213,7 @@ def _wall_velocities(t, wvel, wspin, wwin, wvel_now, wspin_now):
 
 @kernel
 def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r, effective_mass,
-             need_rebuild, need_forces,
+             need_rebuild, need_forces, ranged, pool_size,
              n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, bactive,
              n_spheres, sbody, soff, srad, sx, sx0, sxw, sallow, swallow,
              pstart, ppi, pj, ph, wstart, ws, wk, wh,
@@ -455,21 +226,35 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
     (leapfrog); the chunk starts and ends with half kicks, so velocities are synchronous with
     positions whenever Python sees them. Returns the new time, the (possibly rebuilt) Verlet
     lists and the numbers of pair-list and wall-list rebuilds.
+
+    ``ranged`` runs the kicks, the sphere positions and the contact forces on numba's threads
+    (``simulate.forces.contact_forces_ranged``; the same result on any number of them); the list
+    rebuilds stay on one.
     """
     h = 0.5 * dt
     mode = kick_mode(lever_mode, rolling_model)
     n_walls = wkind.shape[0]
     wcv = np.empty((max(ws.shape[0], 1), 3))       # wall surface velocity at each wall contact
+    # shares of a contact kept aside for a body of another range (ranged forces), a row per pair
+    aside_body = np.empty(ppi.shape[0] if ranged else 0, np.int64)
+    aside_f = np.empty((aside_body.shape[0], 3))
+    aside_t = np.empty_like(aside_f)
+    aside_rv = np.empty_like(aside_f)
+    aside_rm = np.empty(aside_body.shape[0])
     n_rebuilds = 0
     n_wall_rebuilds = 0
     for step in range(-1 if need_forces else 0, n_steps):
         if step >= 0:
             tau = h if step == 0 else dt
-            for b in range(n_bodies):
-                if bactive[b]:
-                    half_kick(b, tau, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi,
-                              mode)
-                    drift(b, dt, bx, bv, bq, bL, bw, bR, binvi)
+            if ranged:
+                _kick_drift_threaded(n_bodies, tau, dt, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw, bR, bf,
+                                     bt, brm, brv, brn, binvm, binvi)
+            else:
+                for b in range(n_bodies):
+                    if bactive[b]:
+                        half_kick(b, tau, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi,
+                                  mode)
+                        drift(b, dt, bx, bv, bq, bL, bw, bR, binvi)
             _wall_velocities(t + h, wvel, wspin, wwin, wvel_now, wspin_now)
             for k in range(n_walls):
                 for a in range(3):
@@ -483,11 +268,16 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
             for a in range(3):
                 dw2 += (worig[k, a] - wx0[k, a]) ** 2
             wmax2 = max(wmax2, dw2)
-        pairs_stale, walls_stale = _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw,
-                                                   sallow, swallow, math.sqrt(wmax2))
+        if ranged:
+            pairs_stale, walls_stale = _update_spheres_threaded(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0,
+                                                                sxw, sallow, swallow, math.sqrt(wmax2))
+        else:
+            pairs_stale, walls_stale = _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw,
+                                                       sallow, swallow, math.sqrt(wmax2))
         if need_rebuild or pairs_stale:
             pstart, ppi, pj, ph = build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo,
-                                                  inv_cell, dims, cell_start, pstart, pj, ph, sallow)
+                                                  inv_cell, dims, cell_start, pstart, pj, ph, sallow,
+                                                  pool_size)
             sx0[:n_spheres] = sx[:n_spheres]
             n_rebuilds += 1
         if need_rebuild or walls_stale:
@@ -502,14 +292,31 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
         if wcv.shape[0] < ws.shape[0]:
             wcv = np.empty((2 * ws.shape[0], 3))
         _wall_contact_velocities(ws, wk, sx, srad, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wspin_now, wcv)
-        _contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass, n_bodies, bx, bv, bw,
-                        bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj,
-                        ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat,
-                        e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min)
+        if ranged:
+            if aside_body.shape[0] < ppi.shape[0]:
+                aside_body = np.empty(2 * ppi.shape[0], np.int64)
+                aside_f = np.empty((aside_body.shape[0], 3))
+                aside_t = np.empty_like(aside_f)
+                aside_rv = np.empty_like(aside_f)
+                aside_rm = np.empty(aside_body.shape[0])
+            contact_forces_ranged(aside_body, aside_f, aside_t, aside_rm, aside_rv, pstart, wstart, hist_dt, dt,
+                                  lever_mode, rolling_model, eta_r, effective_mass, n_bodies, n_spheres, bx, bv, bw,
+                                  bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi,
+                                  pj, ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat, e_star,
+                                  g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min)
+        else:
+            contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass, n_bodies, bx, bv, bw,
+                           bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj,
+                           ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat,
+                           e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min)
     if n_steps > 0:
-        for b in range(n_bodies):
-            if bactive[b]:
-                half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, mode)
+        if ranged:
+            _kick_drift_threaded(n_bodies, h, 0.0, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw, bR, bf, bt,
+                                 brm, brv, brn, binvm, binvi)
+        else:
+            for b in range(n_bodies):
+                if bactive[b]:
+                    half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, mode)
     return t, pstart, ppi, pj, ph, wstart, ws, wk, wh, n_rebuilds, n_wall_rebuilds
 
 
@@ -584,12 +391,12 @@ _BODY_FIELDS = {  # name: (trailing shape, dtype)
     "bf": ((3,), np.float64), "bt": ((3,), np.float64), "brm": ((), np.float64),
     "brv": ((3,), np.float64), "brn": ((3,), np.float64), "binvm": ((), np.float64), "binvi": ((3,), np.float64),
     "bmat": ((), np.int64), "bcount": ((), np.int64), "bactive": ((), np.bool_), "btemplate": ((), np.int64),
-    "bmass": ((), np.float64), "bI": ((3,), np.float64),
+    "bmass": ((), np.float64), "bI": ((3,), np.float64), "bid": ((), np.int64),
 }
 _SPHERE_FIELDS = {
     "sbody": ((), np.int64), "soff": ((3,), np.float64), "srad": ((), np.float64),
     "sx": ((3,), np.float64), "sx0": ((3,), np.float64), "sxw": ((3,), np.float64),
-    "sallow": ((), np.float64), "swallow": ((), np.float64),
+    "sallow": ((), np.float64), "swallow": ((), np.float64), "sid": ((), np.int64),
 }
 
 
@@ -624,12 +431,25 @@ class Simulation:
         ``SimulationError`` (runaway energy). Default 50 m/s, far above anything in the rigs.
     chunk_steps : int
         Steps per return to Python (checks, factories, progress).
+    sort_every, sort_min_spheres : int
+        Every ``sort_every`` steps (0: never) a simulation of at least ``sort_min_spheres``
+        spheres sorts its clumps in memory along a Morton curve (``simulate.neighbours``).
+        Below some 4,000 spheres the whole state (about 500 bytes a sphere with its contacts)
+        stays in a core's cache and sorting would change only the order of roundoff.
+        Body and sphere ids, and every reader, keep the order of addition.
+    threads : int or None
+        Threads of the step loop. None (default): once the simulation holds
+        ``THREADS_MIN_SPHERES`` spheres, its contacts are split into fixed ranges run on
+        ``simulate.threads.threads_per_run()`` threads, with the same result on any number of
+        them (``simulate.forces``); below, one thread and the plain loop. A number: the ranges
+        on that many threads whatever the size.
     """
 
     def __init__(self, materials: MaterialTable, *, domain_lo, domain_hi, dt: float,
                  gravity=(0.0, 0.0, -GRAVITY), rolling_lever: str = "liggghts_reff", skin: float | None = None,
                  max_dt_fraction: float = DEFAULT_MAX_FRACTION, force: bool = False,
-                 max_speed: float = 50.0, chunk_steps: int = 200):
+                 max_speed: float = 50.0, chunk_steps: int = 200, sort_every: int = 1000,
+                 sort_min_spheres: int = 4096, threads: int | None = None):
         if not isinstance(materials, MaterialTable):
             raise InputError(f"materials must be a MaterialTable, got {type(materials).__name__}")
         self.materials = materials
@@ -655,6 +475,16 @@ class Simulation:
         if int(chunk_steps) < 1:
             raise InputError(f"chunk_steps must be >= 1, got {chunk_steps!r}")
         self.chunk_steps = int(chunk_steps)
+        if int(sort_every) < 0 or int(sort_min_spheres) < 0:
+            raise InputError(f"sort_every and sort_min_spheres must be >= 0, got {sort_every!r}, "
+                             f"{sort_min_spheres!r}")
+        self.sort_every = int(sort_every)
+        self.sort_min_spheres = int(sort_min_spheres)
+        self._steps_since_sort = 0
+        self.total_sorts = 0
+        if threads is not None and int(threads) < 1:
+            raise InputError(f"threads must be >= 1 (or None: chosen by size), got {threads!r}")
+        self.threads = None if threads is None else int(threads)
 
         self.time = 0.0
         self.templates: list[ClumpTemplate] = []
@@ -666,6 +496,9 @@ class Simulation:
         self.n_spheres = 0
         self._b = {k: np.zeros((0,) + s, d) for k, (s, d) in _BODY_FIELDS.items()}
         self._s = {k: np.zeros((0,) + s, d) for k, (s, d) in _SPHERE_FIELDS.items()}
+        # row of each body id and sphere id in the arrays above (the rows move when sorted)
+        self._body_row = np.zeros(0, np.int64)
+        self._sphere_row = np.zeros(0, np.int64)
         self._pairs = (np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64),
                        np.zeros((0, 3)))
         self._wpairs = (np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64),
@@ -780,7 +613,7 @@ class Simulation:
 
     def _reserve(self, n_bodies: int, n_spheres: int):
         """Grow the body and sphere arrays to hold at least the given counts."""
-        for store, need in ((self._b, n_bodies), (self._s, n_spheres)):
+        for store, rows, need in ((self._b, "_body_row", n_bodies), (self._s, "_sphere_row", n_spheres)):
             have = next(iter(store.values())).shape[0]
             if need > have:
                 cap = max(need, 2 * have, 16)
@@ -788,6 +621,9 @@ class Simulation:
                     new = np.zeros((cap,) + a.shape[1:], a.dtype)
                     new[:have] = a
                     store[k] = new
+                grown = np.zeros(cap, np.int64)
+                grown[:have] = getattr(self, rows)
+                setattr(self, rows, grown)
 
     def reserve(self, n_bodies: int, n_spheres: int | None = None) -> None:
         """Pre-allocate room for ``n_bodies`` clumps (and spheres; default from the templates)."""
@@ -842,6 +678,10 @@ class Simulation:
         B["bmat"][b] = mat
         B["bactive"][b] = True
         B["btemplate"][b] = int(template)
+        B["bid"][b] = b                      # a new body and its spheres take the last rows
+        self._body_row[b] = b
+        S["sid"][s0:s0 + ns] = np.arange(s0, s0 + ns)
+        self._sphere_row[s0:s0 + ns] = np.arange(s0, s0 + ns)
         S["sbody"][s0:s0 + ns] = b
         S["soff"][s0:s0 + ns] = tpl.offsets
         S["srad"][s0:s0 + ns] = tpl.radii
@@ -967,11 +807,17 @@ class Simulation:
         pt = self.materials.compile()
         width = history_width(pt.velocity_restitution, pt.rolling_model)
         self._ensure_history_width(width)
+        if (self.sort_every and self._steps_since_sort >= self.sort_every
+                and self.n_spheres >= self.sort_min_spheres):
+            self.sort_in_memory()
+        self._steps_since_sort += n_steps
         g = self._gravity
+        ranged = self.threads is not None or self.n_spheres >= THREADS_MIN_SPHERES
+        numba.set_num_threads(self.threads_in_use())   # list rebuilds use threads at any size
         out = _advance(
             n_steps, self.time, self.dt, g[0], g[1], g[2], self.skin, self._lever,
             pt.rolling_model, pt.rolling_damping_ratio, pt.contact_effective_mass, self._need_rebuild,
-            self._need_forces,
+            self._need_forces, ranged, numba.config.NUMBA_NUM_THREADS,
             self.n_bodies, B["bx"], B["bv"], B["bq"], B["bL"], B["bw"], B["bR"], B["bf"], B["bt"],
             B["brm"], B["brv"], B["brn"], B["binvm"], B["binvi"], B["bmat"], B["bcount"], B["bactive"],
             self.n_spheres, S["sbody"], S["soff"], S["srad"], S["sx"], S["sx0"], S["sxw"], S["sallow"],
@@ -987,6 +833,41 @@ class Simulation:
         self._need_rebuild = False
         self._need_forces = False
         return int(out[9])
+
+    def threads_in_use(self) -> int:
+        """Threads the next steps run on (``threads``, or chosen by size: ``simulate.threads``)."""
+        # the numba pool has NUMBA_NUM_THREADS threads at most
+        if self.threads is not None:
+            return min(self.threads, numba.config.NUMBA_NUM_THREADS)
+        return threads_per_run() if self.n_spheres >= THREADS_MIN_SPHERES else 1
+
+    def sort_in_memory(self) -> None:
+        """Reorder the bodies along a Morton curve of their cells (the left ones last), each
+        body's spheres after it, and carry the Verlet lists and their history across; ids and
+        physics are unchanged (``simulate.neighbours``)."""
+        self._ensure_grid()
+        nb, ns = self.n_bodies, self.n_spheres
+        B, S = self._b, self._s
+        key = morton_keys(B["bx"][:nb], self.domain_lo, 1.0 / self._grid[1])
+        key[~B["bactive"][:nb]] = np.iinfo(np.int64).max
+        body_order = np.argsort(key, kind="stable")
+        new_body = np.empty(nb, np.int64)
+        new_body[body_order] = np.arange(nb)
+        sphere_order = np.argsort(new_body[S["sbody"][:ns]], kind="stable")
+        new_sphere = np.empty(ns, np.int64)
+        new_sphere[sphere_order] = np.arange(ns)
+        for a in B.values():
+            a[:nb] = a[:nb][body_order]
+        for a in S.values():
+            a[:ns] = a[:ns][sphere_order]
+        S["sbody"][:ns] = new_body[S["sbody"][:ns]]
+        self._body_row[B["bid"][:nb]] = np.arange(nb)
+        self._sphere_row[S["sid"][:ns]] = np.arange(ns)
+        hist = self._pairs[3]
+        self._pairs = renumber_pair_list(new_sphere, *self._pairs, odd_history_columns(hist.shape[1]))
+        self._wpairs = renumber_wall_list(new_sphere, *self._wpairs)
+        self._steps_since_sort = 0
+        self.total_sorts += 1
 
     def _ensure_history_width(self, width: int) -> None:
         """Widen the contact history rows (zero-filled) if the hooks in use need more columns;
@@ -1005,22 +886,24 @@ class Simulation:
         for key, label in (("bx", "position"), ("bv", "velocity"), ("bL", "angular momentum")):
             bad = ~np.isfinite(B[key][:n]).all(axis=1) & act
             if bad.any():
-                b = int(np.flatnonzero(bad)[0])
+                b = int(B["bid"][np.flatnonzero(bad)].min())
                 raise SimulationError(f"non-finite {label} of body {b} at t = {self.time:.6g} s "
                                       f"(dt = {self.dt:.6g} s); the time step or the contact "
                                       f"stiffness is probably unstable")
-        e = self.body_kinetic_energy()
+        e = self._kinetic_energy_by_row()
         limit = 0.5 * B["bmass"][:n] * self.max_speed ** 2
         bad = (e > limit) & act
         if bad.any():
-            b = int(np.flatnonzero(bad)[0])
-            raise SimulationError(f"runaway kinetic energy: body {b} has {e[b]:.4g} J at t = "
+            rows = np.flatnonzero(bad)
+            r = rows[np.argmin(B["bid"][rows])]
+            raise SimulationError(f"runaway kinetic energy: body {B['bid'][r]} has {e[r]:.4g} J at t = "
                                   f"{self.time:.6g} s, above 1/2 m v^2 for max_speed = "
                                   f"{self.max_speed:g} m/s")
         x = B["bx"][:n]
         out = act & ((x < self.domain_lo) | (x > self.domain_hi)).any(axis=1)
-        for b in np.flatnonzero(out):
-            self.escaped.append(Escape(int(b), float(self.time), tuple(float(v) for v in x[b])))
+        rows = np.flatnonzero(out)
+        for b in rows[np.argsort(B["bid"][rows])]:
+            self.escaped.append(Escape(int(B["bid"][b]), float(self.time), tuple(float(v) for v in x[b])))
             B["bactive"][b] = False
             for key in ("bv", "bL", "bw", "bf", "bt", "brv"):
                 B[key][b] = 0.0
@@ -1028,60 +911,69 @@ class Simulation:
             self._need_rebuild = True
 
     # ---------------------------------------------------------------- reading
+    def _by_body(self, key: str) -> np.ndarray:
+        """A body field in body-id order (a copy)."""
+        return self._b[key][self._body_row[:self.n_bodies]]
+
+    def _by_sphere(self, key: str) -> np.ndarray:
+        """A sphere field in sphere-id order (a copy)."""
+        return self._s[key][self._sphere_row[:self.n_spheres]]
+
     def positions(self) -> np.ndarray:
         """Centres of mass [m], (n_bodies, 3)."""
-        return self._b["bx"][:self.n_bodies].copy()
+        return self._by_body("bx")
 
     def velocities(self) -> np.ndarray:
         """Velocities of the centres of mass [m/s], (n_bodies, 3)."""
-        return self._b["bv"][:self.n_bodies].copy()
+        return self._by_body("bv")
 
     def angular_velocities(self) -> np.ndarray:
         """World-frame angular velocities [rad/s], (n_bodies, 3)."""
-        return self._b["bw"][:self.n_bodies].copy()
+        return self._by_body("bw")
 
     def angular_momenta(self) -> np.ndarray:
         """World-frame spin angular momenta about each centre of mass [kg m2/s]."""
-        return self._b["bL"][:self.n_bodies].copy()
+        return self._by_body("bL")
 
     def orientations(self) -> np.ndarray:
         """Unit quaternions (w, x, y, z) rotating each body's template frame into the world."""
         out = np.empty((self.n_bodies, 4))
-        for b in range(self.n_bodies):
-            qt = self._template_quat[int(self._b["btemplate"][b])]
-            conj = qt * np.array([1.0, -1.0, -1.0, -1.0])
-            out[b] = quat_multiply(self._b["bq"][b], conj)
+        conj = np.array([1.0, -1.0, -1.0, -1.0])
+        for b, (q, t) in enumerate(zip(self._by_body("bq"), self._by_body("btemplate"))):
+            out[b] = quat_multiply(q, self._template_quat[int(t)] * conj)
         return out
 
     def rotation_matrices(self) -> np.ndarray:
         """Rotation matrices template frame -> world, (n_bodies, 3, 3)."""
         out = np.empty((self.n_bodies, 3, 3))
-        for b in range(self.n_bodies):
-            V = self.templates[int(self._b["btemplate"][b])].principal_axes
-            out[b] = self._b["bR"][b] @ V.T
+        for b, (R, t) in enumerate(zip(self._by_body("bR"), self._by_body("btemplate"))):
+            out[b] = R @ self.templates[int(t)].principal_axes.T
         return out
 
     def masses(self) -> np.ndarray:
         """Body masses [kg]."""
-        return self._b["bmass"][:self.n_bodies].copy()
+        return self._by_body("bmass")
 
     def active(self) -> np.ndarray:
         """False for bodies that left the domain."""
-        return self._b["bactive"][:self.n_bodies].copy()
+        return self._by_body("bactive")
 
     def sphere_positions(self) -> np.ndarray:
         """World centres of every member sphere [m], (n_spheres, 3)."""
-        return self._s["sx"][:self.n_spheres].copy()
+        return self._by_sphere("sx")
 
     def sphere_radii(self) -> np.ndarray:
-        return self._s["srad"][:self.n_spheres].copy()
+        return self._by_sphere("srad")
 
     def sphere_body(self) -> np.ndarray:
         """Body (clump) id of every sphere."""
-        return self._s["sbody"][:self.n_spheres].copy()
+        return self._b["bid"][self._by_sphere("sbody")]
 
     def body_kinetic_energy(self) -> np.ndarray:
         """Translational plus rotational kinetic energy of each body [J]."""
+        return self._kinetic_energy_by_row()[self._body_row[:self.n_bodies]]
+
+    def _kinetic_energy_by_row(self) -> np.ndarray:
         B = self._b
         n = self.n_bodies
         v = B["bv"][:n]
@@ -1090,14 +982,14 @@ class Simulation:
 
     def kinetic_energy(self) -> float:
         """Total kinetic energy of the active bodies [J]."""
-        return float(self.body_kinetic_energy()[self._b["bactive"][:self.n_bodies]].sum())
+        return float(self._kinetic_energy_by_row()[self._b["bactive"][:self.n_bodies]].sum())
 
     def contact_forces(self) -> tuple[np.ndarray, np.ndarray]:
         """Contact force [N] and torque about the centre of mass [N m] on each body at the last
         step. The torque includes the particle-pair rolling torques of the constant torque model
         with the ``liggghts_reff`` lever (ordinary pair torques, capped per contact); the other
         rolling torques are applied in the integration (see ``rolling_resistance``)."""
-        return self._b["bf"][:self.n_bodies].copy(), self._b["bt"][:self.n_bodies].copy()
+        return self._by_body("bf"), self._by_body("bt")
 
     def rolling_resistance(self) -> tuple[np.ndarray, np.ndarray]:
         """Rolling-friction terms of each body at the last force evaluation.
@@ -1108,14 +1000,14 @@ class Simulation:
         [N m], both before the cap (particle pairs: see ``contact_forces``). Spring-dashpot model (``epsd``): the summed limit torques
         sum(mu_r F_n R_r) [N m] over all the body's contacts, and the summed spring-dashpot
         torque applied to it [N m] (``simulate.contact.rolling``)."""
-        return self._b["brm"][:self.n_bodies].copy(), self._b["brv"][:self.n_bodies].copy()
+        return self._by_body("brm"), self._by_body("brv")
 
     def wall_origins(self) -> np.ndarray:
         """Current point (plane) or centre (rectangle) of each wall [m]."""
         return self._w["origin"].copy()
 
     def contact_history(self) -> dict:
-        """History of the contacts touching now (copies; rows in Verlet-list order).
+        """History of the contacts touching now (copies; rows in Verlet-list order, sphere ids).
 
         Returns
         -------
@@ -1143,13 +1035,15 @@ class Simulation:
         touch = np.zeros(pi.size, bool)
         if pi.size:
             touch = np.linalg.norm(sx[pj] - sx[pi], axis=1) < r[pi] + r[pj]
-        pairs = {"i": pi[touch].copy(), "j": pj[touch].copy(), **columns(ph, touch)}
+        sid = self._s["sid"]
+        i, j, ph = ascending_pairs(sid[pi[touch]], sid[pj[touch]], ph[touch], odd_history_columns(ph.shape[1]))
+        pairs = {"i": i, "j": j, **columns(ph, np.ones(i.size, bool))}
         _, ws, wk, wh = self._wpairs
         wtouch = np.zeros(ws.size, bool)
         if ws.size:
             dist = wall_distances(self._w, sx[ws])
             wtouch = dist[np.arange(ws.size), wk] < r[ws]
-        walls = {"sphere": ws[wtouch].copy(), "wall": wk[wtouch].copy(), **columns(wh, wtouch)}
+        walls = {"sphere": sid[ws[wtouch]], "wall": wk[wtouch].copy(), **columns(wh, wtouch)}
         return {"pairs": pairs, "walls": walls}
 
     def n_contacts(self) -> tuple[int, int]:

@@ -44,6 +44,7 @@ import numpy as np
 
 from demcal.errors import InputError
 from demcal.simulate.integrate import matrix_from_quat, random_quaternions
+from demcal.simulate.neighbours import spheres_within
 from demcal.simulate.walls import wall_distances
 
 
@@ -171,7 +172,11 @@ class ParticleFactory:
         reach = max(sim.templates[k].bounding_radius for k in self.templates) + gap
         margin = reach + (float(r[keep].max()) if keep.any() else 0.0)
         keep &= np.all((x > self.region_lo - margin) & (x < self.region_hi + margin), axis=1)
-        nearby = [x[keep], r[keep]]
+        n_near = int(keep.sum())
+        room = n_near + (self.n_due(sim.time) - self.inserted) * max(sim.templates[k].n_spheres for k in self.templates)
+        nearby = [np.empty((room, 3)), np.empty(room), n_near]    # the batch's clumps are added
+        nearby[0][:n_near] = x[keep]
+        nearby[1][:n_near] = r[keep]
         while self.inserted < self.n_due(sim.time):
             if not self._insert_one(sim, nearby, gap):
                 break
@@ -192,7 +197,7 @@ class ParticleFactory:
         template = self._next_template()
         tpl = sim.templates[template]
         packed = sim._w
-        existing, ex_r = nearby
+        existing, ex_r, n_near = nearby
         reach = tpl.bounding_radius
         for _ in range(self.max_attempts):
             q = random_quaternions(self.rng, 1)[0]
@@ -203,21 +208,18 @@ class ParticleFactory:
                     np.any(centres + tpl.radii[:, None] > self.region_hi):
                 self.failed_attempts += 1
                 continue
-            if existing.shape[0]:
-                near = np.abs(existing - pos).max(axis=1) < reach + ex_r.max() + gap
-                if near.any():
-                    d = np.linalg.norm(existing[near][None, :, :] - centres[:, None, :], axis=2)
-                    if np.any(d < tpl.radii[:, None] + ex_r[near][None, :] + gap):
-                        self.failed_attempts += 1
-                        continue
+            if spheres_within(existing, ex_r, n_near, pos, reach, centres, tpl.radii, gap):
+                self.failed_attempts += 1
+                continue
             if packed["kind"].shape[0]:
                 dw = wall_distances(packed, centres)
                 if np.any(dw < tpl.radii[:, None]):
                     self.failed_attempts += 1
                     continue
             body = sim.add_clump(template, pos, q, velocity=self.velocity, material=self.material)
-            nearby[0] = np.concatenate([existing, centres])
-            nearby[1] = np.concatenate([ex_r, tpl.radii])
+            existing[n_near:n_near + tpl.n_spheres] = centres
+            ex_r[n_near:n_near + tpl.n_spheres] = tpl.radii
+            nearby[2] = n_near + tpl.n_spheres
             self.bodies.append(body)
             self.body_templates.append(template)
             self._pending = None

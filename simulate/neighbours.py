@@ -27,9 +27,17 @@ engine hooks: impact speed, rolling spring torque; ``simulate.engine``) lives in
 listed pair, as many columns as the old list has, and is carried across rebuilds by looking
 each new pair up in the old rows.
 
+Memory order. The engine stores spheres clump by clump, clumps periodically sorted along a
+Morton (Z-order) curve of the grid cells (``morton_keys``), so that spheres near in space are
+near in memory and the contact loops keep hitting the cache as a bed grows to 10^5 spheres
+(the ``atom_modify sort`` of LAMMPS; Morton 1966). ``renumber_pair_list`` and
+``renumber_wall_list`` carry the lists and their history across such a renumbering.
+
 References
 ----------
 Verlet, L. (1967). Computer "experiments" on classical fluids. Phys. Rev. 159, 98-103.
+Morton, G. M. (1966). A computer oriented geodetic data base and a new technique in file
+sequencing. IBM Technical Report, Ottawa.
 Allen, M. P., Tildesley, D. J. (2017). Computer Simulation of Liquids, 2nd ed. Oxford.
 """
 
@@ -37,9 +45,10 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
-from demcal.simulate._jit import kernel
+from demcal.simulate._jit import kernel, threaded_kernel
 from demcal.simulate.walls import CYLINDER, PLANE, wall_distance
 
 
@@ -60,9 +69,9 @@ def padded_cell_count(dims) -> int:
     return int(np.prod(np.asarray(dims) + 2))
 
 
-@kernel
+@threaded_kernel
 def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dims, cell_start,
-                    old_start, old_j, old_hist, allow):
+                    old_start, old_j, old_hist, allow, pool_size):
     """Sphere-sphere Verlet list with history carried from the previous list, and each
     sphere's displacement allowance into ``allow`` (half its gap to the nearest sphere not
     listed with it; see the module docstring).
@@ -70,6 +79,10 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
     The grid is padded by one empty cell on every side, so the stencil needs no bounds checks;
     cells are numbered x fastest, so the three cells of a stencil row are one contiguous run of
     the cell-sorted spheres (five runs cover the own cell and the 13 forward neighbours).
+
+    The per-sphere passes run on numba's threads; each sphere's pairs go to slots of their own
+    and are then joined in sphere order, and the gaps are minima (exact in any order), so the
+    lists and allowances are the same on any number of threads.
 
     Parameters
     ----------
@@ -79,6 +92,8 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
         The previous list (rows, partners, tangential history).
     allow : float64 (>= n_spheres,)
         Filled with each active sphere's allowance [m] (at least skin / 2).
+    pool_size : int
+        Threads in numba's pool (``numba.config.NUMBA_NUM_THREADS``): a bound on thread ids.
 
     Returns
     -------
@@ -99,17 +114,16 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
     for s in range(n_spheres):
         if bactive[sbody[s]]:
             rmax = max(rmax, srad[s])
-    # counting sort of the active spheres into cells; each sphere's gap bound from the faces
-    # of its 27 cells (any sphere beyond them is at least that far), skin for a stray
-    cell_start[:] = 0
-    kk = np.empty(3, np.int64)
+    # each active sphere's cell and its gap bound from the faces of its 27 cells (any sphere
+    # beyond them is at least that far), skin for a stray
     far = np.empty(n_spheres)   # the same bound from the faces of the 125 cells around it
-    for s in range(n_spheres):
+    for s in numba.prange(n_spheres):
         if bactive[sbody[s]]:
             face = np.inf
             face5 = np.inf
             stray = False
-            for a in range(3):
+            c = 0
+            for a in range(2, -1, -1):
                 u = (sx[s, a] - lo[a]) * inv_cell[a]
                 k = int(u)
                 if u < 0.0 or k > dims[a] - 1:
@@ -117,14 +131,17 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
                 k = min(max(k, 0), dims[a] - 1)
                 face = min(face, (u - (k - 1)) / inv_cell[a], (k + 2 - u) / inv_cell[a])
                 face5 = min(face5, (u - (k - 2)) / inv_cell[a], (k + 3 - u) / inv_cell[a])
-                kk[a] = k + 1
-            c = (kk[2] * ny + kk[1]) * nx + kk[0]
+                c = c * (dims[a] + 2) + k + 1
             allow[s] = skin if stray else face - srad[s] - rmax
             far[s] = skin if stray else face5 - srad[s] - rmax
             scell[s] = c
-            cell_start[c + 1] += 1
         else:
             scell[s] = -1
+    # counting sort into cells
+    cell_start[:] = 0
+    for s in range(n_spheres):
+        if scell[s] >= 0:
+            cell_start[scell[s] + 1] += 1
     for c in range(n_cells):
         cell_start[c + 1] += cell_start[c]
     m = cell_start[n_cells]
@@ -145,7 +162,7 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
     bs = np.empty(m, np.int64)
     cs = np.empty(m, np.int64)
     gap = np.empty(m)   # gap to the nearest sphere not listed, less skin (cell order)
-    for p in range(m):
+    for p in numba.prange(m):
         s = order[p]
         xs[p] = sx[s, 0]
         ys[p] = sx[s, 1]
@@ -156,37 +173,9 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
         gap[p] = allow[s] - skin
     # a sphere with no other sphere in the shell of cells just beyond its 27 has the bound of
     # the 125 (a sphere falling through empty space); counted by rows of contiguous cells
-    for p in range(m):
-        s = order[p]
-        c = cs[p]
-        cz = c // (nx * ny)
-        cy = (c // nx) % ny
-        cx = c % nx
-        inner = 0
-        outer = 0
-        for z in range(cz - 2, cz + 3):
-            for y in range(cy - 2, cy + 3):
-                if 0 <= z < nz and 0 <= y < ny:
-                    base = (z * ny + y) * nx
-                    x0 = max(cx - 2, 0)
-                    x1 = min(cx + 3, nx)
-                    outer += cell_start[base + x1] - cell_start[base + x0]
-                    if abs(z - cz) <= 1 and abs(y - cy) <= 1:
-                        inner += cell_start[base + cx + 2] - cell_start[base + cx - 1]
-        clear = outer == inner
-        if not clear and outer <= 64:
-            # the shell may hold only the sphere's own clump
-            clear = True
-            for z in range(max(cz - 2, 0), min(cz + 3, nz)):
-                for y in range(max(cy - 2, 0), min(cy + 3, ny)):
-                    base = (z * ny + y) * nx
-                    for k in range(cell_start[base + max(cx - 2, 0)], cell_start[base + min(cx + 3, nx)]):
-                        ck = cs[k]
-                        ring = max(abs(ck // (nx * ny) - cz), abs((ck // nx) % ny - cy), abs(ck % nx - cx))
-                        if ring >= 2 and bs[k] != bs[p]:
-                            clear = False
-        if clear:
-            gap[p] = far[s] - skin
+    for p in numba.prange(m):
+        if _shell_is_clear(p, cs, bs, cell_start, nx, ny, nz):
+            gap[p] = far[order[p]] - skin
     row = np.empty(5, np.int64)  # first cell of each forward stencil row, relative to the own cell
     row[0] = 0
     row[1] = nx - 1
@@ -194,24 +183,31 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
     row[3] = ny * nx - 1
     row[4] = (ny + 1) * nx - 1
 
-    # candidates are at most the spheres in the stencil runs; sizing the buffers by that bound
-    # keeps them fixed in the loop below (a buffer that may be reallocated there slows it 4x)
-    cap = 0
+    # each sphere's candidates are at most the spheres in its stencil runs: a slot of that size
+    # each keeps the buffer fixed in the loop below (a buffer reallocated there slows it 4x)
+    slot = np.empty(m + 1, np.int64)
+    slot[0] = 0
     for p in range(m):
         c = cs[p]
-        cap += cell_start[c + 2] - p - 1
+        n_c = cell_start[c + 2] - p - 1
         for o in range(1, 5):
-            cap += cell_start[c + row[o] + 3] - cell_start[c + row[o]]
-    ta = np.empty(cap + 1, np.int64)
-    tb = np.empty(cap + 1, np.int64)
-    n = 0
-    for p in range(m):
+            n_c += cell_start[c + row[o] + 3] - cell_start[c + row[o]]
+        slot[p + 1] = slot[p] + n_c
+    tb = np.empty(slot[m] + 1, np.int64)
+    found = np.empty(m, np.int64)
+    # each thread lowers the gaps in a copy of its own, joined by their minimum
+    gaps = np.empty((pool_size, m))
+    for t in range(gaps.shape[0]):
+        gaps[t, :] = gap
+    for p in numba.prange(m):
+        g = gaps[numba.get_thread_id()]
         xi = xs[p]
         yi = ys[p]
         zi = zs[p]
         ri = rs[p]
         bi = bs[p]
         c = cs[p]
+        n = slot[p]
         for o in range(5):
             if o == 0:
                 b0 = p + 1              # rest of the own cell and the cell at +x
@@ -228,44 +224,49 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
                 d2 = dx * dx + dy * dy + dz * dz
                 other = bs[k] != bi
                 near = (d2 < cut * cut) & other
-                ta[n] = p   # written always, kept only if near (no branch)
-                tb[n] = k
+                tb[n] = k   # written always, kept only if near (no branch)
                 n += near
                 if other and not near:
                     # a root only where it may lower either sphere's gap
-                    reach = cut + max(gap[p], gap[k])
+                    reach = cut + max(g[p], g[k])
                     if d2 < reach * reach:
-                        g = math.sqrt(d2) - cut
-                        gap[p] = min(gap[p], g)
-                        gap[k] = min(gap[k], g)
-    for p in range(m):
-        allow[order[p]] = max(0.5 * skin, 0.5 * (gap[p] + skin))
+                        d = math.sqrt(d2) - cut
+                        g[p] = min(g[p], d)
+                        g[k] = min(g[k], d)
+        found[p] = n - slot[p]
+    for p in numba.prange(m):
+        least = gaps[0, p]
+        for t in range(1, gaps.shape[0]):
+            least = min(least, gaps[t, p])
+        allow[order[p]] = max(0.5 * skin, 0.5 * (least + skin))
 
     # back to sphere ids, ordered by first sphere (counting sort) into compressed rows
     start = np.zeros(n_spheres + 1, np.int64)
-    for k in range(n):
-        a = order[ta[k]]
-        b = order[tb[k]]
-        if a > b:
-            a, b = b, a
-        ta[k] = a
-        tb[k] = b
-        start[a + 1] += 1
+    n_pairs = 0
+    for p in range(m):
+        a = order[p]
+        for q in range(slot[p], slot[p] + found[p]):
+            b = order[tb[q]]
+            start[min(a, b) + 1] += 1
+        n_pairs += found[p]
     for s in range(n_spheres):
         start[s + 1] += start[s]
     pos = start[:n_spheres].copy()
-    pi = np.empty(n, np.int64)
-    pj = np.empty(n, np.int64)
-    for k in range(n):
-        a = ta[k]
-        pi[pos[a]] = a
-        pj[pos[a]] = tb[k]
-        pos[a] += 1
+    pi = np.empty(n_pairs, np.int64)
+    pj = np.empty(n_pairs, np.int64)
+    for p in range(m):
+        a = order[p]
+        for q in range(slot[p], slot[p] + found[p]):
+            b = order[tb[q]]
+            lo_ = min(a, b)
+            pi[pos[lo_]] = lo_
+            pj[pos[lo_]] = max(a, b)
+            pos[lo_] += 1
 
     width = old_hist.shape[1]
-    hist = np.zeros((n, width))
+    hist = np.zeros((n_pairs, width))
     n_old_rows = old_start.shape[0] - 1
-    for k in range(n):
+    for k in numba.prange(n_pairs):
         a = pi[k]
         if a >= n_old_rows:
             continue
@@ -276,6 +277,41 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
                     hist[k, c] = old_hist[q, c]
                 break
     return start, pi, pj, hist
+
+
+@kernel
+def _shell_is_clear(p, cs, bs, cell_start, nx, ny, nz):
+    """Whether the shell of cells just beyond the 27 around sphere ``p`` (cell order) holds no
+    sphere but of its own clump."""
+    c = cs[p]
+    cz = c // (nx * ny)
+    cy = (c // nx) % ny
+    cx = c % nx
+    inner = 0
+    outer = 0
+    for z in range(cz - 2, cz + 3):
+        for y in range(cy - 2, cy + 3):
+            if 0 <= z < nz and 0 <= y < ny:
+                base = (z * ny + y) * nx
+                x0 = max(cx - 2, 0)
+                x1 = min(cx + 3, nx)
+                outer += cell_start[base + x1] - cell_start[base + x0]
+                if abs(z - cz) <= 1 and abs(y - cy) <= 1:
+                    inner += cell_start[base + cx + 2] - cell_start[base + cx - 1]
+    if outer == inner:
+        return True
+    if outer > 64:
+        return False
+    # the shell may hold only the sphere's own clump
+    for z in range(max(cz - 2, 0), min(cz + 3, nz)):
+        for y in range(max(cy - 2, 0), min(cy + 3, ny)):
+            base = (z * ny + y) * nx
+            for k in range(cell_start[base + max(cx - 2, 0)], cell_start[base + min(cx + 3, nx)]):
+                ck = cs[k]
+                ring = max(abs(ck // (nx * ny) - cz), abs((ck // nx) % ny - cy), abs(ck % nx - cx))
+                if ring >= 2 and bs[k] != bs[p]:
+                    return False
+    return True
 
 
 @kernel
@@ -403,3 +439,71 @@ def _room(s, j, sx, sx0, srad):
     for a in range(3):
         d2 += (sx[s, a] - sx0[j, a]) ** 2
     return math.sqrt(d2) - srad[s] - srad[j]
+
+
+def morton_keys(points, lo, cell) -> np.ndarray:
+    """Morton (Z-order) key of the grid cell holding each point: the bits of the cell's x, y
+    and z indices interleaved (21 bits each; points outside the grid clipped to its edge)."""
+    k = np.clip(np.floor((np.asarray(points, float) - np.asarray(lo, float)) / np.asarray(cell, float)),
+                0, (1 << 21) - 1).astype(np.int64)
+    key = np.zeros(k.shape[0], np.int64)
+    for bit in range(21):
+        for a in range(3):
+            key |= ((k[:, a] >> bit) & 1) << (3 * bit + a)
+    return key
+
+
+def ascending_pairs(a, b, hist, odd_columns):
+    """Pairs (a, b) as (min, max), with the history columns that are odd under exchange of the
+    two spheres (``odd_columns``: the tangential spring, the rolling spring torque, both
+    written for the first sphere) negated where a pair was turned round."""
+    turned = a > b
+    hist = hist.copy()
+    if turned.any() and len(odd_columns):
+        rows = np.flatnonzero(turned)
+        hist[np.ix_(rows, odd_columns)] *= -1.0
+    return np.where(turned, b, a), np.where(turned, a, b), hist
+
+
+def _rows(first, n_rows):
+    """Row pointers of a list ordered by ``first``."""
+    start = np.zeros(n_rows + 1, np.int64)
+    np.cumsum(np.bincount(first, minlength=n_rows), out=start[1:])
+    return start
+
+
+def renumber_pair_list(new_index, start, pi, pj, hist, odd_columns):
+    """The sphere-sphere list after sphere s became sphere ``new_index[s]``: pairs turned so
+    that i < j (``ascending_pairs``), reordered into rows by first sphere, history alongside."""
+    a, b, hist = ascending_pairs(new_index[pi], new_index[pj], hist, odd_columns)
+    order = np.lexsort((b, a))
+    return _rows(a, new_index.shape[0]), a[order], b[order], hist[order]
+
+
+def renumber_wall_list(new_index, start, ws, wk, hist):
+    """The sphere-wall list after sphere s became sphere ``new_index[s]``, in rows by sphere."""
+    s = new_index[ws]
+    order = np.lexsort((wk, s))
+    return _rows(s, new_index.shape[0]), s[order], wk[order].copy(), hist[order].copy()
+
+
+@numba.njit(cache=True)    # exact arithmetic (no fastmath): the same placements as numpy's test
+def spheres_within(x, r, n, centre, reach, cx, cr, gap) -> bool:
+    """Whether any of the spheres ``cx``, ``cr`` (a clump centred at ``centre`` within ``reach``
+    of it) comes closer than ``gap`` [m] to any of the first ``n`` spheres ``x``, ``r``."""
+    if n == 0:
+        return False
+    rmax = r[0]
+    for j in range(1, n):
+        rmax = max(rmax, r[j])
+    box = reach + rmax + gap
+    for j in range(n):
+        if (abs(x[j, 0] - centre[0]) < box and abs(x[j, 1] - centre[1]) < box
+                and abs(x[j, 2] - centre[2]) < box):
+            for i in range(cx.shape[0]):
+                dx = x[j, 0] - cx[i, 0]
+                dy = x[j, 1] - cx[i, 1]
+                dz = x[j, 2] - cx[i, 2]
+                if math.sqrt(dx * dx + dy * dy + dz * dz) < cr[i] + r[j] + gap:
+                    return True
+    return False

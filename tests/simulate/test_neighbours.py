@@ -3,6 +3,7 @@ across rebuilds (a second run that never rebuilds is the reference)."""
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import pytest
 
@@ -11,6 +12,8 @@ from demcal.simulate.clump import segment_template
 from demcal.simulate.neighbours import build_pair_list, build_wall_list, grid_shape, padded_cell_count
 from demcal.simulate.walls import Plane, Rectangle, pack_walls, wall_distances
 from tests.simulate.helpers import R, floor, simulation
+
+POOL = numba.config.NUMBA_NUM_THREADS
 
 
 def _cloud(seed, n_bodies=120, per=5):
@@ -33,7 +36,7 @@ def test_pair_list_equals_brute_force(seed):
     empty = (np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)))
     allow = np.zeros(sx.shape[0])
     start, pi, pj, hist = build_pair_list(sx.shape[0], sx, srad, sbody, active, skin, lo,
-                                          1.0 / cell_xyz, dims, cell_start, *empty, allow)
+                                          1.0 / cell_xyz, dims, cell_start, *empty, allow, POOL)
     d = np.linalg.norm(sx[:, None] - sx[None], axis=2)
     i, j = np.nonzero(np.triu(d < srad[:, None] + srad[None] + skin, k=1))
     keep = (sbody[i] != sbody[j]) & active[sbody[i]] & active[sbody[j]]
@@ -55,7 +58,7 @@ def test_pair_list_equals_brute_force(seed):
     # a rebuild carries the history of pairs that persist
     hist[:] = np.arange(3 * len(pi)).reshape(-1, 3)
     start2, pi2, pj2, hist2 = build_pair_list(sx.shape[0], sx, srad, sbody, active, skin, lo,
-                                              1.0 / cell_xyz, dims, cell_start, start, pj, hist, allow)
+                                              1.0 / cell_xyz, dims, cell_start, start, pj, hist, allow, POOL)
     np.testing.assert_array_equal(hist2, hist)
 
 
@@ -116,23 +119,28 @@ def _listed_contacts_missing(sim):
     d = np.linalg.norm(x[:, None] - x[None], axis=2)
     i, j = np.nonzero(np.triu(d < r[:, None] + r[None], k=1))
     keep = (body[i] != body[j]) & on[i] & on[j]
+    sid = sim._s["sid"]                 # sphere id of each row of the engine's arrays
     _, pi, pj, _ = sim._pairs
-    missing = set(zip(i[keep].tolist(), j[keep].tolist())) - set(zip(pi.tolist(), pj.tolist()))
+    listed = {(min(a, b), max(a, b)) for a, b in zip(sid[pi].tolist(), sid[pj].tolist())}
+    missing = set(zip(i[keep].tolist(), j[keep].tolist())) - listed
     dist = wall_distances(sim._w, x[:n])
     s, k = np.nonzero(dist < r[:, None])
     _, ws, wk, _ = sim._wpairs
-    missing_walls = set(zip(s[on[s]].tolist(), k[on[s]].tolist())) - set(zip(ws.tolist(), wk.tolist()))
+    missing_walls = set(zip(s[on[s]].tolist(), k[on[s]].tolist())) - set(zip(sid[ws].tolist(), wk.tolist()))
     return missing, missing_walls
 
 
-def test_a_filling_box_never_misses_a_contact_between_rebuilds():
+@pytest.mark.parametrize("sort_every", [0, 7])
+def test_a_filling_box_never_misses_a_contact_between_rebuilds(sort_every):
     """Segments poured into a box, then pushed by a moving plate: with per-sphere allowances
     and spheres admitted without a rebuild, every touching pair is listed at every step, and
-    the fill rebuilds far less often than once per insertion."""
+    the fill rebuilds far less often than once per insertion; also with the state sorted in
+    memory every 7 steps (the lists renumbered, not rebuilt)."""
     from demcal.simulate.factory import ParticleFactory
     from demcal.simulate.walls import box_rectangles
     params = DEMParameters()
-    sim = simulation(params, dt=5e-5, gravity=(0.0, 0.0, -9.81), lo=(-0.1, -0.1, -0.02), hi=(0.1, 0.1, 0.3))
+    sim = simulation(params, dt=5e-5, gravity=(0.0, 0.0, -9.81), lo=(-0.1, -0.1, -0.02), hi=(0.1, 0.1, 0.3),
+                     sort_every=sort_every, sort_min_spheres=0)
     sim.chunk_steps = 1
     tpl = sim.add_template(segment_template(0.025, 0.011, 5, 912.0))
     sim.add_walls(box_rectangles((-0.05, -0.03, 0.0), (0.05, 0.03, 0.25), faces=("x-", "x+", "y-", "y+", "z-")))
@@ -148,6 +156,7 @@ def test_a_filling_box_never_misses_a_contact_between_rebuilds():
 
     sim.run(duration=0.3, progress=check)
     assert len(checked) == 6000 and sim.n_bodies == 60
+    assert sim.total_sorts == (0 if sort_every == 0 else 6000 // 7)
     assert all(not a and not b for a, b in checked)
 
 

@@ -1,0 +1,70 @@
+"""How many threads one DEM run uses.
+
+A campaign keeps every core busy with separate runs, one process each; a single large run (a
+user's ``demcal simulate``, a drum turning for seconds, a campaign with fewer runs than cores)
+instead splits its steps over threads (``simulate.forces``). The choice is made here:
+
+- ``threads_per_run()`` is the number of cores numba may use, unless limited by
+  ``limit_threads_per_run`` (campaign worker processes and Dask tasks are limited to one; a
+  Dask worker runs several tasks at once on threads of its own) or by the environment
+  variable ``DEMCAL_THREADS``;
+- a ``Simulation`` uses that many threads once it holds ``THREADS_MIN_SPHERES`` spheres
+  (below that, starting the threads each step costs more than they save), unless it was made
+  with ``threads=n``.
+
+Threads change only the order in which each body's contact forces are added, so a run on
+several threads follows the serial one to roundoff and, like any DEM, drifts from it after that
+(the same heap in distribution; ``tests/simulate/test_threads.py``).
+"""
+
+from __future__ import annotations
+
+import os
+from contextlib import contextmanager
+
+import numba
+
+from demcal.errors import InputError
+
+#: Spheres from which a run uses several threads by default.
+THREADS_MIN_SPHERES = 8192
+
+# The step launches a few parallel loops per time step: OpenMP starts them in microseconds, where
+# TBB and numba's own queue take up to a few hundred (measured on 2 cores; each is used if the
+# one before it is missing).
+numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
+
+_limit: int | None = None
+
+
+def threads_per_run() -> int:
+    """Threads a large run may use in this process (at least 1)."""
+    cores = numba.config.NUMBA_NUM_THREADS
+    if _limit is not None:
+        return max(1, min(_limit, cores))
+    env = os.environ.get("DEMCAL_THREADS", "").strip()
+    if env:
+        if not env.isdigit() or int(env) < 1:
+            raise InputError(f"DEMCAL_THREADS must be a whole number >= 1, got {env!r}")
+        return min(int(env), cores)
+    return cores
+
+
+def limit_threads_per_run(n: int | None) -> None:
+    """Limit the threads of every run in this process to ``n`` (None: no limit). A campaign's
+    worker processes call it with 1 when they start."""
+    global _limit
+    _limit = None if n is None else int(n)
+
+
+@contextmanager
+def threads_limited_to(n: int | None):
+    """``limit_threads_per_run(n)`` for the duration of a block (None leaves it as it is)."""
+    global _limit
+    before = _limit
+    if n is not None:
+        _limit = int(n)
+    try:
+        yield
+    finally:
+        _limit = before
