@@ -813,7 +813,7 @@ class Simulation:
         self._steps_since_sort += n_steps
         g = self._gravity
         ranged = self.threads is not None or self.n_spheres >= THREADS_MIN_SPHERES
-        numba.set_num_threads(self.threads_in_use())   # list rebuilds use threads at any size
+        numba.set_num_threads(self.threads_in_use())   # the list rebuilds too (one thread below the size)
         out = _advance(
             n_steps, self.time, self.dt, g[0], g[1], g[2], self.skin, self._lever,
             pt.rolling_model, pt.rolling_damping_ratio, pt.contact_effective_mass, self._need_rebuild,

@@ -9,12 +9,15 @@ instead splits its steps over threads (``simulate.forces``). The choice is made 
   Dask worker runs several tasks at once on threads of its own) or by the environment
   variable ``DEMCAL_THREADS``;
 - a ``Simulation`` uses that many threads once it holds ``THREADS_MIN_SPHERES`` spheres
-  (below that, starting the threads each step costs more than they save), unless it was made
-  with ``threads=n``.
+  (below that, starting the threads each step costs more than they save: one thread), unless
+  it was made with ``threads=n``.
 
-Threads change only the order in which each body's contact forces are added, so a run on
-several threads follows the serial one to roundoff and, like any DEM, drifts from it after that
-(the same heap in distribution; ``tests/simulate/test_threads.py``).
+The number of threads never changes a run's result: from ``THREADS_MIN_SPHERES`` on, the
+contacts are summed in fixed ranges whatever the number of threads
+(``simulate.forces.contact_forces_ranged``), and the list rebuilds give the same lists on any
+number. Those ranged sums differ from the plain loop's only in the order of the additions: a run
+follows the plain one to roundoff and, like any DEM, drifts from it after that, the same heap in
+distribution (``tests/simulate/test_threads.py``).
 """
 
 from __future__ import annotations
