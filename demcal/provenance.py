@@ -30,7 +30,9 @@ from demcal.jsonio import to_jsonable
 #: Revision 7: a simulation of 4,096 spheres or more is sorted in memory every 1,000 steps, and
 #: one of 8,192 or more sums its contacts in fixed ranges run on threads (``simulate.forces``):
 #: the same physics with the additions in another order. Smaller runs are the same to the bit.
-MODEL_VERSION = 7
+#: Revision 8: IEEE arithmetic in every kernel (no ``fastmath``), so that a run gives the same
+#: bits whether its kernels were compiled in the process or loaded from the cache.
+MODEL_VERSION = 8
 
 
 def run_key(inputs: dict) -> str:

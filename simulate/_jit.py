@@ -1,13 +1,21 @@
 """One shared set of numba JIT flags for every simulate kernel, and the kernel cache guard.
 
-``fastmath`` is restricted to the flags that only reorder or contract arithmetic; ``nnan`` and
-``ninf`` are left out on purpose, so that comparisons with NaN and infinity keep their meaning
-(the engine must be able to see a non-finite state and stop).
+Arithmetic is IEEE, without ``fastmath``. Its flags let LLVM fuse, reorder and approximate
+across whatever code it sees at once, and that depends on how a kernel was built: compiled in
+this process with its callees, or loaded from the cache. With them the same run gave other
+bits in a fresh process than in the next one (spring-dashpot rolling, threaded runs); without
+them it does not, at no measurable cost in speed (``tests/simulate/test_jit.py``). Leaving out
+``nnan`` and ``ninf`` also keeps comparisons with NaN and infinity meaningful (the engine must
+be able to see a non-finite state and stop).
 
 Kernels are cached on disk (``cache=True``), so a second run loads machine code instead of
 compiling. numba checks only the source file of each cached function, while the engine's
 kernels inline evaluators from several modules; ``refresh_stale_cache`` therefore drops the
 cached kernels of this package whenever any of those sources changes.
+
+``serial_or_threaded`` pairs a serial kernel with its threaded variant, chosen when the caller
+compiles, so that the threaded variants (about half of the compile time) are compiled only by
+a process that runs on threads.
 """
 
 from __future__ import annotations
@@ -16,6 +24,9 @@ import hashlib
 from pathlib import Path
 
 import numba
+from numba import types
+from numba.core.errors import TypingError
+from numba.extending import overload
 
 #: Flags of every compiled kernel.
 JIT_FLAGS = dict(
@@ -23,7 +34,7 @@ JIT_FLAGS = dict(
     nogil=True,
     error_model="numpy",
     boundscheck=False,
-    fastmath={"nsz", "arcp", "contract", "afn", "reassoc"},
+    fastmath=False,
 )
 
 #: Small evaluators inlined into the kernels that call them.
@@ -68,3 +79,27 @@ def threaded_kernel(fn):
 def evaluator(fn):
     """Compile ``fn`` with the shared flags, inlined at numba level into its callers."""
     return numba.njit(**INLINE_FLAGS)(fn)
+
+
+def serial_or_threaded(serial, threaded):
+    """One kernel of two variants: ``f = serial_or_threaded(a, b)`` is called in a kernel as
+    ``f(use_threads, *args)`` with ``use_threads`` a constant (a literal ``True`` or ``False``
+    passed down from a caller) and runs ``b(*args)`` if it is true, else ``a(*args)``. Only the
+    chosen variant is compiled into the caller, so a serial loop never compiles the threaded
+    kernels (about half of the engine's compile time)."""
+
+    def either(use_threads, *args):
+        return (threaded if use_threads else serial)(*args)
+
+    @overload(either, jit_options=JIT_FLAGS)
+    def _either(use_threads, *args):
+        if not isinstance(use_threads, types.BooleanLiteral):
+            raise TypingError(f"{serial.__name__}: 'use_threads' must be a constant True or False")
+        chosen = threaded if use_threads.literal_value else serial
+
+        def call(use_threads, *args):
+            return chosen(*args)
+
+        return call
+
+    return either

@@ -63,7 +63,9 @@ Threads. From 8,192 spheres (``simulate.threads``) the kicks, the sphere positio
 contact forces run on numba's threads, the contacts split into fixed ranges
 (``simulate.forces.contact_forces_ranged``), and the list rebuilds' per-sphere passes too: a
 run gives the same result on any number of threads. A campaign's worker processes run theirs
-on one thread each; a single large run uses every core.
+on one thread each; a single large run uses every core. The step loop is compiled twice
+(``_advance_serial``, ``_advance_ranged``), each with only its own kernels, so a process that
+runs small rigs only never compiles the threaded ones.
 
 Engine hooks (off by default, switched by the material table, so that ``MaterialTable.
 from_parameters`` carries them from ``DEMParameters``; ``simulate.extensions.ENGINE_HOOKS``):
@@ -92,7 +94,7 @@ import numba
 import numpy as np
 
 from demcal.errors import InputError, SimulationError
-from demcal.simulate._jit import evaluator, kernel, threaded_kernel
+from demcal.simulate._jit import evaluator, kernel, serial_or_threaded, threaded_kernel
 from demcal.simulate.clump import ClumpTemplate
 from demcal.simulate.contact.rolling import kick_mode, lever_index
 from demcal.simulate.forces import (HIST_IMPACT_SPEED, HIST_ROLLING, contact_forces, contact_forces_ranged,
@@ -167,11 +169,21 @@ def _update_spheres_threaded(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, s
     return n_pairs_stale > 0, n_walls_stale > 0
 
 
+@kernel
+def _kick_drift(n_bodies, tau, dt, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn,
+                binvm, binvi):
+    """Kick every active body over ``tau``, then (``dt`` > 0) drift it over ``dt``."""
+    for b in range(n_bodies):
+        if bactive[b]:
+            half_kick(b, tau, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, mode)
+            if dt > 0.0:
+                drift(b, dt, bx, bv, bq, bL, bw, bR, binvi)
+
+
 @threaded_kernel
 def _kick_drift_threaded(n_bodies, tau, dt, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv,
                          brn, binvm, binvi):
-    """Kick every active body over ``tau``, then (``dt`` > 0) drift it over ``dt``, over threads
-    (each body its own)."""
+    """``_kick_drift`` over threads (each body its own)."""
     for b in numba.prange(n_bodies):
         if bactive[b]:
             half_kick(b, tau, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, mode)
@@ -211,15 +223,21 @@ def _wall_velocities(t, wvel, wspin, wwin, wvel_now, wspin_now):
             wspin_now[k, a] = wspin[k, a] if moving else 0.0
 
 
+kick_drift = serial_or_threaded(_kick_drift, _kick_drift_threaded)
+update_spheres = serial_or_threaded(_update_spheres, _update_spheres_threaded)
+all_contact_forces = serial_or_threaded(contact_forces, contact_forces_ranged)
+
+
 @kernel
-def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r, effective_mass,
-             need_rebuild, need_forces, ranged, pool_size,
-             n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, bactive,
-             n_spheres, sbody, soff, srad, sx, sx0, sxw, sallow, swallow,
-             pstart, ppi, pj, ph, wstart, ws, wk, wh,
-             wkind, worig, wnorm, wu, wv, whalf, wvel, wspin, wwin, wmat, wx0, wvel_now, wspin_now,
-             e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min,
-             lo, inv_cell, dims, cell_start):
+def _aside_buffers(n):
+    """Work arrays of ``contact_forces_ranged`` for ``n`` pairs: body, force, torque, rolling
+    torque, rolling limit."""
+    f = np.empty((n, 3))
+    return np.empty(n, np.int64), f, np.empty_like(f), np.empty_like(f), np.empty(n)
+
+
+@kernel
+def _advance(ranged, n_steps, t, dt, settings, bodies, spheres, lists, walls, table, grid):
     """Advance the state by ``n_steps`` steps (see the module docstring for the step).
 
     Between two steps the second half kick of one and the first of the next are one full kick
@@ -227,34 +245,30 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
     positions whenever Python sees them. Returns the new time, the (possibly rebuilt) Verlet
     lists and the numbers of pair-list and wall-list rebuilds.
 
-    ``ranged`` runs the kicks, the sphere positions and the contact forces on numba's threads
-    (``simulate.forces.contact_forces_ranged``; the same result on any number of them); the list
-    rebuilds stay on one.
+    ``ranged`` (a constant: ``_advance_serial``, ``_advance_ranged``) runs the kicks, the sphere
+    positions and the contact forces on numba's threads (``simulate.forces.contact_forces_ranged``;
+    the same result on any number of them). The other arguments are tuples, in the order
+    ``Simulation._advance`` packs them.
     """
+    gx, gy, gz, skin, lever_mode, rolling_model, eta_r, effective_mass, need_rebuild, need_forces, pool_size = settings
+    n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, bactive = bodies
+    n_spheres, sbody, soff, srad, sx, sx0, sxw, sallow, swallow = spheres
+    pstart, ppi, pj, ph, wstart, ws, wk, wh = lists
+    wkind, worig, wnorm, wu, wv, whalf, wvel, wspin, wwin, wmat, wx0, wvel_now, wspin_now = walls
+    e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min = table
+    lo, inv_cell, dims, cell_start = grid
     h = 0.5 * dt
     mode = kick_mode(lever_mode, rolling_model)
     n_walls = wkind.shape[0]
     wcv = np.empty((max(ws.shape[0], 1), 3))       # wall surface velocity at each wall contact
     # shares of a contact kept aside for a body of another range (ranged forces), a row per pair
-    aside_body = np.empty(ppi.shape[0] if ranged else 0, np.int64)
-    aside_f = np.empty((aside_body.shape[0], 3))
-    aside_t = np.empty_like(aside_f)
-    aside_rv = np.empty_like(aside_f)
-    aside_rm = np.empty(aside_body.shape[0])
+    aside_body, aside_f, aside_t, aside_rv, aside_rm = _aside_buffers(ppi.shape[0] if ranged else 0)
     n_rebuilds = 0
     n_wall_rebuilds = 0
     for step in range(-1 if need_forces else 0, n_steps):
         if step >= 0:
-            tau = h if step == 0 else dt
-            if ranged:
-                _kick_drift_threaded(n_bodies, tau, dt, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw, bR, bf,
-                                     bt, brm, brv, brn, binvm, binvi)
-            else:
-                for b in range(n_bodies):
-                    if bactive[b]:
-                        half_kick(b, tau, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi,
-                                  mode)
-                        drift(b, dt, bx, bv, bq, bL, bw, bR, binvi)
+            kick_drift(ranged, n_bodies, h if step == 0 else dt, dt, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw,
+                       bR, bf, bt, brm, brv, brn, binvm, binvi)
             _wall_velocities(t + h, wvel, wspin, wwin, wvel_now, wspin_now)
             for k in range(n_walls):
                 for a in range(3):
@@ -268,12 +282,8 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
             for a in range(3):
                 dw2 += (worig[k, a] - wx0[k, a]) ** 2
             wmax2 = max(wmax2, dw2)
-        if ranged:
-            pairs_stale, walls_stale = _update_spheres_threaded(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0,
-                                                                sxw, sallow, swallow, math.sqrt(wmax2))
-        else:
-            pairs_stale, walls_stale = _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw,
-                                                       sallow, swallow, math.sqrt(wmax2))
+        pairs_stale, walls_stale = update_spheres(ranged, n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw,
+                                                  sallow, swallow, math.sqrt(wmax2))
         if need_rebuild or pairs_stale:
             pstart, ppi, pj, ph = build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo,
                                                   inv_cell, dims, cell_start, pstart, pj, ph, sallow,
@@ -292,32 +302,29 @@ def _advance(n_steps, t, dt, gx, gy, gz, skin, lever_mode, rolling_model, eta_r,
         if wcv.shape[0] < ws.shape[0]:
             wcv = np.empty((2 * ws.shape[0], 3))
         _wall_contact_velocities(ws, wk, sx, srad, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wspin_now, wcv)
-        if ranged:
-            if aside_body.shape[0] < ppi.shape[0]:
-                aside_body = np.empty(2 * ppi.shape[0], np.int64)
-                aside_f = np.empty((aside_body.shape[0], 3))
-                aside_t = np.empty_like(aside_f)
-                aside_rv = np.empty_like(aside_f)
-                aside_rm = np.empty(aside_body.shape[0])
-            contact_forces_ranged(aside_body, aside_f, aside_t, aside_rm, aside_rv, pstart, wstart, hist_dt, dt,
-                                  lever_mode, rolling_model, eta_r, effective_mass, n_bodies, n_spheres, bx, bv, bw,
-                                  bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi,
-                                  pj, ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat, e_star,
-                                  g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min)
-        else:
-            contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass, n_bodies, bx, bv, bw,
-                           bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj,
-                           ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat,
-                           e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min)
+        if aside_body.shape[0] < (ppi.shape[0] if ranged else 0):
+            aside_body, aside_f, aside_t, aside_rv, aside_rm = _aside_buffers(2 * ppi.shape[0])
+        all_contact_forces(ranged, aside_body, aside_f, aside_t, aside_rm, aside_rv, pstart, wstart, hist_dt, dt,
+                           lever_mode, rolling_model, eta_r, effective_mass, n_bodies, n_spheres, bx, bv, bw, bR,
+                           bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph, ws, wk,
+                           wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat, e_star, g_star, damp, mu_s, mu_r, log_e,
+                           e_exp, log_v_ref, v_min)
     if n_steps > 0:
-        if ranged:
-            _kick_drift_threaded(n_bodies, h, 0.0, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw, bR, bf, bt,
-                                 brm, brv, brn, binvm, binvi)
-        else:
-            for b in range(n_bodies):
-                if bactive[b]:
-                    half_kick(b, h, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, mode)
+        kick_drift(ranged, n_bodies, h, 0.0, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv,
+                   brn, binvm, binvi)
     return t, pstart, ppi, pj, ph, wstart, ws, wk, wh, n_rebuilds, n_wall_rebuilds
+
+
+@kernel
+def _advance_serial(n_steps, t, dt, settings, bodies, spheres, lists, walls, table, grid):
+    """``_advance`` on one thread (only the serial kernels compiled in)."""
+    return _advance(False, n_steps, t, dt, settings, bodies, spheres, lists, walls, table, grid)
+
+
+@kernel
+def _advance_ranged(n_steps, t, dt, settings, bodies, spheres, lists, walls, table, grid):
+    """``_advance`` with the kicks, sphere positions and contact forces on threads."""
+    return _advance(True, n_steps, t, dt, settings, bodies, spheres, lists, walls, table, grid)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -814,18 +821,19 @@ class Simulation:
         g = self._gravity
         ranged = self.threads is not None or self.n_spheres >= THREADS_MIN_SPHERES
         numba.set_num_threads(self.threads_in_use())   # the list rebuilds too (one thread below the size)
-        out = _advance(
-            n_steps, self.time, self.dt, g[0], g[1], g[2], self.skin, self._lever,
-            pt.rolling_model, pt.rolling_damping_ratio, pt.contact_effective_mass, self._need_rebuild,
-            self._need_forces, ranged, numba.config.NUMBA_NUM_THREADS,
-            self.n_bodies, B["bx"], B["bv"], B["bq"], B["bL"], B["bw"], B["bR"], B["bf"], B["bt"],
-            B["brm"], B["brv"], B["brn"], B["binvm"], B["binvi"], B["bmat"], B["bcount"], B["bactive"],
-            self.n_spheres, S["sbody"], S["soff"], S["srad"], S["sx"], S["sx0"], S["sxw"], S["sallow"],
-            S["swallow"], *self._pairs, *self._wpairs,
-            W["kind"], W["origin"], W["normal"], W["axis_u"], W["axis_v"], W["half"], W["velocity"],
-            W["spin"], W["window"], W["material"], self._wx0, self._wvel_now, self._wspin_now,
-            pt.e_star, pt.g_star, pt.damping, pt.mu_s, pt.mu_r, pt.log_e, pt.e_exponent, pt.log_v_ref,
-            pt.v_min, self.domain_lo, inv_cell, dims, cell_start)
+        out = (_advance_ranged if ranged else _advance_serial)(
+            n_steps, self.time, self.dt,
+            (g[0], g[1], g[2], self.skin, self._lever, pt.rolling_model, pt.rolling_damping_ratio,
+             pt.contact_effective_mass, self._need_rebuild, self._need_forces, numba.config.NUMBA_NUM_THREADS),
+            (self.n_bodies, B["bx"], B["bv"], B["bq"], B["bL"], B["bw"], B["bR"], B["bf"], B["bt"], B["brm"],
+             B["brv"], B["brn"], B["binvm"], B["binvi"], B["bmat"], B["bcount"], B["bactive"]),
+            (self.n_spheres, S["sbody"], S["soff"], S["srad"], S["sx"], S["sx0"], S["sxw"], S["sallow"],
+             S["swallow"]),
+            (*self._pairs, *self._wpairs),
+            (W["kind"], W["origin"], W["normal"], W["axis_u"], W["axis_v"], W["half"], W["velocity"], W["spin"],
+             W["window"], W["material"], self._wx0, self._wvel_now, self._wspin_now),
+            (pt.e_star, pt.g_star, pt.damping, pt.mu_s, pt.mu_r, pt.log_e, pt.e_exponent, pt.log_v_ref, pt.v_min),
+            (self.domain_lo, inv_cell, dims, cell_start))
         self.time = out[0]
         self._pairs = out[1:5]
         self._wpairs = out[5:9]

@@ -46,11 +46,12 @@ def history_width(velocity_restitution: bool, rolling_model: int) -> int:
 
 
 @kernel
-def contact_forces(hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass, n_bodies, bx, bv, bw, bR,
-                   bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph,
-                   ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat,
+def contact_forces(fbody, ff, ft, frm, frv, pstart, wstart, hist_dt, dt, lever_mode, rolling_model, eta_r,
+                   effective_mass, n_bodies, n_spheres, bx, bv, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat,
+                   bcount, sbody, sx, srad, ppi, pj, ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat,
                    e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min):
-    """Contact forces, torques and rolling torques on every body from the Verlet lists.
+    """Contact forces, torques and rolling torques on every body from the Verlet lists (the
+    arguments of ``contact_forces_ranged``; its work arrays and row pointers unused here).
 
     ``hist_dt`` is the time step used to accumulate tangential displacement (0 for a force
     evaluation that must not advance the contact history). A pair with ``e_exp`` != 0 takes

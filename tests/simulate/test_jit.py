@@ -1,0 +1,78 @@
+"""How the kernels are compiled (``simulate._jit``): a run gives the same bits whether its
+kernels were compiled in the process or loaded from numba's cache, and a kernel of two variants
+compiles only the one its caller chose."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import numba
+import pytest
+from numba.core.errors import TypingError
+
+from demcal.simulate._jit import serial_or_threaded
+
+# Three short pours whose arithmetic differs most between models: the default, the
+# spring-dashpot rolling with e(v) and effective mass (exp, log, pow), and the threaded loop.
+_POURS = textwrap.dedent("""
+    import hashlib, numpy as np
+    from demcal.simulate.params import DEMParameters
+    from demcal.simulate.scenes import build_paper_repose_case
+    hooks = dict(rolling_model="epsd", e_pp_exponent=0.05, e_pw_exponent=0.05, contact_effective_mass=True)
+    for kw, threads in (({}, None), (hooks, None), ({}, 2)):
+        sim = build_paper_repose_case(DEMParameters().with_(**kw), seed=3, n_clumps=200)
+        sim.threads = threads
+        sim.run(duration=0.4)
+        h = hashlib.sha256(np.ascontiguousarray(sim.positions()).tobytes())
+        h.update(np.ascontiguousarray(sim.velocities()).tobytes())
+        print(h.hexdigest())
+""")
+
+
+def test_a_run_is_the_same_compiled_or_loaded_from_the_cache(tmp_path):
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), NUMBA_NUM_THREADS="2")
+
+    def pours():
+        done = subprocess.run([sys.executable, "-c", _POURS], env=env, capture_output=True, text=True,
+                              timeout=900)
+        assert done.returncode == 0, done.stderr[-3000:]
+        return done.stdout.split()
+
+    compiled = pours()       # an empty cache: every kernel compiled in this process
+    loaded = pours()         # the same kernels loaded from the cache
+    assert len(compiled) == 3
+    assert compiled == loaded
+
+
+def _twice(x):
+    return 2.0 * x
+
+
+def _thrice(x):
+    return 3.0 * x
+
+
+def test_serial_or_threaded_compiles_only_the_chosen_variant():
+    serial, threaded = numba.njit(_twice), numba.njit(_thrice)
+    either = serial_or_threaded(serial, threaded)
+
+    @numba.njit
+    def on_one(x):
+        return either(False, x)
+
+    @numba.njit
+    def on_many(x):
+        return either(True, x)
+
+    @numba.njit
+    def undecided(flag, x):
+        return either(flag, x)
+
+    assert on_one(5.0) == 10.0
+    assert threaded.signatures == []     # the serial caller never compiled the other variant
+    assert on_many(5.0) == 15.0
+    with pytest.raises(TypingError, match="constant True or False"):
+        undecided(True, 5.0)
