@@ -124,6 +124,6 @@ def compile_kernels() -> None:
     """Load the engine's compiled kernels into this process, compiling them first if this
     installation has none yet (20-50 s, once: they are cached on disk), by one step of a
     two-segment paper case (the serial step loop; a run on threads compiles its own once); a
-    second call does nothing. Called before local worker processes
-    start, so that they load the kernels instead of each compiling them at the same time."""
+    second call does nothing. Called before local worker processes start, so that they load the
+    kernels instead of each compiling them at the same time."""
     build_paper_repose_case(DEMParameters(), seed=0, n_clumps=2, fill_time=0.0).run(n_steps=1)

@@ -31,15 +31,14 @@ def _cloud(seed, n_bodies=120, per=5):
 @pytest.mark.parametrize("seed", [0, 1])
 def test_pair_list_equals_brute_force(seed, threads):
     numba.set_num_threads(min(threads, POOL))
-    build = build_pair_list
     sx, srad, sbody, active = _cloud(seed)
     skin, lo, hi = 0.002, np.array([-0.06, -0.06, -0.06]), np.array([0.06, 0.06, 0.06])
     cell_xyz, dims = grid_shape(lo, hi, 2 * srad.max() + skin)
     cell_start = np.zeros(padded_cell_count(dims) + 1, np.int64)
     empty = (np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)))
     allow = np.zeros(sx.shape[0])
-    start, pi, pj, hist = build(sx.shape[0], sx, srad, sbody, active, skin, lo,
-                                1.0 / cell_xyz, dims, cell_start, *empty, allow, POOL)
+    start, pi, pj, hist = build_pair_list(sx.shape[0], sx, srad, sbody, active, skin, lo,
+                                          1.0 / cell_xyz, dims, cell_start, *empty, allow, POOL)
     d = np.linalg.norm(sx[:, None] - sx[None], axis=2)
     i, j = np.nonzero(np.triu(d < srad[:, None] + srad[None] + skin, k=1))
     keep = (sbody[i] != sbody[j]) & active[sbody[i]] & active[sbody[j]]
@@ -60,8 +59,8 @@ def test_pair_list_equals_brute_force(seed, threads):
         assert np.all(pi[start[row]:start[row + 1]] == row)
     # a rebuild carries the history of pairs that persist
     hist[:] = np.arange(3 * len(pi)).reshape(-1, 3)
-    start2, pi2, pj2, hist2 = build(sx.shape[0], sx, srad, sbody, active, skin, lo,
-                                    1.0 / cell_xyz, dims, cell_start, start, pj, hist, allow, POOL)
+    start2, pi2, pj2, hist2 = build_pair_list(sx.shape[0], sx, srad, sbody, active, skin, lo,
+                                              1.0 / cell_xyz, dims, cell_start, start, pj, hist, allow, POOL)
     np.testing.assert_array_equal(hist2, hist)
 
 
