@@ -1,4 +1,5 @@
-"""``demcal simulate``: run one lab-rig twin (repose, drop, incline) and store its result.
+"""``demcal simulate``: run one lab-rig twin (repose, drop, incline) and store its result;
+``demcal compile``: compile the DEM kernels once for this installation.
 
     demcal simulate repose --profile quick --set e_pp=0.32 --seed 3 --json run.json
     demcal simulate drop --height 400 --orientation random --pair particle-steel --json drop.json
@@ -66,6 +67,25 @@ def register(subparsers) -> None:
                         "and its contact with the particle: restitution, static_friction, "
                         "rolling_friction (repeatable)")
     p.set_defaults(handler=run)
+    c = subparsers.add_parser(
+        "compile", help="compile the DEM kernels once for this installation",
+        description="Compile the DEM engine's kernels (the step loop on one thread and on "
+                    "threads) and cache them on disk, so that no later command compiles: run "
+                    "once after installing or updating demcal. Takes a minute or two; a second "
+                    "call only loads them.")
+    c.set_defaults(handler=compile_engine)
+
+
+def compile_engine(args) -> int:
+    """``demcal compile``: compile (or load) every kernel variant and say how long it took."""
+    import time
+
+    from demcal.simulate.scenes import compile_kernels
+
+    start = time.perf_counter()
+    compile_kernels(threaded=True)
+    print(f"DEM kernels ready in {time.perf_counter() - start:.1f} s; later commands load them from the cache")
+    return 0
 
 
 def parse_sets(items) -> dict:

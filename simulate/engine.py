@@ -94,7 +94,7 @@ import numba
 import numpy as np
 
 from demcal.errors import InputError, SimulationError
-from demcal.simulate._jit import evaluator, kernel, serial_or_threaded, threaded_kernel
+from demcal.simulate._jit import evaluator, kernel, serial_or_threaded, threaded_kernel, loop_kernel
 from demcal.simulate.clump import ClumpTemplate
 from demcal.simulate.contact.rolling import kick_mode, lever_index
 from demcal.simulate.forces import (HIST_IMPACT_SPEED, HIST_ROLLING, contact_forces, contact_forces_ranged,
@@ -140,13 +140,13 @@ def _place_sphere(s, b, soff, bx, bR, sx, sx0, sxw, sallow, swallow, wmove):
     return pair_stale, (lim <= 0.0) | (d2 > lim * lim)
 
 
-@kernel
-def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sallow, swallow, wmove):
-    """World positions of the spheres; returns whether the pair list and the wall list need a
-    rebuild (``_place_sphere``)."""
+@loop_kernel
+def _update_sphere_rows(s0, s1, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sallow, swallow, wmove):
+    """World positions of spheres ``s0``..``s1 - 1``; returns whether the pair list and the wall
+    list need a rebuild (``_place_sphere``)."""
     pairs_stale = False
     walls_stale = False
-    for s in range(n_spheres):
+    for s in range(s0, s1):
         b = sbody[s]
         if bactive[b]:
             p, w = _place_sphere(s, b, soff, bx, bR, sx, sx0, sxw, sallow, swallow, wmove)
@@ -155,43 +155,59 @@ def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sallo
     return pairs_stale, walls_stale
 
 
+@loop_kernel
+def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sallow, swallow, wmove):
+    """World positions of the spheres; returns whether the pair list and the wall list need a
+    rebuild."""
+    return _update_sphere_rows(0, n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sallow, swallow, wmove)
+
+
+#: Blocks of rows the threaded kicks and sphere updates are split into.
+N_BLOCKS = 64
+
+
 @threaded_kernel
 def _update_spheres_threaded(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sallow, swallow, wmove):
-    """``_update_spheres`` over threads."""
+    """``_update_spheres`` over threads, a block of rows each."""
     n_pairs_stale = 0
     n_walls_stale = 0
-    for s in numba.prange(n_spheres):
-        b = sbody[s]
-        if bactive[b]:
-            p, w = _place_sphere(s, b, soff, bx, bR, sx, sx0, sxw, sallow, swallow, wmove)
-            n_pairs_stale += p
-            n_walls_stale += w
+    for c in numba.prange(N_BLOCKS):
+        p, w = _update_sphere_rows(n_spheres * c // N_BLOCKS, n_spheres * (c + 1) // N_BLOCKS, sbody, soff, bx, bR,
+                                   bactive, sx, sx0, sxw, sallow, swallow, wmove)
+        n_pairs_stale += p
+        n_walls_stale += w
     return n_pairs_stale > 0, n_walls_stale > 0
 
 
-@kernel
-def _kick_drift(n_bodies, tau, dt, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn,
-                binvm, binvi):
-    """Kick every active body over ``tau``, then (``dt`` > 0) drift it over ``dt``."""
-    for b in range(n_bodies):
+@loop_kernel
+def _kick_drift_rows(b0, b1, tau, dt, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn,
+                     binvm, binvi):
+    """Kick active bodies ``b0``..``b1 - 1`` over ``tau``, then (``dt`` > 0) drift them over ``dt``."""
+    for b in range(b0, b1):
         if bactive[b]:
             half_kick(b, tau, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, mode)
             if dt > 0.0:
                 drift(b, dt, bx, bv, bq, bL, bw, bR, binvi)
+
+
+@loop_kernel
+def _kick_drift(n_bodies, tau, dt, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn,
+                binvm, binvi):
+    """Kick every active body over ``tau``, then (``dt`` > 0) drift it over ``dt``."""
+    _kick_drift_rows(0, n_bodies, tau, dt, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn,
+                     binvm, binvi)
 
 
 @threaded_kernel
 def _kick_drift_threaded(n_bodies, tau, dt, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv,
                          brn, binvm, binvi):
-    """``_kick_drift`` over threads (each body its own)."""
-    for b in numba.prange(n_bodies):
-        if bactive[b]:
-            half_kick(b, tau, gx, gy, gz, bv, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, mode)
-            if dt > 0.0:
-                drift(b, dt, bx, bv, bq, bL, bw, bR, binvi)
+    """``_kick_drift`` over threads, a block of bodies each."""
+    for c in numba.prange(N_BLOCKS):
+        _kick_drift_rows(n_bodies * c // N_BLOCKS, n_bodies * (c + 1) // N_BLOCKS, tau, dt, gx, gy, gz, mode,
+                         bactive, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi)
 
 
-@kernel
+@loop_kernel
 def _wall_contact_velocities(ws, wk, sx, srad, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wspin_now, wcv):
     """Velocity of the wall's surface at each sphere-wall contact into ``wcv``: the wall's
     translation, plus spin x (p - centre) for a spinning wall at the contact point p (the
@@ -212,7 +228,7 @@ def _wall_contact_velocities(ws, wk, sx, srad, wkind, worig, wnorm, wu, wv, whal
             wcv[q, 2] += wspin_now[k, 0] * ry - wspin_now[k, 1] * rx
 
 
-@kernel
+@loop_kernel
 def _wall_velocities(t, wvel, wspin, wwin, wvel_now, wspin_now):
     """Velocity and spin of each wall during the step whose midpoint is ``t`` (zero outside its
     window)."""

@@ -17,7 +17,7 @@ import math
 import numba
 import numpy as np
 
-from demcal.simulate._jit import kernel, threaded_kernel
+from demcal.simulate._jit import kernel, threaded_kernel, loop_kernel
 from demcal.simulate.contact.hertz_mindlin import impact_damping, normal_force, tangential_force
 from demcal.simulate.contact.rolling import (EPSD, LIGGGHTS_REFF, constant_torque, epsd_torque,
                                              rolling_lever)
@@ -140,7 +140,7 @@ def contact_forces_ranged(fbody, ff, ft, frm, frv, pstart, wstart, hist_dt, dt, 
             brm[b] += frm[e]
 
 
-@kernel
+@loop_kernel
 def _zero(b0, b1, bf, bt, brm, brv, brn):
     for b in range(b0, b1):
         for a in range(3):
@@ -151,7 +151,7 @@ def _zero(b0, b1, bf, bt, brm, brv, brn):
         brm[b] = 0.0
 
 
-@kernel
+@loop_kernel
 def pair_forces(k0, k1, hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass, bx, bv, bw, bR, binvm,
                 binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph, e_star, g_star, damp, mu_s, mu_r, log_e,
                 e_exp, log_v_ref, v_min, bf, bt, brm, brv, b_lo, b_hi, fbody, ff, ft, frm, frv):
@@ -315,7 +315,7 @@ def pair_forces(k0, k1, hist_dt, dt, lever_mode, rolling_model, eta_r, effective
     return n_aside
 
 
-@kernel
+@loop_kernel
 def wall_forces(q0, q1, hist_dt, lever_mode, rolling_model, eta_r, effective_mass, bx, bv, bw, bR, binvm,
                 binvi, bmat, bcount, sbody, sx, srad, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv,
                 wmat, e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min, bf, bt, brm, brv, brn):
@@ -399,7 +399,7 @@ def wall_forces(q0, q1, hist_dt, lever_mode, rolling_model, eta_r, effective_mas
 
 
 
-@kernel
+@loop_kernel
 def _count_contacts(n_bodies, bcount, sbody, sx, srad, ppi, pj, ws, wk, wkind, worig, wnorm, wu, wv,
                     whalf):
     """Number of touching sphere-sphere and sphere-wall contacts of each body, into ``bcount``."""

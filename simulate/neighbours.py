@@ -48,7 +48,7 @@ import math
 import numba
 import numpy as np
 
-from demcal.simulate._jit import kernel, threaded_kernel
+from demcal.simulate._jit import kernel, threaded_kernel, loop_kernel
 from demcal.simulate.walls import CYLINDER, PLANE, wall_distance
 
 
@@ -279,7 +279,7 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
     return start, pi, pj, hist
 
 
-@kernel
+@loop_kernel
 def _shell_is_clear(p, cs, bs, cell_start, nx, ny, nz):
     """Whether the shell of cells just beyond the 27 around sphere ``p`` (cell order) holds no
     sphere but of its own clump."""

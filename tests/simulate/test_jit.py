@@ -76,3 +76,12 @@ def test_serial_or_threaded_compiles_only_the_chosen_variant():
     assert on_many(5.0) == 15.0
     with pytest.raises(TypingError, match="constant True or False"):
         undecided(True, 5.0)
+
+
+def test_demcal_compile_readies_the_serial_and_the_threaded_step_loop(capsys):
+    from demcal.cli import main
+    from demcal.simulate import engine
+
+    assert main(["compile"]) == 0
+    assert "DEM kernels ready" in capsys.readouterr().out
+    assert engine._advance_serial.signatures and engine._advance_ranged.signatures
