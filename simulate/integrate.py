@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from demcal.simulate._jit import evaluator, kernel
+from demcal.simulate._jit import evaluator, kernel, loop_kernel
 from demcal.simulate.contact.rolling import KICK_ELASTIC, KICK_RELATIVE, cap_rolling_impulse
 
 
@@ -115,7 +115,7 @@ def pair_rolling_scale(R, inv_i, bi, bj, tx, ty, tz, magnitude, wrx, wry, wrz, d
     return _pair_rolling_scale_exact(R, inv_i, bi, bj, tx * dt, ty * dt, tz * dt, wrx, wry, wrz)
 
 
-@kernel
+@loop_kernel
 def _pair_rolling_scale_exact(R, inv_i, bi, bj, jx, jy, jz, wrx, wry, wrz):
     """``pair_rolling_scale`` for an impulse ``j`` that may reverse ``w_r`` (rare, not inlined)."""
     dix, diy, diz = apply_inverse_inertia(R, bi, inv_i, jx, jy, jz)
