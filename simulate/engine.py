@@ -94,7 +94,7 @@ import numba
 import numpy as np
 
 from demcal.errors import InputError, SimulationError
-from demcal.simulate._jit import evaluator, kernel, serial_or_threaded, threaded_kernel, loop_kernel
+from demcal.simulate._jit import evaluator, kernel, loop_kernel, serial_or_threaded, threaded_kernel
 from demcal.simulate.clump import ClumpTemplate
 from demcal.simulate.contact.rolling import kick_mode, lever_index
 from demcal.simulate.forces import (HIST_IMPACT_SPEED, HIST_ROLLING, contact_forces, contact_forces_ranged,

@@ -17,7 +17,7 @@ import math
 import numba
 import numpy as np
 
-from demcal.simulate._jit import kernel, threaded_kernel, loop_kernel
+from demcal.simulate._jit import kernel, loop_kernel, threaded_kernel
 from demcal.simulate.contact.hertz_mindlin import impact_damping, normal_force, tangential_force
 from demcal.simulate.contact.rolling import (EPSD, LIGGGHTS_REFF, constant_torque, epsd_torque,
                                              rolling_lever)

@@ -48,7 +48,7 @@ import math
 import numba
 import numpy as np
 
-from demcal.simulate._jit import kernel, threaded_kernel, loop_kernel
+from demcal.simulate._jit import kernel, loop_kernel, threaded_kernel
 from demcal.simulate.walls import CYLINDER, PLANE, wall_distance
 
 
