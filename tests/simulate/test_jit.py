@@ -78,10 +78,16 @@ def test_serial_or_threaded_compiles_only_the_chosen_variant():
         undecided(True, 5.0)
 
 
-def test_demcal_compile_readies_the_serial_and_the_threaded_step_loop(capsys):
-    from demcal.cli import main
-    from demcal.simulate import engine
-
-    assert main(["compile"]) == 0
-    assert "DEM kernels ready" in capsys.readouterr().out
-    assert engine._advance_serial.signatures and engine._advance_ranged.signatures
+def test_demcal_compile_readies_the_serial_and_the_threaded_step_loop():
+    # a process of its own: in this one another test may already have loaded either variant
+    check = textwrap.dedent("""
+        from demcal.cli import main
+        from demcal.simulate import engine
+        assert not engine._advance_serial.signatures and not engine._advance_ranged.signatures
+        assert main(["compile"]) == 0
+        print(bool(engine._advance_serial.signatures), bool(engine._advance_ranged.signatures))
+    """)
+    done = subprocess.run([sys.executable, "-c", check], capture_output=True, text=True, timeout=900)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "DEM kernels ready" in done.stdout
+    assert done.stdout.split()[-2:] == ["True", "True"]
