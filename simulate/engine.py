@@ -517,6 +517,7 @@ class Simulation:
         self.escaped: list[Escape] = []
         self.n_bodies = 0
         self.n_spheres = 0
+        self._materials_checked: set[int] = set()    # body materials whose pairs are all defined
         self._b = {k: np.zeros((0,) + s, d) for k, (s, d) in _BODY_FIELDS.items()}
         self._s = {k: np.zeros((0,) + s, d) for k, (s, d) in _SPHERE_FIELDS.items()}
         # row of each body id and sphere id in the arrays above (the rows move when sorted)
@@ -714,7 +715,9 @@ class Simulation:
         self.n_bodies = b + 1
         self.n_spheres = s0 + ns
         # no rebuild: the next step admits the new spheres into the lists (``_advance``)
-        self._check_pairs_defined()
+        if mat not in self._materials_checked:   # the pairs only grow: a material checked stays so
+            self._check_pairs_defined()
+            self._materials_checked.add(mat)
         return b
 
     # ---------------------------------------------------------------- stability

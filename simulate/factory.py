@@ -43,9 +43,12 @@ import math
 import numpy as np
 
 from demcal.errors import InputError
-from demcal.simulate.integrate import matrix_from_quat, random_quaternions
-from demcal.simulate.neighbours import spheres_within
+from demcal.simulate.integrate import matrices_from_quats, quaternions_from_uniforms
+from demcal.simulate.neighbours import first_clear
 from demcal.simulate.walls import wall_distances
+
+#: Draws tested per call into numpy and numba (the clumps placed do not depend on it).
+DRAWS_AT_ONCE = 16
 
 
 class ParticleFactory:
@@ -193,31 +196,43 @@ class ParticleFactory:
 
     def _insert_one(self, sim, nearby, gap: float) -> bool:
         """Place the next clump at least ``gap`` [m] clear of the spheres ``nearby``
-        (positions, radii; the placed clump's spheres are appended)."""
+        (positions, radii; the placed clump's spheres are appended).
+
+        Each draw takes six numbers from the generator: three for the orientation, three for
+        the position. Draws are made ``DRAWS_AT_ONCE`` at a time and tested in order; the
+        generator is then set back to just after the draw placed, so the clumps, and the
+        numbers left for the next, are those of one draw at a time."""
         template = self._next_template()
         tpl = sim.templates[template]
         packed = sim._w
         existing, ex_r, n_near = nearby
-        reach = tpl.bounding_radius
-        for _ in range(self.max_attempts):
-            q = random_quaternions(self.rng, 1)[0]
-            pos = self.region_lo + self.rng.random(3) * (self.region_hi - self.region_lo)
-            R = matrix_from_quat(q)
-            centres = pos + (tpl.centres - tpl.centre_of_mass) @ R.T
-            if np.any(centres - tpl.radii[:, None] < self.region_lo) or \
-                    np.any(centres + tpl.radii[:, None] > self.region_hi):
-                self.failed_attempts += 1
+        offsets = tpl.centres - tpl.centre_of_mass
+        radii = tpl.radii[:, None]
+        tried = 0
+        while tried < self.max_attempts:
+            n_draws = min(DRAWS_AT_ONCE, self.max_attempts - tried)
+            state = self.rng.bit_generator.state
+            u = self.rng.random((n_draws, 6))
+            q = quaternions_from_uniforms(u[:, :3])
+            pos = self.region_lo + u[:, 3:] * (self.region_hi - self.region_lo)
+            centres = pos[:, None, :] + offsets @ matrices_from_quats(q).transpose(0, 2, 1)
+            inside = ~(np.any(centres - radii < self.region_lo, axis=(1, 2))
+                       | np.any(centres + radii > self.region_hi, axis=(1, 2)))
+            m = -1
+            while True:
+                m = first_clear(m + 1, existing, ex_r, n_near, pos, tpl.bounding_radius, centres, tpl.radii,
+                                gap, inside)
+                if m < 0 or not packed["kind"].shape[0] or not np.any(wall_distances(packed, centres[m]) < radii):
+                    break
+            if m < 0:
+                self.failed_attempts += n_draws
+                tried += n_draws
                 continue
-            if spheres_within(existing, ex_r, n_near, pos, reach, centres, tpl.radii, gap):
-                self.failed_attempts += 1
-                continue
-            if packed["kind"].shape[0]:
-                dw = wall_distances(packed, centres)
-                if np.any(dw < tpl.radii[:, None]):
-                    self.failed_attempts += 1
-                    continue
-            body = sim.add_clump(template, pos, q, velocity=self.velocity, material=self.material)
-            existing[n_near:n_near + tpl.n_spheres] = centres
+            self.failed_attempts += m
+            self.rng.bit_generator.state = state
+            self.rng.random((m + 1, 6))     # the generator just after the draw placed
+            body = sim.add_clump(template, pos[m], q[m], velocity=self.velocity, material=self.material)
+            existing[n_near:n_near + tpl.n_spheres] = centres[m]
             ex_r[n_near:n_near + tpl.n_spheres] = tpl.radii
             nearby[2] = n_near + tpl.n_spheres
             self.bodies.append(body)

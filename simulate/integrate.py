@@ -362,10 +362,29 @@ def quat_multiply(a, b) -> np.ndarray:
 
 def random_quaternions(rng: np.random.Generator, n: int) -> np.ndarray:
     """``n`` uniformly distributed unit quaternions (Shoemake 1992, Graphics Gems III)."""
-    u1, u2, u3 = rng.random((3, n))
+    return quaternions_from_uniforms(rng.random((3, n)).T)
+
+
+def quaternions_from_uniforms(u) -> np.ndarray:
+    """Unit quaternions from rows of three uniform numbers in [0, 1) (Shoemake 1992): uniformly
+    distributed for uniform rows."""
+    u1, u2, u3 = np.asarray(u, dtype=float).T
     a, b = np.sqrt(1.0 - u1), np.sqrt(u1)
     return np.column_stack([a * np.sin(2 * np.pi * u2), a * np.cos(2 * np.pi * u2),
                             b * np.sin(2 * np.pi * u3), b * np.cos(2 * np.pi * u3)])
+
+
+def matrices_from_quats(q) -> np.ndarray:
+    """``matrix_from_quat`` of each row of ``q`` (n, 4), to the same bits: each row's norm is
+    taken as ``numpy.linalg.norm`` takes it (a dot product), the rest is elementwise."""
+    q = np.asarray(q, dtype=float)
+    norm = np.sqrt(np.array([row.dot(row) for row in q]))
+    w, x, y, z = (q / norm[:, None]).T
+    R = np.empty((q.shape[0], 3, 3))
+    R[:, 0] = np.column_stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)])
+    R[:, 1] = np.column_stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)])
+    R[:, 2] = np.column_stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)])
+    return R
 
 
 def axis_angle_quat(axis, angle: float) -> np.ndarray:

@@ -507,3 +507,13 @@ def spheres_within(x, r, n, centre, reach, cx, cr, gap) -> bool:
                 if math.sqrt(dx * dx + dy * dy + dz * dz) < cr[i] + r[j] + gap:
                     return True
     return False
+
+
+@numba.njit(cache=True)    # exact arithmetic, as spheres_within
+def first_clear(start, x, r, n, centres_of_mass, reach, cx, cr, gap, inside) -> int:
+    """The first candidate clump ``m >= start`` with ``inside[m]`` whose spheres ``cx[m]``, ``cr``
+    keep ``gap`` [m] from the first ``n`` spheres ``x``, ``r`` (``spheres_within``); -1 if none."""
+    for m in range(start, cx.shape[0]):
+        if inside[m] and not spheres_within(x, r, n, centres_of_mass[m], reach, cx[m], cr, gap):
+            return m
+    return -1

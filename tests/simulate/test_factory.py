@@ -84,7 +84,7 @@ SIZES = ((0.021, 0.0095), (0.023, 0.0100), (0.025, 0.0110), (0.025, 0.0110), (0.
          (0.029, 0.0120), (0.029, 0.0120), (0.029, 0.0120), (0.031, 0.0125))
 
 
-def _sized_sim(n, seed, sizes=SIZES, dt=7.43678e-5):
+def _sized_sim(n, seed, sizes=SIZES, dt=7.43678e-5, half=0.25):
     from collections import Counter
 
     from demcal.simulate.extensions import particle_of_size
@@ -93,7 +93,7 @@ def _sized_sim(n, seed, sizes=SIZES, dt=7.43678e-5):
     sim = simulation(params, dt=dt, lo=(-0.3, -0.3, -0.3), hi=(0.3, 0.3, 0.3))
     counts = Counter(sizes)
     ids = [sim.add_template(particle_of_size(params, size)) for size in counts]
-    factory = ParticleFactory(ids, n, (-0.25, -0.25, -0.25), (0.25, 0.25, 0.25), seed=seed,
+    factory = ParticleFactory(ids, n, (-half, -half, -half), (half, half, half), seed=seed,
                               end_time=0.0, weights=list(counts.values()))
     sim.add_factory(factory)
     return sim, factory, list(counts)
@@ -179,3 +179,40 @@ def test_bad_template_weights_are_named():
         ParticleFactory([0, 1], 5, LO, HI, seed=1, weights=[0.0, 0.0])
     with pytest.raises(InputError, match="template must be a template id"):
         ParticleFactory([], 5, LO, HI, seed=1)
+
+
+@pytest.mark.parametrize("draws_at_once", [1, 5, 64])
+def test_clumps_do_not_depend_on_how_many_draws_are_tested_at_once(monkeypatch, draws_at_once):
+    # a crowded region (many draws rejected) and two templates: the clumps, the rejected
+    # draws and the generator left behind are those of one draw at a time
+    import demcal.simulate.factory as factory_module
+
+    def placed(n_draws):
+        monkeypatch.setattr(factory_module, "DRAWS_AT_ONCE", n_draws)
+        sim, factory, _ = _sized_sim(150, seed=5, half=0.05)
+        sim.run(n_steps=0)
+        return sim, factory
+
+    ref, f_ref = placed(1)
+    sim, factory = placed(draws_at_once)
+    assert f_ref.failed_attempts > f_ref.inserted          # crowded: most draws rejected
+    assert factory.failed_attempts == f_ref.failed_attempts
+    assert factory.body_templates == f_ref.body_templates
+    np.testing.assert_array_equal(sim.positions(), ref.positions())
+    np.testing.assert_array_equal(sim.orientations(), ref.orientations())
+    assert factory.rng.random() == f_ref.rng.random()
+
+
+def test_batched_rotation_matrices_are_those_of_one_quaternion_at_a_time():
+    from demcal.simulate.integrate import (matrices_from_quats, matrix_from_quat, quaternions_from_uniforms,
+                                           random_quaternions)
+    rng = np.random.default_rng(2)
+    q = random_quaternions(rng, 500) * rng.uniform(0.5, 2.0, (500, 1))     # not normalised
+    batched = matrices_from_quats(q)
+    for k in range(len(q)):
+        np.testing.assert_array_equal(batched[k], matrix_from_quat(q[k]))
+    # Shoemake's map from uniforms: a row at a time as a block, and unit quaternions
+    u = rng.random((200, 3))
+    block = quaternions_from_uniforms(u)
+    np.testing.assert_array_equal(block, np.concatenate([quaternions_from_uniforms(row[None]) for row in u]))
+    np.testing.assert_allclose(np.linalg.norm(block, axis=1), 1.0, rtol=1e-14)
