@@ -828,7 +828,7 @@ class Simulation:
             self._need_rebuild = not admit_spheres(
                 self._admit_from, self.n_spheres, S["sx"], S["srad"], S["sbody"], B["bactive"], self.skin,
                 S["sx0"], S["sallow"], S["sxw"], S["swallow"], W["kind"], W["origin"], W["normal"],
-                W["axis_u"], W["axis_v"], W["half"], self._wx0)
+                W["axis_u"], W["axis_v"], W["half"], self._wx0, self.domain_lo, inv_cell, dims)
         self._admit_from = self.n_spheres
         pt = self.materials.compile()
         width = history_width(pt.velocity_restitution, pt.rolling_model)

@@ -44,7 +44,7 @@ import numpy as np
 
 from demcal.errors import InputError
 from demcal.simulate.integrate import matrices_from_quats, quaternions_from_uniforms
-from demcal.simulate.neighbours import first_clear
+from demcal.simulate.neighbours import bin_spheres, first_clear
 from demcal.simulate.walls import wall_distances
 
 #: Draws tested per call into numpy and numba (the clumps placed do not depend on it).
@@ -175,11 +175,9 @@ class ParticleFactory:
         reach = max(sim.templates[k].bounding_radius for k in self.templates) + gap
         margin = reach + (float(r[keep].max()) if keep.any() else 0.0)
         keep &= np.all((x > self.region_lo - margin) & (x < self.region_hi + margin), axis=1)
-        n_near = int(keep.sum())
-        room = n_near + (self.n_due(sim.time) - self.inserted) * max(sim.templates[k].n_spheres for k in self.templates)
-        nearby = [np.empty((room, 3)), np.empty(room), n_near]    # the batch's clumps are added
-        nearby[0][:n_near] = x[keep]
-        nearby[1][:n_near] = r[keep]
+        room = int(keep.sum()) + (self.n_due(sim.time) - self.inserted) * max(
+            sim.templates[k].n_spheres for k in self.templates)
+        nearby = _Nearby(x[keep], r[keep], room, self.region_lo - margin, self.region_hi + margin, margin)
         while self.inserted < self.n_due(sim.time):
             if not self._insert_one(sim, nearby, gap):
                 break
@@ -194,9 +192,9 @@ class ParticleFactory:
             self._pending = self.templates[int(self.rng.choice(len(self.templates), p=self.probabilities))]
         return self._pending
 
-    def _insert_one(self, sim, nearby, gap: float) -> bool:
-        """Place the next clump at least ``gap`` [m] clear of the spheres ``nearby``
-        (positions, radii; the placed clump's spheres are appended).
+    def _insert_one(self, sim, nearby: "_Nearby", gap: float) -> bool:
+        """Place the next clump at least ``gap`` [m] clear of the spheres ``nearby`` (the placed
+        clump's spheres are added to them).
 
         Each draw takes six numbers from the generator: three for the orientation, three for
         the position. Draws are made ``DRAWS_AT_ONCE`` at a time and tested in order; the
@@ -205,7 +203,6 @@ class ParticleFactory:
         template = self._next_template()
         tpl = sim.templates[template]
         packed = sim._w
-        existing, ex_r, n_near = nearby
         offsets = tpl.centres - tpl.centre_of_mass
         radii = tpl.radii[:, None]
         tried = 0
@@ -220,8 +217,7 @@ class ParticleFactory:
                        | np.any(centres + radii > self.region_hi, axis=(1, 2)))
             m = -1
             while True:
-                m = first_clear(m + 1, existing, ex_r, n_near, pos, tpl.bounding_radius, centres, tpl.radii,
-                                gap, inside)
+                m = nearby.first_clear(m + 1, pos, tpl.bounding_radius, centres, tpl.radii, gap, inside)
                 if m < 0 or not packed["kind"].shape[0] or not np.any(wall_distances(packed, centres[m]) < radii):
                     break
             if m < 0:
@@ -232,9 +228,7 @@ class ParticleFactory:
             self.rng.bit_generator.state = state
             self.rng.random((m + 1, 6))     # the generator just after the draw placed
             body = sim.add_clump(template, pos[m], q[m], velocity=self.velocity, material=self.material)
-            existing[n_near:n_near + tpl.n_spheres] = centres[m]
-            ex_r[n_near:n_near + tpl.n_spheres] = tpl.radii
-            nearby[2] = n_near + tpl.n_spheres
+            nearby.add(centres[m], tpl.radii)
             self.bodies.append(body)
             self.body_templates.append(template)
             self._pending = None
@@ -248,3 +242,44 @@ class ParticleFactory:
                 "start_time": self.start_time, "end_time": self.end_time, "material": self.material,
                 "velocity": self.velocity.tolist(), "batch_steps": self.batch_steps, "inserted": self.inserted,
                 "failed_attempts": self.failed_attempts}
+
+
+class _Nearby:
+    """The spheres a batch's clumps keep clear of: those near the insertion region, then the
+    batch's own as they are placed, in cells of side ``cell`` [m] (at least the reach of a
+    test) over ``lo``-``hi``, so a test looks at a few cells instead of every sphere."""
+
+    MAX_CELLS = 1 << 20
+
+    def __init__(self, x, r, room: int, lo, hi, cell: float):
+        self.x = np.empty((room, 3))
+        self.r = np.empty(room)
+        self.n = len(r)
+        self.x[:self.n] = x
+        self.r[:self.n] = r
+        self.rmax = float(r.max()) if self.n else 0.0
+        cell = max(cell, 1e-12)
+        while True:
+            self.dims = np.maximum(np.ceil((hi - lo) / cell), 1).astype(np.int64)
+            if self.dims.prod() <= self.MAX_CELLS:
+                break
+            cell *= 2.0
+        self.lo = np.asarray(lo, dtype=float)
+        self.inv_cell = np.full(3, 1.0 / cell)
+        self.head = np.full(int(self.dims.prod()), -1, np.int64)
+        self.nxt = np.empty(room, np.int64)
+        bin_spheres(self.x, 0, self.n, self.lo, self.inv_cell, self.dims, self.head, self.nxt)
+
+    def add(self, centres, radii) -> None:
+        n = self.n
+        self.x[n:n + len(radii)] = centres
+        self.r[n:n + len(radii)] = radii
+        self.n = n + len(radii)
+        self.rmax = max(self.rmax, float(radii.max()))
+        bin_spheres(self.x, n, self.n, self.lo, self.inv_cell, self.dims, self.head, self.nxt)
+
+    def first_clear(self, start: int, centres_of_mass, reach: float, centres, radii, gap: float, inside) -> int:
+        """The first candidate from ``start`` inside the region and ``gap`` clear of these
+        spheres (``simulate.neighbours.first_clear``); -1 if none."""
+        return first_clear(start, self.x, self.r, self.rmax, self.lo, self.inv_cell, self.dims, self.head, self.nxt,
+                           centres_of_mass, reach, centres, radii, gap, inside)

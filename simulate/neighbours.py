@@ -375,7 +375,7 @@ def build_wall_list(n_spheres, sx, srad, sbody, bactive, skin, kind, origin, nor
 
 @kernel
 def admit_spheres(first, n_spheres, sx, srad, sbody, bactive, skin, sx0, allow, sxw, wall_allow,
-                  kind, origin, normal, axis_u, axis_v, half, wall_ref):
+                  kind, origin, normal, axis_u, axis_v, half, wall_ref, lo, inv_cell, dims):
     """Admit spheres ``first``..``n_spheres - 1``, added since the last rebuild, into valid
     Verlet lists without rebuilding them; returns False if a rebuild is needed instead (the
     allowances may then have been narrowed: the rebuild sets them all anew).
@@ -388,6 +388,12 @@ def admit_spheres(first, n_spheres, sx, srad, sbody, bactive, skin, sx0, allow, 
     ``sxw``). A sphere allowance below skin / 2 is raised to it by narrowing the allowances of
     the neighbours in the way, if they have not yet moved as far; else, and for a wall allowance
     below skin / 2, the lists are rebuilt instead.
+
+    The earlier spheres are put in the cells of the grid ``lo``, ``inv_cell``, ``dims`` by
+    their reference positions (each new sphere joins as it is admitted), and a new sphere
+    looks at rings of cells around its own until no sphere beyond can come closer than the
+    nearest found: the same smallest allowance as over every sphere, in time independent of
+    the number of spheres.
     """
     wmax = 0.0
     for k in range(kind.shape[0]):
@@ -396,6 +402,14 @@ def admit_spheres(first, n_spheres, sx, srad, sbody, bactive, skin, sx0, allow, 
             d2 += (origin[k, a] - wall_ref[k, a]) ** 2
         wmax = max(wmax, math.sqrt(d2))
     least = 0.5 * skin
+    head = np.full(dims[0] * dims[1] * dims[2], -1, np.int64)   # a linked list of spheres per cell
+    nxt = np.empty(n_spheres, np.int64)
+    reach = 0.0    # the largest radius plus allowance in the cells: bounds how far a sphere matters
+    for j in range(first):
+        if bactive[sbody[j]]:
+            reach = _into_cell(j, sx0, srad, allow, lo, inv_cell, dims, head, nxt, reach)
+    edge = min(1.0 / inv_cell[0], 1.0 / inv_cell[1], 1.0 / inv_cell[2])
+    ring = np.empty(24 * max(dims[0], dims[1], dims[2]) ** 2 + 2, np.int64)
     for s in range(first, n_spheres):
         if not bactive[sbody[s]]:
             continue
@@ -406,30 +420,94 @@ def admit_spheres(first, n_spheres, sx, srad, sbody, bactive, skin, sx0, allow, 
             w_s = min(w_s, d - srad[s] - wmax)
         if w_s < least:
             return False
-        a_s = np.inf
-        for j in range(s):
-            if sbody[j] != sbody[s] and bactive[sbody[j]]:
-                a_s = min(a_s, _room(s, j, sx, sx0, srad) - allow[j])
+        a_s = _admit_rings(s, np.inf, False, least, sx, sx0, srad, sbody, allow, lo, inv_cell, dims, head, nxt,
+                           reach, edge, ring)
         if a_s < least:
             # give s skin / 2 by narrowing the neighbours that leave it less: valid while
             # each has not yet moved that far from its reference
-            for j in range(s):
-                if sbody[j] != sbody[s] and bactive[sbody[j]]:
-                    narrowed = _room(s, j, sx, sx0, srad) - least
-                    if narrowed < allow[j]:
-                        moved2 = 0.0
-                        for a in range(3):
-                            moved2 += (sx[j, a] - sx0[j, a]) ** 2
-                        if narrowed <= 0.0 or moved2 >= narrowed * narrowed:
-                            return False
-                        allow[j] = narrowed
+            if _admit_rings(s, least, True, least, sx, sx0, srad, sbody, allow, lo, inv_cell, dims, head, nxt,
+                            reach, edge, ring) < 0.0:
+                return False
             a_s = least
         allow[s] = a_s
         wall_allow[s] = w_s
         for a in range(3):
             sx0[s, a] = sx[s, a]
             sxw[s, a] = sx[s, a]
+        reach = _into_cell(s, sx0, srad, allow, lo, inv_cell, dims, head, nxt, reach)
     return True
+
+
+@kernel
+def _into_cell(j, sx0, srad, allow, lo, inv_cell, dims, head, nxt, reach):
+    """Put sphere j in the cell of its reference position (strays in the nearest boundary
+    cell); returns ``reach`` raised to its radius plus allowance."""
+    c = 0
+    for a in range(2, -1, -1):
+        k = min(max(int((sx0[j, a] - lo[a]) * inv_cell[a]), 0), dims[a] - 1)
+        c = c * dims[a] + k
+    nxt[j] = head[c]
+    head[c] = j
+    return max(reach, srad[j] + allow[j])
+
+
+@kernel
+def _admit_rings(s, limit, narrow, least, sx, sx0, srad, sbody, allow, lo, inv_cell, dims, head, nxt, reach,
+                 edge, ring):
+    """The smallest room |x_s - sx0_j| - R_s - R_j - allow_j over the spheres j in cells (other
+    clumps than s's), searched ring of cells by ring around s while a sphere beyond could have
+    less than that smallest and ``limit``; every ring when s lies outside the grid.
+
+    With ``narrow``, each j with room below ``least`` instead has its allowance narrowed to
+    leave s ``least`` (``admit_spheres``); returns -1 if one has already moved that far."""
+    cell = np.empty(3, np.int64)
+    inside = True
+    for a in range(3):
+        u = (sx[s, a] - lo[a]) * inv_cell[a]
+        inside &= 0.0 <= u < dims[a]
+        cell[a] = min(max(int(u), 0), dims[a] - 1)
+    best = np.inf
+    for r in range(max(dims[0], dims[1], dims[2])):
+        for q in range(_cells_in_ring(cell, r, dims, ring)):
+            j = head[ring[q]]
+            while j >= 0:
+                if sbody[j] != sbody[s] and not narrow:
+                    best = min(best, _room(s, j, sx, sx0, srad) - allow[j])
+                elif sbody[j] != sbody[s]:
+                    narrowed = _room(s, j, sx, sx0, srad) - least
+                    if narrowed < allow[j]:
+                        moved2 = 0.0
+                        for a in range(3):
+                            moved2 += (sx[j, a] - sx0[j, a]) ** 2
+                        if narrowed <= 0.0 or moved2 >= narrowed * narrowed:
+                            return -1.0
+                        allow[j] = narrowed
+                j = nxt[j]
+        # a sphere beyond ring r is at least r cell edges from s (a margin of a billionth of
+        # an edge over the rounding)
+        if inside and r * edge - srad[s] - reach > min(best, limit) + 1e-9 * edge:
+            break
+    return best
+
+
+@kernel
+def _cells_in_ring(cell, r, dims, out):
+    """The cells at Chebyshev distance ``r`` from ``cell`` within the grid, into ``out``;
+    returns how many."""
+    n = 0
+    for z in range(max(cell[2] - r, 0), min(cell[2] + r, dims[2] - 1) + 1):
+        for y in range(max(cell[1] - r, 0), min(cell[1] + r, dims[1] - 1) + 1):
+            row = (z * dims[1] + y) * dims[0]
+            if abs(z - cell[2]) == r or abs(y - cell[1]) == r:
+                for x in range(max(cell[0] - r, 0), min(cell[0] + r, dims[0] - 1) + 1):
+                    out[n] = row + x
+                    n += 1
+            else:   # r > 0 here: the ring's two ends of this row
+                for x in (cell[0] - r, cell[0] + r):
+                    if 0 <= x < dims[0]:
+                        out[n] = row + x
+                        n += 1
+    return n
 
 
 @kernel
@@ -487,33 +565,55 @@ def renumber_wall_list(new_index, start, ws, wk, hist):
     return _rows(s, new_index.shape[0]), s[order], wk[order].copy(), hist[order].copy()
 
 
+@numba.njit(cache=True)
+def bin_spheres(x, first, n, lo, inv_cell, dims, head, nxt):
+    """Spheres ``first``..``n - 1`` of ``x`` into the cells of a grid (``lo``, ``inv_cell``,
+    ``dims``; outside it, the nearest boundary cell): a linked list per cell, ``head[cell]``
+    and ``nxt[sphere]`` (-1 ends)."""
+    for j in range(first, n):
+        c = 0
+        for a in range(2, -1, -1):
+            c = c * dims[a] + min(max(int((x[j, a] - lo[a]) * inv_cell[a]), 0), dims[a] - 1)
+        nxt[j] = head[c]
+        head[c] = j
+
+
 @numba.njit(cache=True)    # exact arithmetic (no fastmath): the same placements as numpy's test
-def spheres_within(x, r, n, centre, reach, cx, cr, gap) -> bool:
-    """Whether any of the spheres ``cx``, ``cr`` (a clump centred at ``centre`` within ``reach``
-    of it) comes closer than ``gap`` [m] to any of the first ``n`` spheres ``x``, ``r``."""
-    if n == 0:
-        return False
-    rmax = r[0]
-    for j in range(1, n):
-        rmax = max(rmax, r[j])
-    box = reach + rmax + gap
-    for j in range(n):
-        if (abs(x[j, 0] - centre[0]) < box and abs(x[j, 1] - centre[1]) < box
-                and abs(x[j, 2] - centre[2]) < box):
-            for i in range(cx.shape[0]):
-                dx = x[j, 0] - cx[i, 0]
-                dy = x[j, 1] - cx[i, 1]
-                dz = x[j, 2] - cx[i, 2]
-                if math.sqrt(dx * dx + dy * dy + dz * dz) < cr[i] + r[j] + gap:
-                    return True
-    return False
-
-
-@numba.njit(cache=True)    # exact arithmetic, as spheres_within
-def first_clear(start, x, r, n, centres_of_mass, reach, cx, cr, gap, inside) -> int:
+def first_clear(start, x, r, rmax, lo, inv_cell, dims, head, nxt, centres_of_mass, reach, cx, cr, gap,
+                inside) -> int:
     """The first candidate clump ``m >= start`` with ``inside[m]`` whose spheres ``cx[m]``, ``cr``
-    keep ``gap`` [m] from the first ``n`` spheres ``x``, ``r`` (``spheres_within``); -1 if none."""
+    keep ``gap`` [m] from every sphere ``x``, ``r`` in the cells (``bin_spheres``; ``rmax`` their
+    largest radius; the clump lies within ``reach`` of its centre ``centres_of_mass[m]``); -1 if
+    none."""
+    box = reach + rmax + gap
     for m in range(start, cx.shape[0]):
-        if inside[m] and not spheres_within(x, r, n, centres_of_mass[m], reach, cx[m], cr, gap):
+        if inside[m] and not _near_any(x, r, lo, inv_cell, dims, head, nxt, centres_of_mass[m], box, cx[m], cr,
+                                       gap):
             return m
     return -1
+
+
+@numba.njit(cache=True)
+def _near_any(x, r, lo, inv_cell, dims, head, nxt, centre, box, cx, cr, gap) -> bool:
+    """Whether a sphere in the cells within ``box`` of ``centre`` (one cell more each way, over
+    the rounding) comes closer than ``gap`` to a sphere ``cx``, ``cr``."""
+    k0 = np.empty(3, np.int64)
+    k1 = np.empty(3, np.int64)
+    for a in range(3):
+        k0[a] = min(max(int((centre[a] - box - lo[a]) * inv_cell[a]) - 1, 0), dims[a] - 1)
+        k1[a] = min(max(int((centre[a] + box - lo[a]) * inv_cell[a]) + 1, 0), dims[a] - 1)
+    for z in range(k0[2], k1[2] + 1):
+        for y in range(k0[1], k1[1] + 1):
+            for c in range((z * dims[1] + y) * dims[0] + k0[0], (z * dims[1] + y) * dims[0] + k1[0] + 1):
+                j = head[c]
+                while j >= 0:
+                    if (abs(x[j, 0] - centre[0]) < box and abs(x[j, 1] - centre[1]) < box
+                            and abs(x[j, 2] - centre[2]) < box):
+                        for i in range(cx.shape[0]):
+                            dx = x[j, 0] - cx[i, 0]
+                            dy = x[j, 1] - cx[i, 1]
+                            dz = x[j, 2] - cx[i, 2]
+                            if math.sqrt(dx * dx + dy * dy + dz * dz) < cr[i] + r[j] + gap:
+                                return True
+                    j = nxt[j]
+    return False

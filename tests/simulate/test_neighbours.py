@@ -201,3 +201,125 @@ def test_a_clump_falling_through_empty_space_needs_few_rebuilds_and_a_new_one_no
     sim.add_clump(tpl, (-0.2, -0.2, 0.3))
     sim.run(n_steps=1)
     assert sim.total_rebuilds == before
+
+
+def _admit_every_sphere(first, n, sx, srad, sbody, bactive, skin, sx0, allow, sxw, wall_allow, packed, wall_ref):
+    """``admit_spheres`` as first written: each new sphere against every earlier one, in plain
+    Python (the second implementation the cell search is held to)."""
+    import math
+
+    from demcal.simulate.walls import wall_distance
+    wall_args = tuple(packed[k] for k in ("kind", "origin", "normal", "axis_u", "axis_v", "half"))
+    wmax = max((math.sqrt(sum((packed["origin"][k, a] - wall_ref[k, a]) ** 2 for a in range(3)))
+                for k in range(len(packed["kind"]))), default=0.0)
+
+    def room(s, j):
+        return math.sqrt(sum((sx[s, a] - sx0[j, a]) ** 2 for a in range(3))) - srad[s] - srad[j]
+
+    least = 0.5 * skin
+    for s in range(first, n):
+        if not bactive[sbody[s]]:
+            continue
+        w_s = min((wall_distance(*wall_args, k, *sx[s])[0] - srad[s] - wmax for k in range(len(packed["kind"]))),
+                  default=math.inf)
+        if w_s < least:
+            return False
+        others = [j for j in range(s) if sbody[j] != sbody[s] and bactive[sbody[j]]]
+        a_s = min((room(s, j) - allow[j] for j in others), default=math.inf)
+        if a_s < least:
+            for j in others:
+                narrowed = room(s, j) - least
+                if narrowed < allow[j]:
+                    moved2 = sum((sx[j, a] - sx0[j, a]) ** 2 for a in range(3))
+                    if narrowed <= 0.0 or moved2 >= narrowed * narrowed:
+                        return False
+                    allow[j] = narrowed
+            a_s = least
+        allow[s], wall_allow[s] = a_s, w_s
+        sx0[s] = sx[s]
+        sxw[s] = sx[s]
+    return True
+
+
+def _admission_case(seed):
+    """Earlier spheres with reference positions and allowances (one without bound, strays
+    outside the grid, an inactive clump) and 40 new spheres dropped among them, one a stray;
+    a floor that moved since the wall list was built."""
+    rng = np.random.default_rng(seed)
+    sx, srad, sbody, active = _cloud(seed, n_bodies=90)
+    n, skin = sx.shape[0], 0.002
+    first = n - 40
+    sx0 = sx + rng.normal(0.0, 2e-4, sx.shape)
+    allow = rng.uniform(0.5 * skin, 2.0 * skin, n)
+    allow[11] = np.inf
+    sx[first:] = rng.uniform(-0.05, 0.05, (n - first, 3))
+    if seed % 2:    # spread out above the cloud, the first 0.8 skin above an old sphere's top
+        sx[first:, 2] = rng.uniform(0.06, 0.56, n - first)
+        top = np.argmax(np.where(active[sbody[:first]] & (sx0[:first, 2] < 0.06), sx0[:first, 2], -np.inf))
+        sx[first] = sx0[top] + (0.0, 0.0, srad[top] + srad[first] + 0.8 * skin)
+    sx[n - 3] += 0.3
+    walls = pack_walls([Plane((0.0, 0.0, -0.2), (0.0, 0.0, 1.0))], lambda name: 0)
+    wall_ref = walls["origin"] - (0.0, 0.0, 1e-4)
+    state = [sx0, allow, sx0.copy(), np.zeros(n)]        # sx0, allow, sxw, wall allowance
+    return first, n, sx, srad, sbody, active, skin, state, walls, wall_ref
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_admitting_new_spheres_by_cells_equals_admitting_them_against_every_sphere(seed):
+    from demcal.simulate.neighbours import admit_spheres
+    first, n, sx, srad, sbody, active, skin, got, walls, wall_ref = _admission_case(seed)
+    ref = [a.copy() for a in got]
+    lo = np.array([-0.06, -0.06, -0.06])
+    cell_xyz, dims = grid_shape(lo, np.array([0.06, 0.06, 0.6]), 2 * srad.max() + skin)
+    ok = admit_spheres(first, n, sx, srad, sbody, active, skin, *got, walls["kind"], walls["origin"],
+                       walls["normal"], walls["axis_u"], walls["axis_v"], walls["half"], wall_ref, lo,
+                       1.0 / cell_xyz, dims)
+    assert ok == _admit_every_sphere(first, n, sx, srad, sbody, active, skin, *ref, walls, wall_ref)
+    if ok:    # a refusal leaves the allowances to the rebuild
+        for a, b in zip(got, ref):
+            np.testing.assert_array_equal(a, b)
+
+
+def test_the_admission_cases_both_admit_and_refuse():
+    # the comparison above is only as good as its cases: some admit (one narrowing its
+    # neighbours), some refuse
+    outcomes = []
+    for seed in range(8):
+        first, n, sx, srad, sbody, active, skin, state, walls, wall_ref = _admission_case(seed)
+        before = state[1].copy()
+        ok = _admit_every_sphere(first, n, sx, srad, sbody, active, skin, *state, walls, wall_ref)
+        outcomes.append((ok, ok and bool(np.any(state[1][:first] < before[:first]))))
+    assert any(ok for ok, _ in outcomes) and not all(ok for ok, _ in outcomes)
+    assert any(narrowed for _, narrowed in outcomes)
+
+
+@pytest.mark.parametrize("cell", [0.004, 0.02, 1.0])
+def test_a_clump_clear_of_spheres_by_cells_equals_against_every_sphere(cell):
+    # the factory's test of a drawn clump, the spheres in cells (some outside the grid), against
+    # every sphere in plain Python: the same first clear candidate from every start
+    from demcal.simulate.neighbours import bin_spheres, first_clear
+    rng = np.random.default_rng(3)
+    x, r, _, _ = _cloud(3, n_bodies=60)
+    n, gap = len(r), 0.002
+    lo, hi = np.array([-0.04, -0.04, -0.04]), np.array([0.04, 0.04, 0.04])
+    dims = np.maximum(np.ceil((hi - lo) / cell), 1).astype(np.int64)
+    head, nxt = np.full(int(dims.prod()), -1, np.int64), np.empty(n, np.int64)
+    bin_spheres(x, 0, n, lo, np.full(3, 1.0 / cell), dims, head, nxt)
+    offsets = np.array([[-0.01, 0.0, 0.0], [0.0, 0.0, 0.0], [0.01, 0.0, 0.0]])
+    radii, reach = np.full(3, 0.004), 0.014
+    pos = rng.uniform(-0.06, 0.06, (40, 3))
+    centres = pos[:, None, :] + offsets
+    inside = rng.random(40) < 0.9
+    box = reach + r.max() + gap
+
+    def clear(m):
+        near = np.all(np.abs(x - pos[m]) < box, axis=1)
+        d = np.linalg.norm(x[near][:, None] - centres[m][None], axis=2)
+        return not np.any(d < radii[None] + r[near][:, None] + gap)
+
+    expected = [m for m in range(40) if inside[m] and clear(m)]
+    assert 0 < len(expected) < inside.sum()
+    for start in range(41):
+        got = first_clear(start, x, r, r.max(), lo, np.full(3, 1.0 / cell), dims, head, nxt, pos, reach, centres,
+                          radii, gap, inside)
+        assert got == next((m for m in expected if m >= start), -1)
