@@ -45,7 +45,7 @@ import numpy as np
 from demcal.errors import InputError
 from demcal.simulate.integrate import matrices_from_quats, quaternions_from_uniforms
 from demcal.simulate.neighbours import bin_spheres, first_clear
-from demcal.simulate.walls import wall_distances
+from demcal.simulate.walls import wall_distances, walls_near
 
 #: Draws tested per call into numpy and numba (the clumps placed do not depend on it).
 DRAWS_AT_ONCE = 16
@@ -218,7 +218,7 @@ class ParticleFactory:
             m = -1
             while True:
                 m = nearby.first_clear(m + 1, pos, tpl.bounding_radius, centres, tpl.radii, gap, inside)
-                if m < 0 or not packed["kind"].shape[0] or not np.any(wall_distances(packed, centres[m]) < radii):
+                if m < 0 or not _touches_a_wall(packed, pos[m], tpl.bounding_radius, centres[m], radii):
                     break
             if m < 0:
                 self.failed_attempts += n_draws
@@ -242,6 +242,16 @@ class ParticleFactory:
                 "start_time": self.start_time, "end_time": self.end_time, "material": self.material,
                 "velocity": self.velocity.tolist(), "batch_steps": self.batch_steps, "inserted": self.inserted,
                 "failed_attempts": self.failed_attempts}
+
+
+def _touches_a_wall(packed: dict, centre_of_mass, reach: float, centres, radii) -> bool:
+    """Whether a sphere ``centres``, ``radii`` of a clump within ``reach`` of its centre of mass
+    overlaps a wall (``wall_distances``, over the walls near enough to matter)."""
+    near = walls_near(packed["kind"], packed["origin"], packed["normal"], packed["axis_u"], packed["axis_v"],
+                      packed["half"], *centre_of_mass, reach)
+    if near.size == 0:
+        return False
+    return bool(np.any(wall_distances({k: v[near] for k, v in packed.items()}, centres) < radii))
 
 
 class _Nearby:

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from demcal.errors import InputError
-from demcal.simulate._jit import evaluator
+from demcal.simulate._jit import evaluator, kernel
 
 PLANE, RECTANGLE, CYLINDER = 0, 1, 2
 
@@ -283,6 +283,21 @@ def wall_distance(kind, origin, normal, axis_u, axis_v, half, k, x, y, z):
         return 0.0, nx, ny, nz
     inv = 1.0 / d
     return d, px * inv, py * inv, pz * inv
+
+
+@kernel
+def walls_near(kind, origin, normal, axis_u, axis_v, half, x, y, z, reach):
+    """Indices of the walls closer than ``reach`` [m] to point (x, y, z) (``wall_distance``,
+    with a margin well over its rounding): the only walls a body within ``reach`` of the
+    point can touch, a wall's distance changing by at most the distance moved."""
+    out = np.empty(kind.shape[0], np.int64)
+    n = 0
+    for k in range(kind.shape[0]):
+        d, nx, ny, nz = wall_distance(kind, origin, normal, axis_u, axis_v, half, k, x, y, z)
+        if d < reach * (1.0 + 1e-6) + 1e-9:
+            out[n] = k
+            n += 1
+    return out[:n]
 
 
 def wall_distances(packed: dict, points) -> np.ndarray:

@@ -313,3 +313,30 @@ def test_a_spinning_wall_keeps_its_place_and_records_its_spin():
     assert pack_walls([tube], lambda name: 0)["spin"][0].tolist() == [0.0, 0.0, 2.0]
     with pytest.raises(Exception, match="spin must be a finite"):
         pack_walls([_tube(spin=(0.0, math.nan, 0.0))], lambda name: 0)
+
+
+def test_walls_near_a_point_are_all_the_walls_a_body_around_it_can_touch():
+    # every kind of wall; bodies of random reach at random points: a wall left out is at least
+    # (reach - distance from the point) from every point of the body, by wall_distances itself
+    from demcal.simulate.walls import pack_walls, wall_distances, walls_near
+    walls = [Plane((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)), Plane((0.1, 0.0, 0.0), (-1.0, 0.0, 0.0)),
+             Rectangle((0.0, 0.05, 0.05), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0), 0.04, 0.03),
+             Cylinder((0.05, 0.0, 0.1), (0.0, 0.0, 1.0), 0.03, 0.05),
+             Cylinder((-0.05, 0.0, 0.1), (0.0, 1.0, 0.0), 0.02, 0.04, top_radius=0.04)]
+    packed = pack_walls(walls, lambda name: 0)
+    args = [packed[k] for k in ("kind", "origin", "normal", "axis_u", "axis_v", "half")]
+    rng = np.random.default_rng(4)
+    left_out = 0
+    for _ in range(400):
+        centre, reach = rng.uniform(-0.1, 0.2, 3), rng.uniform(0.002, 0.04)
+        near = walls_near(*args, *centre, reach)
+        far = np.setdiff1d(np.arange(len(walls)), near)
+        left_out += far.size
+        d = rng.normal(size=(30, 3))
+        body = centre + d / np.linalg.norm(d, axis=1)[:, None] * reach * rng.random((30, 1)) ** (1 / 3)
+        dist = wall_distances({k: v[far] for k, v in packed.items()}, body)
+        assert np.all(dist >= reach - np.linalg.norm(body - centre, axis=1)[:, None] - 1e-12)
+        # and the walls kept are the ones within reach (plus the margin)
+        at_centre = wall_distances(packed, centre)[0]
+        np.testing.assert_array_equal(near, np.flatnonzero(at_centre < reach * (1 + 1e-6) + 1e-9))
+    assert 0 < left_out < 400 * len(walls)
