@@ -13,6 +13,12 @@ kept on one thread; ``--threads 1 2`` runs each size on 1, then 2 threads.
     python benchmarks/dem_scaling.py                         # 2,500 and 20,000 spheres
     python benchmarks/dem_scaling.py --spheres 2500 20000 100000
     python benchmarks/dem_scaling.py --spheres 20000 --threads 1 2   # one run on 1, then 2 threads
+    python benchmarks/dem_scaling.py --rounds 3                      # each case 3 times, in turn
+
+With ``--rounds`` every case runs again in each round, and each ratio (a size's settled
+throughput against the first size's; a thread count's run against the first's) is given round
+by round, then as a median and range: on a machine whose speed drifts, the two runs of a pair
+are close in time.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ import argparse
 import json
 import math
 import os
+import statistics
 import sys
 import time
 
@@ -64,6 +71,40 @@ def case(n_spheres: int, fill_time: float, seed: int, threads: int | None) -> di
                                                / max(settled["pair_rebuilds_per_1000_steps"], 1e-9))}
 
 
+def ratio_lines(rows: list[dict]) -> list[str]:
+    """Each size's settled throughput against the first size's, and each thread count's run
+    against the first's, round by round (a machine whose speed drifts moves both of a pair);
+    with several rounds, their median and range."""
+    def run_s(r):
+        return r["fill"]["wall_s"] + r["settled"]["wall_s"]
+
+    def settled(r):
+        return r["settled"]["sphere_steps_per_s"]
+
+    ratios: dict[str, list[float]] = {}
+    for round_ in sorted({r["round"] for r in rows}):
+        these = [r for r in rows if r["round"] == round_]
+        base = these[0]
+        for row in these[1:]:
+            if row["threads"] == base["threads"]:
+                name = f"settled throughput at {row['spheres']} / at {base['spheres']}"
+                ratios.setdefault(name, []).append(settled(row) / settled(base))
+            elif row["spheres"] == base["spheres"]:
+                ratios.setdefault(f"{row['threads']} threads / {base['threads']}: the run (fill and settled) "
+                                  f"faster", []).append(run_s(base) / run_s(row))
+                ratios.setdefault(f"{row['threads']} threads / {base['threads']}: fill faster",
+                                  []).append(row["fill"]["sphere_steps_per_s"] / base["fill"]["sphere_steps_per_s"])
+                ratios.setdefault(f"{row['threads']} threads / {base['threads']}: settled faster",
+                                  []).append(settled(row) / settled(base))
+    lines = []
+    for name, values in ratios.items():
+        each = ", ".join(f"{v:.2f}" for v in values)
+        spread = (f"; median {statistics.median(values):.2f}, {min(values):.2f}-{max(values):.2f}"
+                  if len(values) > 1 else "")
+        lines.append(f"{name}: {each}{spread}")
+    return lines
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--spheres", type=int, nargs="+", default=[2500, 20000])
@@ -71,32 +112,26 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--threads", type=int, nargs="+", default=[None],
                         help="threads of each run (default: demcal's choice by size, on one thread)")
+    parser.add_argument("--rounds", type=int, default=1,
+                        help="run every case this many times, in turn, and give each ratio round by round")
     parser.add_argument("--json", default=None, help="write the numbers to this file")
     args = parser.parse_args(argv)
     rows = []
-    for n, threads in ((n, t) for n in args.spheres for t in args.threads):
-        t0 = time.perf_counter()
-        row = case(n, args.fill_time, args.seed, threads)
-        row["elapsed_s"] = time.perf_counter() - t0
-        rows.append(row)
-        f, s = row["fill"], row["settled"]
-        print(f"{n:>7} spheres, threads {row['threads_used']} | {row['elapsed_s']:.1f} s | fill {f['sphere_steps_per_s']:.3g} sphere-steps/s, {f['pair_rebuilds']} "
-              f"rebuilds in {f['steps']} steps ({f['wall_rebuilds']} wall) | settled "
-              f"{s['sphere_steps_per_s']:.3g}, {s['pair_rebuilds']} in {s['steps']} ({s['wall_rebuilds']} wall) "
-              f"| fill/settled throughput {row['fill_over_settled_throughput']:.2f}, rebuild rate "
-              f"{row['fill_over_settled_rebuild_rate']:.2f}", flush=True)
-    for row in rows[1:]:
-        base = rows[0]
-        if row["threads"] == base["threads"]:
-            print(f"settled throughput at {row['spheres']} / at {base['spheres']}: "
-                  f"{row['settled']['sphere_steps_per_s'] / base['settled']['sphere_steps_per_s']:.2f}")
-        elif row["spheres"] == base["spheres"]:
-            def run_s(r):
-                return r["fill"]["wall_s"] + r["settled"]["wall_s"]
-            print(f"{row['threads']} threads / {base['threads']}: the run (fill and settled) "
-                  f"{run_s(base) / run_s(row):.2f}x faster; fill {row['fill']['sphere_steps_per_s'] / base['fill']['sphere_steps_per_s']:.2f}x, "
-                  f"settled {row['settled']['sphere_steps_per_s'] / base['settled']['sphere_steps_per_s']:.2f}x; "
-                  f"whole process {base['elapsed_s'] / row['elapsed_s']:.2f}x")
+    for round_ in range(args.rounds):
+        for n, threads in ((n, t) for n in args.spheres for t in args.threads):
+            t0 = time.perf_counter()
+            row = case(n, args.fill_time, args.seed, threads)
+            row["elapsed_s"] = time.perf_counter() - t0
+            row["round"] = round_
+            rows.append(row)
+            f, s = row["fill"], row["settled"]
+            print(f"{n:>7} spheres, threads {row['threads_used']} | {row['elapsed_s']:.1f} s | fill {f['sphere_steps_per_s']:.3g} sphere-steps/s, {f['pair_rebuilds']} "
+                  f"rebuilds in {f['steps']} steps ({f['wall_rebuilds']} wall) | settled "
+                  f"{s['sphere_steps_per_s']:.3g}, {s['pair_rebuilds']} in {s['steps']} ({s['wall_rebuilds']} wall) "
+                  f"| fill/settled throughput {row['fill_over_settled_throughput']:.2f}, rebuild rate "
+                  f"{row['fill_over_settled_rebuild_rate']:.2f}", flush=True)
+    for line in ratio_lines(rows):
+        print(line)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump({"machine": machine(), "versions": versions(),
