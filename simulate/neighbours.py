@@ -440,14 +440,9 @@ def admit_spheres(first, n_spheres, sx, srad, sbody, bactive, skin, sx0, allow, 
 
 @kernel
 def _into_cell(j, sx0, srad, allow, lo, inv_cell, dims, head, nxt, reach):
-    """Put sphere j in the cell of its reference position (strays in the nearest boundary
-    cell); returns ``reach`` raised to its radius plus allowance."""
-    c = 0
-    for a in range(2, -1, -1):
-        k = min(max(int((sx0[j, a] - lo[a]) * inv_cell[a]), 0), dims[a] - 1)
-        c = c * dims[a] + k
-    nxt[j] = head[c]
-    head[c] = j
+    """Put sphere j in the cell of its reference position (``bin_spheres``); returns ``reach``
+    raised to its radius plus allowance."""
+    bin_spheres(sx0, j, j + 1, lo, inv_cell, dims, head, nxt)
     return max(reach, srad[j] + allow[j])
 
 
@@ -565,7 +560,7 @@ def renumber_wall_list(new_index, start, ws, wk, hist):
     return _rows(s, new_index.shape[0]), s[order], wk[order].copy(), hist[order].copy()
 
 
-@numba.njit(cache=True)
+@kernel
 def bin_spheres(x, first, n, lo, inv_cell, dims, head, nxt):
     """Spheres ``first``..``n - 1`` of ``x`` into the cells of a grid (``lo``, ``inv_cell``,
     ``dims``; outside it, the nearest boundary cell): a linked list per cell, ``head[cell]``
@@ -578,7 +573,7 @@ def bin_spheres(x, first, n, lo, inv_cell, dims, head, nxt):
         head[c] = j
 
 
-@numba.njit(cache=True)    # exact arithmetic (no fastmath): the same placements as numpy's test
+@kernel
 def first_clear(start, x, r, rmax, lo, inv_cell, dims, head, nxt, centres_of_mass, reach, cx, cr, gap,
                 inside) -> int:
     """The first candidate clump ``m >= start`` with ``inside[m]`` whose spheres ``cx[m]``, ``cr``
@@ -593,7 +588,7 @@ def first_clear(start, x, r, rmax, lo, inv_cell, dims, head, nxt, centres_of_mas
     return -1
 
 
-@numba.njit(cache=True)
+@kernel
 def _near_any(x, r, lo, inv_cell, dims, head, nxt, centre, box, cx, cr, gap) -> bool:
     """Whether a sphere in the cells within ``box`` of ``centre`` (one cell more each way, over
     the rounding) comes closer than ``gap`` to a sphere ``cx``, ``cr``."""

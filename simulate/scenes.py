@@ -122,12 +122,15 @@ def particle_templates(sim: Simulation, params: DEMParameters, size_distribution
 @functools.cache
 def compile_kernels(threaded: bool = False) -> None:
     """Load the engine's compiled kernels into this process, compiling them first if this
-    installation has none yet (20-50 s, once: they are cached on disk), by one step of a
-    two-segment paper case: the serial step loop, and with ``threaded`` the step loop on threads
+    installation has none yet (20-50 s, once: they are cached on disk), by a step of a
+    two-segment paper case, a clump added and a step more (the factory, the admission and the
+    serial step loop), and with ``threaded`` the step loop on threads
     too (runs from ``THREADS_MIN_SPHERES`` spheres, or with ``threads`` set). A second call does
     nothing. Called before local worker processes start, so that they load the kernels instead
     of each compiling them at the same time, and by ``demcal compile`` at installation."""
     sim = build_paper_repose_case(DEMParameters(), seed=0, n_clumps=2, fill_time=0.0)
+    sim.run(n_steps=1)
+    sim.add_clump(0, (0.1, 0.05, 0.05))     # a clump added between steps: the admission too
     sim.run(n_steps=1)
     if threaded:
         sim.threads = 2

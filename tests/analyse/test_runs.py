@@ -159,6 +159,9 @@ def test_compile_kernels_runs_the_engine_once_per_process(monkeypatch):
         def run(self, n_steps):
             steps.append(n_steps)
 
+        def add_clump(self, template, position):
+            steps.append("clump")
+
     monkeypatch.setattr(scenes, "build_paper_repose_case", lambda *a, **k: Case())
     scenes.compile_kernels.cache_clear()
     try:
@@ -166,4 +169,4 @@ def test_compile_kernels_runs_the_engine_once_per_process(monkeypatch):
         scenes.compile_kernels()
     finally:
         scenes.compile_kernels.cache_clear()
-    assert steps == [1]
+    assert steps == [1, "clump", 1]     # one step, one admitted clump, one step: once
