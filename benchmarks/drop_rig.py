@@ -95,6 +95,23 @@ def results_row(doc: dict) -> str:
     return "| " + " | ".join(cells) + " |\n"
 
 
+def add_table_row(md: Path, heading: str, section: str, row: str) -> None:
+    """Add ``row`` at the end of the table under ``heading`` in ``md`` (the section ``section``
+    appended first if it is not there), whatever sections follow it."""
+    text = md.read_text() if md.exists() else "# Benchmark results\n"
+    if heading not in text:
+        text = text.rstrip("\n") + "\n" + section
+    lines = text.splitlines(keepends=True)
+    at = next(i for i, line in enumerate(lines) if line.rstrip("\n") == heading.strip("\n"))
+    at += 1
+    while at < len(lines) and not lines[at].startswith("|"):
+        at += 1
+    while at < len(lines) and lines[at].startswith("|"):
+        at += 1
+    lines.insert(at, row)
+    md.write_text("".join(lines))
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.drop_rig",
                                      description=__doc__.splitlines()[0])
@@ -120,11 +137,7 @@ def main(argv=None) -> int:
     doc["machine"]["load_avg"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
     json_path = write_json(args.results / f"drop_rig_{stamp}.json", doc)
     md = args.results_md
-    text = md.read_text() if md.exists() else "# Benchmark results\n"
-    if "\n## Drop rig\n" not in text:
-        md.write_text(text.rstrip("\n") + "\n" + RESULTS_MD_SECTION)
-    with md.open("a") as f:
-        f.write(results_row(doc))
+    add_table_row(md, "\n## Drop rig\n", RESULTS_MD_SECTION, results_row(doc))
     print(f"{s['drops']} drops: wall per drop mean {s['wall_mean_s']:.3f} s, median "
           f"{s['wall_median_s']:.3f} s, max {s['wall_max_s']:.2f} s (total {s['wall_total_s']:.1f} s); "
           f"CPU mean {s['cpu_mean_s']:.3f} s; mean apparent e {s['apparent_restitution_mean']:.4f}")

@@ -22,6 +22,13 @@ the call. The arithmetic is the same, so are the bits. numba cannot lower a ``pr
 without reference counting, so a threaded variant hands each thread blocks of rows of a loop
 kernel.
 
+The same counts are paid once per call of a kernel that takes arrays, so they also set a floor
+under every step whatever the number of particles: in a rig of one particle (an incline, a drop)
+more than half the CPU samples fall on them. The serial force kernel is therefore a loop kernel,
+and ``serial_or_threaded`` passes the step's arrays on by name instead of packing them into a
+tuple and out again: together some three quarters of the CPU time a step there
+(``benchmarks/RESULTS.md``). Most of what is left is counted in the step loop itself.
+
 ``serial_or_threaded`` pairs a serial kernel with its threaded variant, chosen when the caller
 compiles, so that the threaded variants (about half of the compile time) are compiled only by
 a process that runs on threads.
@@ -30,6 +37,7 @@ a process that runs on threads.
 from __future__ import annotations
 
 import hashlib
+import inspect
 from pathlib import Path
 
 import numba
@@ -103,18 +111,21 @@ def serial_or_threaded(serial, threaded):
     chosen variant is compiled into the caller, so a serial loop never compiles the threaded
     kernels (about half of the engine's compile time)."""
 
-    def either(use_threads, *args):
-        return (threaded if use_threads else serial)(*args)
+    # the arguments by name (the serial kernel's), not packed into a tuple: each array is passed
+    # on as it came, instead of counted into a tuple and out of it at every call of every step
+    names = ", ".join(inspect.signature(serial.py_func).parameters)
 
-    @overload(either, jit_options=JIT_FLAGS)
-    def _either(use_threads, *args):
+    def choose(use_threads):
         if not isinstance(use_threads, types.BooleanLiteral):
             raise TypingError(f"{serial.__name__}: 'use_threads' must be a constant True or False")
-        chosen = threaded if use_threads.literal_value else serial
+        scope = {"chosen": threaded if use_threads.literal_value else serial}
+        exec(f"def call(use_threads, {names}):\n    return chosen({names})\n", scope)
+        return scope["call"]
 
-        def call(use_threads, *args):
-            return chosen(*args)
-
-        return call
-
-    return either
+    scope = {"serial": serial, "threaded": threaded, "choose": choose}
+    exec(f"def either(use_threads, {names}):\n"
+         f"    return (threaded if use_threads else serial)({names})\n"
+         f"def typed(use_threads, {names}):\n"
+         f"    return choose(use_threads)\n", scope)
+    overload(scope["either"], jit_options=dict(JIT_FLAGS, cache=False))(scope["typed"])
+    return scope["either"]

@@ -17,7 +17,7 @@ import math
 import numba
 import numpy as np
 
-from demcal.simulate._jit import kernel, loop_kernel, threaded_kernel
+from demcal.simulate._jit import loop_kernel, threaded_kernel
 from demcal.simulate.contact.hertz_mindlin import impact_damping, normal_force, tangential_force
 from demcal.simulate.contact.rolling import (EPSD, LIGGGHTS_REFF, constant_torque, epsd_torque,
                                              rolling_lever)
@@ -45,13 +45,14 @@ def history_width(velocity_restitution: bool, rolling_model: int) -> int:
     return HIST_IMPACT_SPEED + 1 if velocity_restitution else HIST_IMPACT_SPEED
 
 
-@kernel
+@loop_kernel
 def contact_forces(fbody, ff, ft, frm, frv, pstart, wstart, hist_dt, dt, lever_mode, rolling_model, eta_r,
                    effective_mass, n_bodies, n_spheres, bx, bv, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat,
                    bcount, sbody, sx, srad, ppi, pj, ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat,
                    e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min):
     """Contact forces, torques and rolling torques on every body from the Verlet lists (the
-    arguments of ``contact_forces_ranged``; its work arrays and row pointers unused here).
+    arguments of ``contact_forces_ranged``; its row pointers unused here, and nothing put aside
+    in its work arrays, since every body is in the one range).
 
     ``hist_dt`` is the time step used to accumulate tangential displacement (0 for a force
     evaluation that must not advance the contact history). A pair with ``e_exp`` != 0 takes
@@ -74,11 +75,9 @@ def contact_forces(fbody, ff, ft, frm, frv, pstart, wstart, hist_dt, dt, lever_m
         _count_contacts(n_bodies, bcount, sbody, sx, srad, ppi, pj, ws, wk, wkind, worig, wnorm,
                         wu, wv, whalf)
     _zero(0, n_bodies, bf, bt, brm, brv, brn)
-    none = np.empty((0, 3))
     pair_forces(0, ppi.shape[0], hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass, bx, bv, bw, bR,
                 binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph, e_star, g_star, damp, mu_s, mu_r,
-                log_e, e_exp, log_v_ref, v_min, bf, bt, brm, brv, 0, n_bodies, np.empty(0, np.int64), none,
-                none, np.empty(0), none)
+                log_e, e_exp, log_v_ref, v_min, bf, bt, brm, brv, 0, n_bodies, fbody, ff, ft, frm, frv)
     wall_forces(0, ws.shape[0], hist_dt, lever_mode, rolling_model, eta_r, effective_mass, bx, bv, bw, bR,
                 binvm, binvi, bmat, bcount, sbody, sx, srad, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv,
                 wmat, e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min, bf, bt, brm, brv, brn)

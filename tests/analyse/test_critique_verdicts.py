@@ -13,7 +13,7 @@ import pytest
 from scipy import stats
 
 from demcal.analyse.critique import diagnosis
-from demcal.analyse.critique.diagnosis import Series, series_tests
+from demcal.analyse.critique.diagnosis import Series
 from demcal.analyse.critique.mechanisms import judge
 
 

@@ -133,7 +133,7 @@ def test_a_text_file_named_jpg_and_damaged_headers(tmp_path):
 # The limit and its override
 
 def test_a_photo_just_over_a_lowered_limit_and_the_override(tmp_path):
-    with pytest.raises(ValueError, match=rf"1200 x 900 px \(1,080,000 pixels\).*limit of 1,079,999"):
+    with pytest.raises(ValueError, match=r"1200 x 900 px \(1,080,000 pixels\).*limit of 1,079,999"):
         check_image(HEAP, max_pixels=HEAP_PIXELS - 1)
     with pytest.raises(ValueError, match="1,079,999"):
         read_image(HEAP, max_pixels=HEAP_PIXELS - 1)

@@ -16,6 +16,14 @@ from tests.simulate.helpers import R, floor, simulation
 POOL = numba.config.NUMBA_NUM_THREADS
 
 
+@pytest.fixture(autouse=True)
+def _restore_threads():
+    """The tests below set numba's thread count; later tests in the worker see it restored."""
+    before = numba.get_num_threads()
+    yield
+    numba.set_num_threads(before)
+
+
 def _cloud(seed, n_bodies=120, per=5):
     rng = np.random.default_rng(seed)
     sx = rng.uniform(-0.05, 0.05, (n_bodies * per, 3))

@@ -300,11 +300,11 @@ def test_the_workbook_names_its_repose_rig_and_another_rigs_dimension_is_refused
         repose_rig({"repose_rig": "pile"}, file="wb.xlsx")
     # a blank row of a template says nothing
     assert repose_rig({"cylinder_diameter_mm": None, "drum_speed_rpm": " "}).name == "repose"
-    for meta, key, rig in (({"cylinder_diameter_mm": 100.0}, "cylinder_diameter_mm", "lifting_cylinder"),
+    for meta, key, name in (({"cylinder_diameter_mm": 100.0}, "cylinder_diameter_mm", "lifting_cylinder"),
                            ({"drum_speed_rpm": 5}, "drum_speed_rpm", "drum"),
                            ({"funnel_outlet_diameter_mm": 20}, "funnel_outlet_diameter_mm", "funnel"),
                            ({"repose_rig": "lifting_cylinder", "box_length_mm": 200}, "box_length_mm", "lifted_plate")):
-        with pytest.raises(WorkbookError, match=f"meta {key}: a dimension of the {rig} rig"):
+        with pytest.raises(WorkbookError, match=f"meta {key}: a dimension of the {name} rig"):
             repose_rig(meta)
     with pytest.raises(WorkbookError, match=r"cylinder_height_mm: missing"):
         repose_setup({"repose_rig": "lifting_cylinder", "cylinder_diameter_mm": 60, "lift_speed_mm_s": 10})
