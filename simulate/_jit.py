@@ -127,5 +127,7 @@ def serial_or_threaded(serial, threaded):
          f"    return (threaded if use_threads else serial)({names})\n"
          f"def typed(use_threads, {names}):\n"
          f"    return choose(use_threads)\n", scope)
+    # a function made by exec has no file to cache against; it is compiled into its caller,
+    # whose cached machine code holds it
     overload(scope["either"], jit_options=dict(JIT_FLAGS, cache=False))(scope["typed"])
     return scope["either"]
