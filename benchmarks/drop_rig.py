@@ -95,6 +95,14 @@ def results_row(doc: dict) -> str:
     return "| " + " | ".join(cells) + " |\n"
 
 
+def add_output_options(parser: argparse.ArgumentParser) -> None:
+    """The options a benchmark that adds a row to ``RESULTS.md`` shares: note, JSON folder, table."""
+    parser.add_argument("--note", default="", help="free text for the table's note column")
+    parser.add_argument("--results", type=Path, default=HERE / "results", help="folder of the JSON output")
+    parser.add_argument("--results-md", type=Path, default=HERE / "RESULTS.md",
+                        help="the file whose table the row is added to")
+
+
 def add_table_row(md: Path, heading: str, section: str, row: str) -> None:
     """Add ``row`` at the end of the table under ``heading`` in ``md`` (the section ``section``
     appended first if it is not there), whatever sections follow it."""
@@ -117,10 +125,7 @@ def main(argv=None) -> int:
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--drops", type=int, default=40, help="number of drops (default 40)")
     parser.add_argument("--height", type=float, default=0.4, help="drop height [m] (default 0.4)")
-    parser.add_argument("--note", default="", help="free text for the table's note column")
-    parser.add_argument("--results", type=Path, default=HERE / "results", help="folder of the JSON output")
-    parser.add_argument("--results-md", type=Path, default=HERE / "RESULTS.md",
-                        help="table the row is appended to")
+    add_output_options(parser)
     args = parser.parse_args(argv)
     if args.drops < 1:
         parser.error(f"--drops must be >= 1, got {args.drops}")

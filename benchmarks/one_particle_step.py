@@ -31,7 +31,7 @@ ROOT = HERE.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from benchmarks.drop_rig import add_table_row  # noqa: E402
+from benchmarks.drop_rig import add_output_options, add_table_row  # noqa: E402
 from benchmarks.repose_vs_liggghts import machine, versions  # noqa: E402
 from demcal.jsonio import write_json  # noqa: E402
 
@@ -73,10 +73,7 @@ def main(argv=None) -> int:
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3, help="timed rounds (default 3)")
     parser.add_argument("--steps", type=int, default=400_000, help="steps a round (default 400,000)")
-    parser.add_argument("--note", default="", help="free text for the table's note column")
-    parser.add_argument("--results", type=Path, default=HERE / "results", help="folder of the JSON output")
-    parser.add_argument("--results-md", type=Path, default=HERE / "RESULTS.md",
-                        help="table the row is added to")
+    add_output_options(parser)
     args = parser.parse_args(argv)
     if args.rounds < 1 or args.steps < 1000:
         parser.error("--rounds must be >= 1 and --steps >= 1000")
