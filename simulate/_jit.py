@@ -25,9 +25,10 @@ kernel.
 The same counts are paid once per call of a kernel that takes arrays, so they also set a floor
 under every step whatever the number of particles: in a rig of one particle (an incline, a drop)
 more than half the CPU samples fall on them. The serial force kernel is therefore a loop kernel,
-and ``serial_or_threaded`` passes the step's arrays on by name instead of packing them into a
-tuple and out again: together some three quarters of the CPU time a step there
-(``benchmarks/RESULTS.md``). Most of what is left is counted in the step loop itself.
+``serial_or_threaded`` passes the step's arrays on by name instead of packing them into a tuple
+and out again, and on one thread the steps between two list rebuilds run in a loop kernel
+(``engine._steps_serial``): the step loop counts its arrays once per rebuild, not once per step.
+A step of a one-particle rig costs less than half what it did (``benchmarks/RESULTS.md``).
 
 ``serial_or_threaded`` pairs a serial kernel with its threaded variant, chosen when the caller
 compiles, so that the threaded variants (about half of the compile time) are compiled only by

@@ -252,6 +252,97 @@ def _aside_buffers(n):
     return np.empty(n, np.int64), f, np.empty_like(f), np.empty_like(f), np.empty(n)
 
 
+@evaluator
+def _move(ranged, step, t, dt, mode, settings, bodies, spheres, walls):
+    """The first part of a step: kick and drift the bodies (``step`` >= 0; a half kick at step
+    0, a whole one after), move the walls, place the spheres. Returns the new time and whether
+    the pair list and the wall list are stale."""
+    gx, gy, gz = settings[0], settings[1], settings[2]
+    n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, bactive = bodies
+    n_spheres, sbody, soff, srad, sx, sx0, sxw, sallow, swallow = spheres
+    wkind, worig, wnorm, wu, wv, whalf, wvel, wspin, wwin, wmat, wx0, wvel_now, wspin_now = walls
+    h = 0.5 * dt
+    n_walls = wkind.shape[0]
+    if step >= 0:
+        kick_drift(ranged, n_bodies, h if step == 0 else dt, dt, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw,
+                   bR, bf, bt, brm, brv, brn, binvm, binvi)
+        _wall_velocities(t + h, wvel, wspin, wwin, wvel_now, wspin_now)
+        for k in range(n_walls):
+            for a in range(3):
+                worig[k, a] += wvel_now[k, a] * dt
+        t += dt
+    else:
+        _wall_velocities(t + h, wvel, wspin, wwin, wvel_now, wspin_now)
+    wmax2 = 0.0
+    for k in range(n_walls):
+        dw2 = 0.0
+        for a in range(3):
+            dw2 += (worig[k, a] - wx0[k, a]) ** 2
+        wmax2 = max(wmax2, dw2)
+    pairs_stale, walls_stale = update_spheres(ranged, n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw,
+                                              sallow, swallow, math.sqrt(wmax2))
+    return t, pairs_stale, walls_stale
+
+
+@evaluator
+def _contacts(ranged, step, dt, settings, bodies, spheres, lists, walls, table, wcv, aside):
+    """The second part of a step: the contact forces from the (fresh) lists."""
+    lever_mode, rolling_model, eta_r, effective_mass = settings[4], settings[5], settings[6], settings[7]
+    n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, bactive = bodies
+    n_spheres, sbody, soff, srad, sx, sx0, sxw, sallow, swallow = spheres
+    pstart, ppi, pj, ph, wstart, ws, wk, wh = lists
+    wkind, worig, wnorm, wu, wv, whalf, wvel, wspin, wwin, wmat, wx0, wvel_now, wspin_now = walls
+    e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min = table
+    aside_body, aside_f, aside_t, aside_rv, aside_rm = aside
+    # the first evaluation of a fresh state must not advance the contact history
+    hist_dt = dt if step >= 0 else 0.0
+    _wall_contact_velocities(ws, wk, sx, srad, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wspin_now, wcv)
+    all_contact_forces(ranged, aside_body, aside_f, aside_t, aside_rm, aside_rv, pstart, wstart, hist_dt, dt,
+                       lever_mode, rolling_model, eta_r, effective_mass, n_bodies, n_spheres, bx, bv, bw, bR,
+                       bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph, ws, wk,
+                       wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat, e_star, g_star, damp, mu_s, mu_r, log_e,
+                       e_exp, log_v_ref, v_min)
+
+
+@evaluator
+def _steps(ranged, step, n_steps, t, dt, mode, resume, rebuild, settings, bodies, spheres, lists, walls, table,
+           wcv, aside):
+    """Whole steps from ``step`` until ``n_steps``, or until a step finds a list stale (or
+    ``rebuild``, the first): it returns then, after that step's first part, with the step, the
+    new time and which lists are stale, for the caller to rebuild them and go on with ``resume``
+    (the first part of ``step`` is done and its lists are fresh)."""
+    while step < n_steps:
+        if not resume:
+            t, pairs_stale, walls_stale = _move(ranged, step, t, dt, mode, settings, bodies, spheres, walls)
+            if pairs_stale or walls_stale or rebuild:
+                return step, t, pairs_stale, walls_stale
+        resume = False
+        _contacts(ranged, step, dt, settings, bodies, spheres, lists, walls, table, wcv, aside)
+        step += 1
+    return step, t, False, False
+
+
+@loop_kernel
+def _steps_serial(step, n_steps, t, dt, mode, resume, rebuild, settings, bodies, spheres, lists, walls, table, wcv,
+                  aside):
+    """``_steps`` on one thread, as a loop kernel: a step hands some sixty arrays to its kernels,
+    and counting each of them in and out at every step was most of a step's cost in a rig of
+    one particle."""
+    return _steps(False, step, n_steps, t, dt, mode, resume, rebuild, settings, bodies, spheres, lists, walls,
+                  table, wcv, aside)
+
+
+@kernel
+def _steps_ranged(step, n_steps, t, dt, mode, resume, rebuild, settings, bodies, spheres, lists, walls, table, wcv,
+                  aside):
+    """``_steps`` with the kicks, the sphere positions and the contact forces on threads."""
+    return _steps(True, step, n_steps, t, dt, mode, resume, rebuild, settings, bodies, spheres, lists, walls,
+                  table, wcv, aside)
+
+
+steps_until_stale = serial_or_threaded(_steps_serial, _steps_ranged)
+
+
 @kernel
 def _advance(ranged, n_steps, t, dt, settings, bodies, spheres, lists, walls, table, grid):
     """Advance the state by ``n_steps`` steps (see the module docstring for the step).
@@ -263,43 +354,32 @@ def _advance(ranged, n_steps, t, dt, settings, bodies, spheres, lists, walls, ta
 
     ``ranged`` (a constant: ``_advance_serial``, ``_advance_ranged``) runs the kicks, the sphere
     positions and the contact forces on numba's threads (``simulate.forces.contact_forces_ranged``;
-    the same result on any number of them). The other arguments are tuples, in the order
-    ``Simulation._advance`` packs them.
+    the same result on any number of them). The steps between two rebuilds run in
+    ``steps_until_stale``. The other arguments are tuples, in the order ``Simulation._advance``
+    packs them.
     """
     gx, gy, gz, skin, lever_mode, rolling_model, eta_r, effective_mass, need_rebuild, need_forces, pool_size = settings
     n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, bactive = bodies
     n_spheres, sbody, soff, srad, sx, sx0, sxw, sallow, swallow = spheres
     pstart, ppi, pj, ph, wstart, ws, wk, wh = lists
     wkind, worig, wnorm, wu, wv, whalf, wvel, wspin, wwin, wmat, wx0, wvel_now, wspin_now = walls
-    e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min = table
     lo, inv_cell, dims, cell_start = grid
-    h = 0.5 * dt
     mode = kick_mode(lever_mode, rolling_model)
-    n_walls = wkind.shape[0]
     wcv = np.empty((max(ws.shape[0], 1), 3))       # wall surface velocity at each wall contact
     # shares of a contact kept aside for a body of another range (ranged forces), a row per pair
-    aside_body, aside_f, aside_t, aside_rv, aside_rm = _aside_buffers(ppi.shape[0] if ranged else 0)
+    aside = _aside_buffers(ppi.shape[0] if ranged else 0)
     n_rebuilds = 0
     n_wall_rebuilds = 0
-    for step in range(-1 if need_forces else 0, n_steps):
-        if step >= 0:
-            kick_drift(ranged, n_bodies, h if step == 0 else dt, dt, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw,
-                       bR, bf, bt, brm, brv, brn, binvm, binvi)
-            _wall_velocities(t + h, wvel, wspin, wwin, wvel_now, wspin_now)
-            for k in range(n_walls):
-                for a in range(3):
-                    worig[k, a] += wvel_now[k, a] * dt
-            t += dt
-        else:
-            _wall_velocities(t + h, wvel, wspin, wwin, wvel_now, wspin_now)
-        wmax2 = 0.0
-        for k in range(n_walls):
-            dw2 = 0.0
-            for a in range(3):
-                dw2 += (worig[k, a] - wx0[k, a]) ** 2
-            wmax2 = max(wmax2, dw2)
-        pairs_stale, walls_stale = update_spheres(ranged, n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw,
-                                                  sallow, swallow, math.sqrt(wmax2))
+    step = -1 if need_forces else 0
+    # the first part of ``step`` is done and its lists are fresh (a plain bool from the start: a
+    # literal False would compile the steps a second time, for that type)
+    resume = np.bool_(False)
+    while step < n_steps:
+        step, t, pairs_stale, walls_stale = steps_until_stale(
+            ranged, step, n_steps, t, dt, mode, resume, need_rebuild, settings, bodies, spheres,
+            (pstart, ppi, pj, ph, wstart, ws, wk, wh), walls, table, wcv, aside)
+        if step >= n_steps:
+            break
         if need_rebuild or pairs_stale:
             pstart, ppi, pj, ph = build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo,
                                                   inv_cell, dims, cell_start, pstart, pj, ph, sallow,
@@ -313,21 +393,14 @@ def _advance(ranged, n_steps, t, dt, settings, bodies, spheres, lists, walls, ta
             wx0[:] = worig
             n_wall_rebuilds += 1
         need_rebuild = False
-        # the first evaluation of a fresh state must not advance the contact history
-        hist_dt = dt if step >= 0 else 0.0
         if wcv.shape[0] < ws.shape[0]:
             wcv = np.empty((2 * ws.shape[0], 3))
-        _wall_contact_velocities(ws, wk, sx, srad, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wspin_now, wcv)
-        if aside_body.shape[0] < (ppi.shape[0] if ranged else 0):
-            aside_body, aside_f, aside_t, aside_rv, aside_rm = _aside_buffers(2 * ppi.shape[0])
-        all_contact_forces(ranged, aside_body, aside_f, aside_t, aside_rm, aside_rv, pstart, wstart, hist_dt, dt,
-                           lever_mode, rolling_model, eta_r, effective_mass, n_bodies, n_spheres, bx, bv, bw, bR,
-                           bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph, ws, wk,
-                           wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat, e_star, g_star, damp, mu_s, mu_r, log_e,
-                           e_exp, log_v_ref, v_min)
+        if aside[0].shape[0] < (ppi.shape[0] if ranged else 0):
+            aside = _aside_buffers(2 * ppi.shape[0])
+        resume = True
     if n_steps > 0:
-        kick_drift(ranged, n_bodies, h, 0.0, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv,
-                   brn, binvm, binvi)
+        kick_drift(ranged, n_bodies, 0.5 * dt, 0.0, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw, bR, bf, bt, brm,
+                   brv, brn, binvm, binvi)
     return t, pstart, ppi, pj, ph, wstart, ws, wk, wh, n_rebuilds, n_wall_rebuilds
 
 
