@@ -103,6 +103,7 @@ Analysis, 5th ed. Wiley, sec. 2.3 and 3.3 (t and F tests of regression coefficie
 
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 from dataclasses import asdict, dataclass, field, replace
@@ -216,6 +217,15 @@ class Series:
             return PRACTICAL_THRESHOLDS[self.family]
         y = np.asarray(self.values, dtype=float)
         return RELATIVE_THRESHOLD * abs(float(np.mean(y))) if y.size else math.nan
+
+
+@functools.lru_cache(maxsize=256)
+def noncentrality(alpha: float, df: int, power: float) -> float:
+    """The noncentrality at which a chi-square test of ``df`` degrees of freedom at level
+    ``alpha`` rejects with probability ``power`` (a root-find over the noncentral chi-square:
+    a critique asks it of every test for a handful of distinct arguments, so it is kept)."""
+    crit = float(stats.chi2.isf(alpha, df))
+    return optimize.brentq(lambda nc: float(stats.ncx2.sf(crit, df, nc)) - power, 1e-9, 1e6)
 
 
 @dataclass(frozen=True)
@@ -346,9 +356,7 @@ class CovariateTest:
         if not (math.isfinite(self.se) and self.se > 0 and delta > 0):
             return None
         df = max(len(self.levels) - 1, 1) if self.method == "anova" else self.df_test
-        crit = float(stats.chi2.isf(alpha, df))
-        lam = optimize.brentq(lambda nc: float(stats.ncx2.sf(crit, df, nc)) - power, 1e-9, 1e6)
-        return int(math.ceil(self.n * lam * (self.se / delta) ** 2))
+        return int(math.ceil(self.n * noncentrality(alpha, df, power) * (self.se / delta) ** 2))
 
     def to_dict(self) -> dict:
         d = asdict(self)
