@@ -320,8 +320,8 @@ NOTE_RESOLUTION = 200
 @functools.lru_cache(maxsize=64)
 def _union_volume(shape) -> float:
     """Volume [m^3] of the shape's sphere model (the union of its spheres), on a coarse grid: 4
-    digits in 0.02 s (the DEM's 600 lines take 0.3 s); kept, since a plan or a critique measures
-    hundreds of workbooks of one shape."""
+    digits in 0.02 s (the DEM's 600 lines take 0.3 s); kept, since a critique or a calibration
+    measures one workbook several times."""
     return shape.template(1.0, resolution=NOTE_RESOLUTION).mass
 
 
