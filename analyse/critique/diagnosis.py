@@ -109,7 +109,7 @@ import numbers
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import optimize, special, stats
 
 from demcal.errors import InputError
 from demcal.jsonio import restore_nan
@@ -466,8 +466,15 @@ def _interval(t, tail: float) -> tuple:
 # single tests
 
 
+@functools.lru_cache(maxsize=None)
 def _t95(dof: int) -> float:
     return float(stats.t.ppf(0.975, dof)) if dof > 0 else math.nan
+
+
+def _f_sf(F: float, dfn: int, dfd: int) -> float:
+    """``stats.f.sf(F, dfn, dfd)``, by the special function it calls, without the distribution
+    machinery's overhead (the specimen tests take it thousands of times per workbook)."""
+    return 1.0 if F <= 0 else float(special.fdtrc(dfn, dfd, F))
 
 
 def trend_test(x, y, degree: int = 2) -> dict:
@@ -575,7 +582,7 @@ def _random_effects_fit(y, X, groups):
     # "sometimes pool": the specimen variance is taken as nil unless the specimens differ at the
     # preliminary level (Bancroft 1964), so that a chance excess of msb over msw does not cost a
     # trial covariate the degrees of freedom of the specimens
-    differ = G > 1 and n > G and msw > 0 and float(stats.f.sf(msb / msw, G - 1, n - G)) < PRELIMINARY_LEVEL
+    differ = G > 1 and n > G and msw > 0 and _f_sf(msb / msw, G - 1, n - G) < PRELIMINARY_LEVEL
     s_b2 = max(0.0, (msb - msw) / n0) if n0 > 0 and differ else 0.0
     theta = 1.0 - np.sqrt(msw / (msw + sizes * s_b2)) if s_b2 > 0 and msw > 0 else np.zeros(G)
     t = theta[index]
@@ -622,7 +629,7 @@ def _clustered(y, X, groups, between: bool, controls: int = 0):
     elif s2 <= 0:
         p = 0.0 if rss0 > rss1 else 1.0
     else:
-        p = float(stats.f.sf((rss0 - rss1) / q / s2, q, dof))
+        p = _f_sf((rss0 - rss1) / q / s2, q, dof)
     lead = 1 + controls
     return coef[lead:], cov[lead:, lead:], p, dof
 

@@ -71,6 +71,20 @@ def test_union_of_two_spheres_matches_lens_formula():
     assert ours.centre_of_mass[0] == pytest.approx(d / 2, rel=1e-9)
 
 
+def test_a_kept_union_is_handed_out_as_a_copy():
+    # the grid integration is kept per process: a caller that changes its answer in place
+    # must not change the next caller's, and other inputs (a density) are integrated afresh
+    centres, radii = segment_centres(0.025, 0.011, 5), np.full(5, 0.0055)
+    first = union_mass_properties(centres, radii, 912.0)
+    com, inertia = first.centre_of_mass.copy(), first.inertia.copy()
+    first.centre_of_mass[:] = 1.0
+    first.inertia[:] = 1.0
+    again = union_mass_properties(centres, radii, 912.0)
+    np.testing.assert_array_equal(again.centre_of_mass, com)
+    np.testing.assert_array_equal(again.inertia, inertia)
+    assert union_mass_properties(centres, radii, 2 * 912.0).mass == pytest.approx(2 * first.mass, rel=1e-12)
+
+
 def test_single_sphere_is_exact():
     tpl = make_template([[0.0, 0.0, 0.0]], 0.0055, 912.0)
     m = 912.0 * 4 / 3 * math.pi * 0.0055 ** 3
