@@ -292,7 +292,7 @@ def _segment_length(workbook, sheet, row) -> float:
     specimen = f.at[row, "specimen_id"]
     specimens = workbook.sheet("specimens")
     matches = [] if specimens is None else [
-        r for r in specimens.rows if specimens.frame.at[r, "specimen_id"] == specimen]
+        r for r, name in specimens.column("specimen_id").items() if name == specimen]
     if len(matches) != 1 or "length_mm" not in specimens.frame:
         found = ("no length_mm in the specimens sheet" if matches and len(matches) == 1 else
                  f"{'no' if not matches else len(matches)} specimens rows with this specimen_id")

@@ -124,21 +124,24 @@ def friction_estimates(workbook, *, outliers="none") -> dict:
         return {}
     f = sheet.frame
     out = {}
-    groups = sorted({(f.at[r, "mode"], f.at[r, "surface"]) for r in sheet.rows})
+    mode_of, surface_of = sheet.column("mode"), sheet.column("surface")
+    cell = {c: sheet.column(c) for c in ("angle_deg", "trial_id", "carrier", "slope_deg",
+                                         "release_height_mm", "runout_mm") if c in f}
+    groups = sorted({(mode_of[r], surface_of[r]) for r in sheet.rows})
     for mode, surface in groups:
-        rows = [r for r in sheet.rows if f.at[r, "mode"] == mode and f.at[r, "surface"] == surface]
+        rows = [r for r in sheet.rows if mode_of[r] == mode and surface_of[r] == surface]
         values, records = [], []
         for r in rows:
-            angle = f.at[r, "angle_deg"] if "angle_deg" in f else math.nan
-            rec = {"id": f.at[r, "trial_id"], "surface": surface, "mode": mode,
-                   "carrier": f.at[r, "carrier"] if "carrier" in f else "particle"}
+            angle = cell["angle_deg"][r] if "angle_deg" in f else math.nan
+            rec = {"id": cell["trial_id"][r], "surface": surface, "mode": mode,
+                   "carrier": cell["carrier"][r] if "carrier" in f else "particle"}
             if not math.isnan(angle):
                 values.append(float(from_tilt_angle(math.radians(angle))))
                 rec.update(method="tilt", angle_rad=math.radians(angle))
             else:
-                theta = math.radians(f.at[r, "slope_deg"])
-                H = f.at[r, "release_height_mm"] * MM
-                S = f.at[r, "runout_mm"] * MM
+                theta = math.radians(cell["slope_deg"][r])
+                H = cell["release_height_mm"][r] * MM
+                S = cell["runout_mm"][r] * MM
                 values.append(float(rolling_from_rollout(theta, H, S)))
                 rec.update(method="rollout", slope_angle_rad=theta, release_height_m=H, runout_m=S)
             rec["covariates"] = sheet.covariates_of(r)

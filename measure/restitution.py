@@ -356,18 +356,20 @@ def restitution_estimates(workbook, *, outliers="none", g=GRAVITY) -> dict:
         return {}
     f = sheet.frame
     out = {}
+    pair_of, trial_id = sheet.column("pair"), sheet.column("trial_id")
+    drop_mm, rebound_mm = sheet.column("drop_height_mm"), sheet.column("rebound_height_mm")
     for pair in sorted(set(f["pair"])):
-        rows = [r for r in sheet.rows if f.at[r, "pair"] == pair]
+        rows = [r for r in sheet.rows if pair_of[r] == pair]
         values, records = [], []
         for r in rows:
-            h1 = f.at[r, "drop_height_mm"] * MM
-            h2 = f.at[r, "rebound_height_mm"] * MM
-            rec = {"id": f.at[r, "trial_id"], "pair": pair,
+            h1 = drop_mm[r] * MM
+            h2 = rebound_mm[r] * MM
+            rec = {"id": trial_id[r], "pair": pair,
                    "drop_height_m": None if math.isnan(h1) else h1,
                    "rebound_height_m": None if math.isnan(h2) else h2}
             e_heights = (float(from_rebound_heights(h1, h2))
                          if not (math.isnan(h1) or math.isnan(h2)) else None)
-            track = f.at[r, "track_file"] if "track_file" in f else None
+            track = sheet.column("track_file")[r] if "track_file" in f else None
             if track is not None:
                 table = workbook.attachment(track)
                 try:

@@ -295,6 +295,15 @@ class Sheet:
         columns = {c: [_plain(v) for v in self.frame[c].tolist()] for c in self.covariates}
         return {int(r): {c: columns[c][i] for c in self.covariates} for i, r in enumerate(self.frame.index)}
 
+    def column(self, name: str) -> dict:
+        """``{row: frame.at[row, name]}``, the same values and types, taken once per column:
+        the estimators read their cells row by row, and a frame lookup per cell costs more
+        than the estimate."""
+        columns = self.__dict__.setdefault("_columns", {})
+        if name not in columns:
+            columns[name] = dict(zip(self.rows, self.frame[name].to_numpy()))
+        return columns[name]
+
     def error(self, message, *, row=None, column=None, value=None) -> WorkbookError:
         """A :class:`WorkbookError` located in this sheet."""
         return WorkbookError(message, file=str(self.file), sheet=self.name, row=row,
@@ -639,6 +648,11 @@ def _covariate(sheet: str, column: str, cells: pd.Series, file: Path, notes: lis
     return pd.Series(values, index=cells.index, dtype=object)
 
 
+def _cells(frame: pd.DataFrame, column: str) -> dict:
+    """``{row: frame.at[row, column]}``, the same values and types, in one pass over the column."""
+    return dict(zip(frame.index, frame[column].to_numpy()))
+
+
 def _require_cells(name: str, frame: pd.DataFrame, columns, file: Path, rows=None):
     for col in columns:
         for row, cell in frame[col].items():
@@ -665,25 +679,26 @@ def _row_rules(name: str, frame: pd.DataFrame, file: Path, required, meta: dict)
         return
     if name == "incline":
         _require_cells(name, frame, spec.required, file)
+        cell = {c: _cells(frame, c) for c in ("angle_deg", "carrier", "mode", *ROLLOUT_COLUMNS) if c in frame}
         for row in frame.index:
-            has_angle = "angle_deg" in frame and not math.isnan(frame.at[row, "angle_deg"])
-            rollout = [c for c in ROLLOUT_COLUMNS if c in frame and not math.isnan(frame.at[row, c])]
+            has_angle = "angle_deg" in cell and not math.isnan(cell["angle_deg"][row])
+            rollout = [c for c in ROLLOUT_COLUMNS if c in cell and not math.isnan(cell[c][row])]
             if has_angle and rollout:
                 raise err("give either angle_deg or the roll-out columns, not both", row,
-                          rollout[0], frame.at[row, rollout[0]])
+                          rollout[0], cell[rollout[0]][row])
             if not has_angle and not rollout:
                 raise err("missing value (or give slope_deg, release_height_mm and runout_mm "
                           "for a roll-out trial)", row, "angle_deg")
-            if "carrier" in frame and frame.at[row, "carrier"] == "sled" and frame.at[row, "mode"] != "slide":
+            if "carrier" in cell and cell["carrier"][row] == "sled" and cell["mode"][row] != "slide":
                 raise err("a sled of glued particles measures static friction: mode must be slide", row,
                           "carrier", "sled")
             if rollout:
                 missing = [c for c in ROLLOUT_COLUMNS if c not in rollout]
                 if missing:
                     raise err("missing value of a roll-out trial", row, missing[0])
-                if frame.at[row, "mode"] != "roll":
+                if cell["mode"][row] != "roll":
                     raise err("a roll-out trial measures rolling friction: mode must be roll",
-                              row, "mode", frame.at[row, "mode"])
+                              row, "mode", cell["mode"][row])
         return
     _require_cells(name, frame, required, file)
     if name == "specimens":
@@ -886,8 +901,9 @@ def _check_unique(name: str, frame: pd.DataFrame, file: Path) -> None:
     if not set(keys) <= set(frame.columns):      # an optional id (a clump's sphere_id) not given
         return
     seen: dict = {}
+    cells = [_cells(frame, k) for k in keys]
     for row in frame.index:
-        key = tuple(frame.at[row, k] for k in keys)
+        key = tuple(cell[row] for cell in cells)
         if any(k is None for k in key):
             continue
         if key in seen:
