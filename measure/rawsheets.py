@@ -366,8 +366,9 @@ def read_csv(path, *, sheet: str | None = None, separator: str | None = None,
             continue
         row = {}
         for j, cell in enumerate(fields):
-            _check_cell(cell, max_cell_chars, {"file": str(path), "sheet": sheet, "row": i,
-                                               "column": header[j].strip() or f"#{j + 1}"})
+            if len(cell) > max_cell_chars:
+                _check_cell(cell, max_cell_chars, {"file": str(path), "sheet": sheet, "row": i,
+                                                   "column": header[j].strip() or f"#{j + 1}"})
             if mark == ",":
                 if _DOT_NUMBER.fullmatch(cell.strip()):
                     raise WorkbookError("a decimal point in a file whose decimal mark is a comma",

@@ -365,14 +365,16 @@ class Workbook:
 # cells
 
 def _is_empty(cell) -> bool:
+    if isinstance(cell, str):     # most cells: checked first, it is the cheap test
+        return not cell.strip()
     if cell is None:
         return True
     if isinstance(cell, float) and math.isnan(cell):
         return True
-    if cell is pd.NaT or (isinstance(cell, str) and not cell.strip()):
+    if cell is pd.NaT:
         return True
     try:
-        return bool(pd.isna(cell)) if not isinstance(cell, (str, bytes)) else False
+        return bool(pd.isna(cell)) if not isinstance(cell, bytes) else False
     except (TypeError, ValueError):
         return False
 
@@ -402,12 +404,12 @@ def _plain(value):
 
 def _number(cell) -> float:
     """A cell as a finite float; raises ValueError if it is not one."""
-    if isinstance(cell, bool):
-        raise ValueError("boolean")
-    if isinstance(cell, numbers.Real):
-        x = float(cell)
-    elif isinstance(cell, str):
+    if isinstance(cell, str):     # a CSV's cells: checked first, before the abstract number test
         x = float(cell.strip())
+    elif isinstance(cell, bool):
+        raise ValueError("boolean")
+    elif isinstance(cell, numbers.Real):
+        x = float(cell)
     else:
         raise ValueError(type(cell).__name__)
     if not math.isfinite(x):
