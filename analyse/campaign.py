@@ -41,6 +41,7 @@ from __future__ import annotations
 import math
 import os
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
@@ -53,7 +54,7 @@ from demcal.analyse.optimise import (canonical_analysis, confirmation_interval, 
                               steepest_climb_analysis, steepest_climb_plan, validate_repeats)
 from demcal.analyse.regression import fit_response_surface
 from demcal.analyse.results import CampaignResult
-from demcal.analyse.runs import RunStore, run_all, run_key
+from demcal.analyse.runs import RunStore, Workers, run_all, run_key
 from demcal.analyse.screening import plackett_burman_screening
 from demcal.errors import AnalysisError, InputError
 from demcal.jsonio import write_json
@@ -298,17 +299,26 @@ def repose_setup(measurement):
 
 @dataclass
 class _Runner:
-    """Executes batches of runs through the store (``runner`` for those not yet finished)."""
+    """Executes batches of runs through the store (``runner`` for those not yet finished) on
+    ``workers``, kept open for all of a campaign's stages."""
 
     config: CampaignConfig
     store: RunStore
     runner: object
+    workers: Workers
     log: list = field(default_factory=list)
 
+    @classmethod
+    @contextmanager
+    def opened(cls, config: CampaignConfig, store_dir, runner):
+        """A runner whose workers close when the ``with`` block ends."""
+        prepare = compile_kernels if runner is campaign_runner else None
+        with Workers(config.workers, config.scheduler, prepare=prepare) as workers:
+            yield cls(config, RunStore(store_dir), runner, workers)
+
     def __call__(self, stage: str, tasks: list[dict]) -> list[dict]:
-        out = run_all(tasks, self.runner, self.store, workers=self.config.workers,
-                      scheduler=self.config.scheduler, desc=stage, progress=self.config.progress,
-                      prepare=compile_kernels if self.runner is campaign_runner else None)
+        out = run_all(tasks, self.runner, self.store, desc=stage, progress=self.config.progress,
+                      executor=self.workers)
         failed = [r for r in out.records if r["status"] != "ok"]
         self.log.append({"stage": stage, "runs": len(tasks), "ran": out.ran, "reused": out.reused,
                          "failed": len(failed)})
@@ -412,7 +422,9 @@ def calibrate(workbook, out_dir, config: CampaignConfig | None = None, *, runner
         measurement = measure_workbook(workbook, annotate_dir=out / "annotated")
     write_json(out / "measure.json", measurement.to_dict())
     runner = runner or campaign_runner
-    results = _derive(measurement, config, _Runner(config, RunStore(out / "runs"), runner)).with_(
+    with _Runner.opened(config, out / "runs", runner) as execute:
+        results = _derive(measurement, config, execute)
+    results = results.with_(
         runner=f"{getattr(runner, '__module__', '?')}.{getattr(runner, '__qualname__', repr(runner))}",
         wall_s=time.perf_counter() - t_start)
     write_json(out / "results.json", results.to_dict())
@@ -503,9 +515,9 @@ def identify_rigs(measurement, config: CampaignConfig, out_dir, runner=None) -> 
     from demcal.analyse.plausible import derive_plausible
 
     factors, base, setups = _prepare(measurement, config)
-    execute = _Runner(config, RunStore(Path(out_dir) / "runs"), runner or campaign_runner)
-    found = derive_plausible(measurement, config, execute, factors=factors, base=base, setups=setups,
-                             responses=_responses, run_refs=_run_refs, identify_only=True)
+    with _Runner.opened(config, Path(out_dir) / "runs", runner or campaign_runner) as execute:
+        found = derive_plausible(measurement, config, execute, factors=factors, base=base, setups=setups,
+                                 responses=_responses, run_refs=_run_refs, identify_only=True)
     return {**found, "stages": list(execute.log)}
 
 

@@ -99,7 +99,8 @@ class RunOutcome:
 
 def run_all(tasks: Iterable[dict], runner: Callable[[dict], dict], store: RunStore, *,
             workers: int = 1, scheduler: str | None = None, desc: str = "DEM runs",
-            progress: bool = True, prepare: Callable[[], object] | None = None) -> RunOutcome:
+            progress: bool = True, prepare: Callable[[], object] | None = None,
+            executor: Workers | None = None) -> RunOutcome:
     """Run every task not yet finished in ``store``; return all records in task order.
 
     Parameters
@@ -117,6 +118,10 @@ def run_all(tasks: Iterable[dict], runner: Callable[[dict], dict], store: RunSto
         Called here once before local worker processes start, when there are runs to make
         (``simulate.scenes.compile_kernels``: the workers then load the compiled DEM instead
         of each compiling it at the same time).
+    executor : Workers, optional
+        Where to run, kept open by the caller across calls (a campaign's stages then share
+        one set of worker processes); ``workers``, ``scheduler`` and ``prepare`` are then its
+        own. Without it the runs get workers of their own for this call.
     """
     tasks = [to_jsonable(t) for t in tasks]
     keys = [run_key(t) for t in tasks]
@@ -139,44 +144,84 @@ def run_all(tasks: Iterable[dict], runner: Callable[[dict], dict], store: RunSto
     failed = 0
     attempts = {key: 0 for key, _ in pending}
     queue = list(pending)
+    own = executor is None and bool(pending)
+    if own:
+        executor = Workers(workers, scheduler, prepare=prepare)
     try:
-        if prepare is not None and pending and workers > 1 and not scheduler:
-            prepare()
-        with _executor(workers, scheduler) as submit:
-            while queue:
-                futures = {submit(_execute, runner, task): (key, task) for key, task in queue}
-                queue = []
-                for fut in _as_completed(futures):
-                    key, task = futures.pop(fut)
-                    try:
-                        status, result, error, wall = fut.result()
-                    except Exception as exc:  # _execute never raises: the executor lost the run
-                        status, result, wall = "failed", None, 0.0
-                        error = f"run lost by the executor: {type(exc).__name__}: {exc}"
-                    _release(fut)
-                    attempts[key] += 1
-                    if status == "failed" and attempts[key] < MAX_ATTEMPTS:
-                        record(key, task, status, result, error, wall, attempts[key])
-                        queue.append((key, task))  # retried once, in the next round
-                        continue
+        while queue:
+            futures = {executor.submit(_execute, runner, task): (key, task) for key, task in queue}
+            queue = []
+            for fut in _as_completed(futures):
+                key, task = futures.pop(fut)
+                try:
+                    status, result, error, wall = fut.result()
+                except Exception as exc:  # _execute never raises: the executor lost the run
+                    status, result, wall = "failed", None, 0.0
+                    error = f"run lost by the executor: {type(exc).__name__}: {exc}"
+                _release(fut)
+                attempts[key] += 1
+                if status == "failed" and attempts[key] < MAX_ATTEMPTS:
                     record(key, task, status, result, error, wall, attempts[key])
-                    failed += status == "failed"
-                    bar.update(1)
+                    queue.append((key, task))  # retried once, in the next round
+                    continue
+                record(key, task, status, result, error, wall, attempts[key])
+                failed += status == "failed"
+                bar.update(1)
     finally:
         bar.close()
+        if own:
+            executor.close()
     records = [store.get(k) for k in keys]
     return RunOutcome(records=records, ran=len(pending), reused=reused, failed=failed)
 
 
-class _executor:
-    """Context manager giving a ``submit(fn, *args) -> future`` for local processes or Dask."""
+class Workers:
+    """Where runs execute, open until :meth:`close`: in this process (``workers`` 1), in
+    ``workers`` local processes started at the first run and kept for every later batch, or on
+    the Dask scheduler at ``scheduler``, connected once. A campaign opens one for all its
+    stages, so its workers start, import the DEM and load its compiled kernels once, not once
+    per stage. ``prepare`` is called here once, before local worker processes first start.
+    A pool a crashed worker broke is replaced at the next run submitted."""
 
-    def __init__(self, workers: int, scheduler: str | None):
-        self.workers, self.scheduler = workers, scheduler
+    def __init__(self, workers: int = 1, scheduler: str | None = None,
+                 prepare: Callable[[], object] | None = None):
+        self.workers, self.scheduler, self.prepare = workers, scheduler, prepare
         self._pool = self._client = None
 
-    def __enter__(self):
+    def __enter__(self) -> Workers:
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        self.close()
+        return False
+
+    def submit(self, fn, *args):
+        """A future of ``fn(*args)``."""
         if self.scheduler:
+            # a Dask worker runs tasks on threads of its own: each run's DEM on one
+            return self._dask().submit(fn, *args, 1, pure=False)
+        if self.workers <= 1:
+            return _LazyResult(fn, args)  # one run at a time: a large one may use every core
+        if self._pool is None:
+            if self.prepare is not None:
+                self.prepare()
+                self.prepare = None
+            self._pool = self._new_pool()
+        try:
+            return self._pool.submit(fn, *args)
+        except cf.process.BrokenProcessPool:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = self._new_pool()
+            return self._pool.submit(fn, *args)
+
+    def _new_pool(self) -> cf.ProcessPoolExecutor:
+        # spawn: worker processes must not inherit numba/threading state from the parent; the
+        # cores are shared among the runs, so each run's DEM stays on one thread
+        return cf.ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"),
+                                      initializer=limit_threads_per_run, initargs=(1,))
+
+    def _dask(self):
+        if self._client is None:
             try:
                 from dask.distributed import Client
             except ImportError as exc:  # pragma: no cover - dask is a dependency
@@ -185,22 +230,15 @@ class _executor:
                 self._client = Client(self.scheduler, timeout="10s")
             except OSError as exc:
                 raise InputError(f"cannot reach the Dask scheduler at {self.scheduler}: {exc}") from exc
-            # a Dask worker runs tasks on threads of its own: each run's DEM on one
-            return lambda fn, *args: self._client.submit(fn, *args, 1, pure=False)
-        if self.workers <= 1:
-            return _inline_submit  # one run at a time: a large one may use every core
-        # spawn: worker processes must not inherit numba/threading state from the parent; the
-        # cores are shared among the runs, so each run's DEM stays on one thread
-        self._pool = cf.ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"),
-                                            initializer=limit_threads_per_run, initargs=(1,))
-        return self._pool.submit
+        return self._client
 
-    def __exit__(self, *exc):
+    def close(self) -> None:
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
         if self._client is not None:
             self._client.close()
-        return False
+            self._client = None
 
 
 class _LazyResult:
@@ -212,10 +250,6 @@ class _LazyResult:
 
     def result(self):
         return self.fn(*self.args)
-
-
-def _inline_submit(fn, *args):
-    return _LazyResult(fn, args)
 
 
 def _release(fut) -> None:

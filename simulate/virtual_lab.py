@@ -712,7 +712,7 @@ def _compression(truth: Truth, rng, specimens, n: int, root: Path) -> pd.DataFra
 
 
 def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base: int, geometry=None,
-            size=None, prefix=""):
+            size=None, prefix="", workers: int = 1):
     import cv2
 
     from demcal.simulate.render import PHOTO_PX_PER_M, PHOTO_SIZE, Lighting, heap_photo, heap_profile
@@ -737,35 +737,36 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
     rig = rig_of_geometry(geometry) if geometry is not None else rig_named("repose")
     seeds = iter(range(seed_base, seed_base + 100 * n))
     discarded: list = []
-    for i in range(n):
-        row = {"photo_id": f"{prefix}P{i + 1}", "operator": ops[i % len(ops)],
-               "date": str(rng.choice(list(truth.days))) if spread else day}
-        offset = sum(_level_offset(tuple({"operator": truth.operators, "date": truth.days,
-                                          "batch": truth.batches}[e.covariate]),
-                                   row.get(e.covariate, truth.batches[0]), e.size) for e in block)
-        angle = truth.repose_angle_deg + truth.repose_sd_deg * rng.standard_normal() + offset
-        roll = truth.camera_roll_sd_deg * rng.standard_normal() + floor
-        light = Lighting(gradient=float(rng.uniform(0.1, 0.35)), direction_deg=float(rng.uniform(0, 360)))
-        if mode == "analytic" and rig.analytic_photo is not None:
-            img, side = rig.analytic_photo(angle, rng), rig.flanks
-        elif mode == "analytic":
-            x, z = heap_profile(angle + flank, angle - flank, height_m=0.10, floor_m=0.04,
-                                roughness_m=0.002, rng=rng)
-            side = "both"
-            # the same field of view at any resolution: the heap spans the same share of the frame
-            img = heap_photo(x, z, rng=rng, camera_roll_deg=float(np.clip(roll, -15, 15)), light=light,
-                             noise_sd=4.0, blur_px=1.0, jpeg_quality=int(rng.integers(75, 93)),
-                             size=size, px_per_m=PHOTO_PX_PER_M * size[1] / PHOTO_SIZE[1],
-                             particle_m=truth.params.shape.outline_m)
-        else:
-            img, side = _dem_heap_photo(truth, rng, roll, light, seeds, discarded, geometry)
-        name = f"photos/{prefix}heap_{i + 1}.jpg"
-        cv2.imwrite(str(root / name), img, [cv2.IMWRITE_JPEG_QUALITY, 95])
-        rows.append({"photo_id": row["photo_id"], "file": name, "side": side, "operator": row["operator"],
-                     "date": row["date"]})
-        if mode == "dem" and rig.run_photo is None:
-            # a twin's heap seen from the side at the renderer's scale: its crest height is the truth's
-            rows[-1]["scale_mm_per_px"] = 1e3 / PHOTO_PX_PER_M
+    with _Pours(truth.params, geometry, range(seed_base, seed_base + n) if mode == "dem" else (), workers) as pours:
+        for i in range(n):
+            row = {"photo_id": f"{prefix}P{i + 1}", "operator": ops[i % len(ops)],
+                   "date": str(rng.choice(list(truth.days))) if spread else day}
+            offset = sum(_level_offset(tuple({"operator": truth.operators, "date": truth.days,
+                                              "batch": truth.batches}[e.covariate]),
+                                       row.get(e.covariate, truth.batches[0]), e.size) for e in block)
+            angle = truth.repose_angle_deg + truth.repose_sd_deg * rng.standard_normal() + offset
+            roll = truth.camera_roll_sd_deg * rng.standard_normal() + floor
+            light = Lighting(gradient=float(rng.uniform(0.1, 0.35)), direction_deg=float(rng.uniform(0, 360)))
+            if mode == "analytic" and rig.analytic_photo is not None:
+                img, side = rig.analytic_photo(angle, rng), rig.flanks
+            elif mode == "analytic":
+                x, z = heap_profile(angle + flank, angle - flank, height_m=0.10, floor_m=0.04,
+                                    roughness_m=0.002, rng=rng)
+                side = "both"
+                # the same field of view at any resolution: the heap spans the same share of the frame
+                img = heap_photo(x, z, rng=rng, camera_roll_deg=float(np.clip(roll, -15, 15)), light=light,
+                                 noise_sd=4.0, blur_px=1.0, jpeg_quality=int(rng.integers(75, 93)),
+                                 size=size, px_per_m=PHOTO_PX_PER_M * size[1] / PHOTO_SIZE[1],
+                                 particle_m=truth.params.shape.outline_m)
+            else:
+                img, side = _dem_heap_photo(truth, rng, roll, light, seeds, discarded, geometry, pours)
+            name = f"photos/{prefix}heap_{i + 1}.jpg"
+            cv2.imwrite(str(root / name), img, [cv2.IMWRITE_JPEG_QUALITY, 95])
+            rows.append({"photo_id": row["photo_id"], "file": name, "side": side, "operator": row["operator"],
+                         "date": row["date"]})
+            if mode == "dem" and rig.run_photo is None:
+                # a twin's heap seen from the side at the renderer's scale: its crest height is the truth's
+                rows[-1]["scale_mm_per_px"] = 1e3 / PHOTO_PX_PER_M
     frame = pd.DataFrame(rows)
     for e in tilt:
         q = "flank_difference_deg" if e.quantity == "flanks" else "base_tilt_deg"
@@ -786,7 +787,58 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
 MAX_POURS = 5
 
 
-def _dem_heap_photo(truth: Truth, rng, roll, light, seeds, discarded: list, geometry):
+def _pour(params, geometry, seed: int):
+    """One repose-twin heap of the photos (top level: worker processes pickle it)."""
+    return rig_of_geometry(geometry).run(params, seed, profile="quick", geometry=geometry)
+
+
+class _Pours:
+    """The repose-twin heaps of the photos by seed, as a context manager. The heaps of
+    ``seeds`` (one per photo, as when no heap is discarded) are poured on ``workers`` local
+    processes while the photos of the first are drawn here; any other seed is poured here when
+    asked for. A heap depends on its seed only, so the photos are the same whatever
+    ``workers``."""
+
+    def __init__(self, params, geometry, seeds, workers: int):
+        self.params, self.geometry = params, geometry
+        self._pool, self._heaps = None, iter(())
+        self._seeds = list(seeds)
+        if workers > 1 and len(self._seeds) > 1:
+            import concurrent.futures as cf
+            import multiprocessing as mp
+
+            from demcal.simulate.scenes import compile_kernels
+            from demcal.simulate.threads import limit_threads_per_run
+
+            compile_kernels()                     # the workers load the kernels, none compiles them
+            self._pool = cf.ProcessPoolExecutor(min(workers, len(self._seeds)), mp_context=mp.get_context("spawn"),
+                                                initializer=limit_threads_per_run, initargs=(1,))
+            n = len(self._seeds)
+            self._heaps = self._pool.map(_pour, [params] * n, [geometry] * n, self._seeds)
+        else:
+            self._seeds = []
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+        return False
+
+    def __call__(self, seed: int):
+        # the pool's heaps come in seed order; a seed past them (after a discarded heap) or
+        # before them is poured here
+        while self._seeds and self._seeds[0] < seed:
+            self._seeds.pop(0)
+            next(self._heaps)
+        if self._seeds and self._seeds[0] == seed:
+            self._seeds.pop(0)
+            return next(self._heaps)
+        return _pour(self.params, self.geometry, seed)
+
+
+def _dem_heap_photo(truth: Truth, rng, roll, light, seeds, discarded: list, geometry, pours: _Pours):
     """The side photo of a repose-twin heap, poured again (next seed) when the photo method
     cannot read it, as a lab pours again a heap it cannot measure; the seeds of the discarded
     heaps are appended to ``discarded``. Returns the image and the flank measured."""
@@ -798,7 +850,7 @@ def _dem_heap_photo(truth: Truth, rng, roll, light, seeds, discarded: list, geom
     rig = rig_of_geometry(geometry)
     for _ in range(MAX_POURS):
         seed = next(seeds)
-        res = rig.run(truth.params, seed, profile="quick", geometry=geometry)
+        res = pours(seed)
         if rig.run_photo is not None:
             img = rig.run_photo(res.record, rng)
         else:
@@ -903,7 +955,7 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
                            n_compression: int = 10, n_photos: int = 4,
                            cache_dir=None, geometry=None, trials_per_specimen: int | None = None,
                            interleaved: bool = False, photo_size=None,
-                           repose_rig: dict | None = None) -> VirtualWorkbook:
+                           repose_rig: dict | None = None, workers: int = 1) -> VirtualWorkbook:
     """Write a complete lab workbook from ``truth``, with ``effects`` planted.
 
     Parameters
@@ -958,6 +1010,9 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
     photo_size : (int, int), optional
         Height and width of the analytic heap photos [px], the same field of view at any size
         (default ``simulate.render.PHOTO_SIZE``, 900 x 1200 at 2.5 px/mm).
+    workers : int
+        Local processes pouring the heaps of ``photos="dem"`` at once; the workbook is the
+        same whatever their number.
 
     Returns
     -------
@@ -1024,7 +1079,8 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
             # every rig photographs n_photos heaps; the first rig's come as a single-rig lab's
             frame, exp, discarded = _photos(truth, rng, effects, n_photos, root, photos,
                                             seed_base=int(rng.integers(0, 2**31)), geometry=g,
-                                            size=photo_size, prefix="" if i == 0 else rig_of_geometry(g).workbook_name + "_")
+                                            size=photo_size, workers=workers,
+                                            prefix="" if i == 0 else rig_of_geometry(g).workbook_name + "_")
             if len(geometries) > 1:
                 frame.insert(2, "rig", rig_of_geometry(g).workbook_name)
             frames.append(frame)

@@ -1,6 +1,6 @@
 """``demcal virtual-lab``: a complete lab workbook written from a stated truth.
 
-    demcal virtual-lab TRUTH.yaml --out DIR [--plant KIND=SIZE ...] [--seed N] [--force]
+    demcal virtual-lab TRUTH.yaml --out DIR [--plant KIND=SIZE ...] [--seed N] [--force] [--workers N]
 
 TRUTH.yaml states the material, the scatter and reading noise of the lab, and the design of the
 campaign (``simulate.truth_file``; data/virtual_lab/truth.yaml is a commented example). The
@@ -13,6 +13,7 @@ effects and their true sizes. The command prints the true value of every quantit
 from __future__ import annotations
 
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -186,6 +187,9 @@ def register(subparsers) -> None:
                         f"KIND one of {', '.join(EFFECT_KINDS)}")
     p.add_argument("--seed", type=int, default=0, help="seed of the virtual campaign (default %(default)s)")
     p.add_argument("--force", action="store_true", help="replace a virtual workbook already in DIR")
+    p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="processes pouring the heaps of DEM photos at once; the workbook is the same "
+                        "whatever their number (default: the cores, %(default)s)")
     p.set_defaults(handler=run)
 
 
@@ -198,6 +202,8 @@ def run(args) -> int:
     from demcal.simulate.rigs import rig_of_geometry
     from demcal.simulate.virtual_lab import EFFECT_DEFAULTS, check_design, write_virtual_workbook
 
+    if args.workers < 1:
+        raise InputError(f"--workers must be >= 1, got {args.workers}")
     spec = read_truth_file(args.truth)
     effects = parse_plant(args.plant)
     design = spec.design
@@ -213,7 +219,7 @@ def run(args) -> int:
               "takes minutes" if len(rigs) > 1 else
               f"pouring {design['n_photos']} heaps in the {rigs[0]} rig for the photos: this takes minutes",
               file=sys.stderr)
-    vw = write_virtual_workbook(spec.truth, out, effects=effects, rng=args.seed, **design)
+    vw = write_virtual_workbook(spec.truth, out, effects=effects, rng=args.seed, workers=args.workers, **design)
     root = out.parent if out.suffix.lower() == ".xlsx" else out
     print(f"virtual workbook written: {vw.path} (seed {args.seed}; truth and planted effects in "
           f"{root / 'truth.json'})")

@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from demcal.analyse.runs import RunStore, run_all, run_key
+from demcal.analyse.runs import RunStore, Workers, run_all, run_key
 from demcal.errors import SimulationError
 from demcal.jsonio import restore_nan
 from demcal.simulate.scenes import compile_kernels
@@ -91,15 +91,14 @@ class TwinRunner:
             self._tmp = tempfile.TemporaryDirectory(prefix="demcal-twins-")
             store_dir = self._tmp.name
         self.store = RunStore(store_dir)
-        self.workers = int(workers)
+        self.workers = Workers(int(workers), prepare=compile_kernels)
         self.progress = bool(progress)
         self.log: list = []
 
     def __call__(self, function, tasks: list, desc: str) -> list:
         if not tasks:
             return []
-        out = run_all(tasks, function, self.store, workers=self.workers, desc=desc, progress=self.progress,
-                      prepare=compile_kernels)
+        out = run_all(tasks, function, self.store, desc=desc, progress=self.progress, executor=self.workers)
         self.log.append({"stage": desc, "runs": len(tasks), "ran": out.ran, "reused": out.reused,
                          "failed": out.failed})
         bad = [r for r in out.records if r["status"] != "ok"]
@@ -109,6 +108,7 @@ class TwinRunner:
         return [r["result"] for r in out.records]
 
     def close(self):
+        self.workers.close()
         if self._tmp is not None:
             self._tmp.cleanup()
             self._tmp = None

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from demcal.analyse.runs import RunStore, run_all, run_key
+from demcal.analyse.runs import RunStore, Workers, run_all, run_key
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -149,6 +149,51 @@ def test_prepare_runs_once_here_before_local_workers_and_only_when_needed(tmp_pa
     run_all([{"x": 9, "seed": 0}], square_runner, RunStore(tmp_path / "one"), workers=1, progress=False,
             prepare=lambda: calls.append("inline"))
     assert calls == [os.getpid()]
+
+
+def pid_runner(inputs):
+    """A stand-in run that says which process made it (and can kill that process)."""
+    if inputs.get("die"):
+        os._exit(3)
+    return {"pid": os.getpid()}
+
+
+def test_stages_sharing_workers_run_on_the_same_processes_prepared_once(tmp_path):
+    """A campaign's stages share its :class:`Workers`: the second batch runs on the processes
+    the first started (no new start, import and kernel load), ``prepare`` ran once before
+    them, and closing ends them."""
+    calls = []
+    store = RunStore(tmp_path / "runs")
+    with Workers(2, prepare=lambda: calls.append("prepared")) as workers:
+        first = run_all([{"x": x, "seed": 1} for x in range(6)], pid_runner, store, progress=False,
+                        executor=workers)
+        second = run_all([{"x": x, "seed": 2} for x in range(6)], pid_runner, store, progress=False,
+                         executor=workers)
+        pids = {r["result"]["pid"] for r in first.records} | {r["result"]["pid"] for r in second.records}
+        assert os.getpid() not in pids and 1 <= len(pids) <= 2
+        assert {p.pid for p in workers._pool._processes.values()} >= pids
+    assert calls == ["prepared"] and workers._pool is None
+
+
+def die_once_runner(inputs):
+    """Kills its worker process on the first attempt (marker file absent), succeeds after."""
+    marker = Path(inputs["marker"])
+    if not marker.exists():
+        marker.write_text("died")
+        os._exit(3)
+    return {"pid": os.getpid()}
+
+
+def test_a_pool_broken_by_a_dying_worker_is_replaced_for_the_retry_and_the_next_stage(tmp_path):
+    """A worker process that dies breaks the pool; its run counts as a failed attempt, and the
+    retry and the next batch get fresh processes instead of failing on the broken pool."""
+    with Workers(2) as workers:
+        out = run_all([{"x": 0, "seed": 0, "marker": str(tmp_path / "died")}], die_once_runner,
+                      RunStore(tmp_path / "a"), progress=False, executor=workers)
+        assert (out.failed, out.records[0]["status"], out.records[0]["attempts"]) == (0, "ok", 2)
+        later = run_all([{"x": 1, "seed": 0}], pid_runner, RunStore(tmp_path / "b"), progress=False,
+                        executor=workers)
+        assert later.records[0]["status"] == "ok"
 
 
 def test_compile_kernels_runs_the_engine_once_per_process(monkeypatch):

@@ -35,7 +35,7 @@ OTHER_SHAPES = {
 
 
 def virtual_campaign(root, geometry, config, truth=TRUTH, **lab):
-    vw = write_virtual_workbook(Truth(params=truth), root / "lab", rng=21, photos="dem",
+    vw = write_virtual_workbook(Truth(params=truth), root / "lab", rng=21, photos="dem", workers=2,
                                 geometry=geometry, **lab)
     m = measure_workbook(vw.path)
     return calibrate(vw.path, root / "campaign", config, measurement=m)

@@ -146,3 +146,24 @@ def test_a_drum_lab_writes_end_on_frames_that_measure_read_back_at_the_truths_an
     assert set(wb.sheet("repose").frame["side"]) == {"drum"}
     est = measure_workbook(vw.path).quantities["repose_angle_deg"]
     assert est.n == 6 and est.value == pytest.approx(35.0, abs=3.0 * 1.0 / math.sqrt(6) + 0.5)
+
+
+def test_dem_photos_are_the_same_poured_on_one_process_or_on_two(tmp_path):
+    """The heaps of ``photos="dem"`` poured at once on worker processes give the workbook the
+    same heaps poured one after the other give: every sheet and every photo byte for byte."""
+    from demcal.simulate.rigs.repose import ReposeGeometry
+    from demcal.simulate.shapes.sphere import Sphere
+
+    seeds = Truth(params=DEMParameters(shape=Sphere(0.0066), particle_density_kg_m3=1200, shear_modulus_pa=1.04e6,
+                                       dt=None))
+    small = ReposeGeometry.for_particle(seeds.params.shape).scaled(0.35)
+    design = dict(rng=5, photos="dem", geometry=small, n_photos=3, n_drop=2, n_incline=3, n_tracks=0,
+                  n_specimens=5, n_compression=2, drop_heights_mm=(400.0,), orientation_range_deg=(0.0, 90.0))
+    one = write_virtual_workbook(seeds, tmp_path / "one", workers=1, **design)
+    two = write_virtual_workbook(seeds, tmp_path / "two", workers=2, **design)
+    files = sorted(p.relative_to(tmp_path / "one") for p in (tmp_path / "one").rglob("*")
+                   if p.is_file() and p.name != "truth.json")
+    assert any(f.suffix == ".jpg" for f in files) and any(f.name == "repose.csv" for f in files)
+    for f in files:
+        assert (tmp_path / "one" / f).read_bytes() == (tmp_path / "two" / f).read_bytes(), f
+    assert one.provenance.options["discarded_heaps"] == two.provenance.options["discarded_heaps"]
