@@ -353,10 +353,11 @@ class _StoredRuns:
         return records
 
 
-def _responses(records, fallbacks: list | None = None) -> np.ndarray:
+def _responses(records, fallbacks: list | None = None, unreadable: list | None = None) -> np.ndarray:
     """The response of each run: its rig's compared observable (the photo-method angle), else
     the first finite one of its rig's fallbacks (``{"key", "used"}`` is then appended to
-    ``fallbacks``); an error when none is finite."""
+    ``fallbacks``); when none is finite, NaN with the run's index appended to ``unreadable``,
+    or an error without that list."""
     from demcal.simulate.rigs import rig
 
     y = []
@@ -369,8 +370,12 @@ def _responses(records, fallbacks: list | None = None) -> np.ndarray:
             if value is not None and math.isfinite(value):
                 break
         else:
-            raise AnalysisError(f"DEM run {r['key']} gave none of {', '.join(names)} "
-                                f"(run record runs/{r['key']}.json)")
+            if unreadable is None:
+                raise AnalysisError(f"DEM run {r['key']} gave none of {', '.join(names)} "
+                                    f"(run record runs/{r['key']}.json)")
+            unreadable.append(len(y))
+            y.append(math.nan)
+            continue
         if name != twin.compared and fallbacks is not None:
             fallbacks.append({"key": r["key"], "used": name})
         y.append(float(value))
@@ -535,22 +540,28 @@ def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
         results = derive_plausible(measurement, config, execute, factors=factors, base=base,
                                    setups=setups, responses=_responses, run_refs=_run_refs)
         fallbacks = results.pop("fallback_runs")
+        repoured = results.pop("repoured_runs")
     else:
         if len(setups) > 1:
             raise InputError(f"the design-expert workflow fits the angle of one heap; the workbook names "
                              f"{len(setups)} repose rigs ({', '.join(s.workbook_name for s in setups)}): "
                              "calibrate with --workflow plausible, which conditions on every rig")
         results = _derive_design_expert(measurement, config, execute, factors, base, setup)
-        fallbacks = results.pop("fallback_runs")
+        fallbacks, repoured = results.pop("fallback_runs"), []
     # the sections come as their analyses' dictionaries; from_dict types them here, so that a
     # renamed key fails where the result is made
     return CampaignResult.from_dict(dict(
         workflow=config.workflow,
         response={"name": setup_rig.compared, "fallbacks": list(setup_rig.fallbacks),
                   "fallback_runs": fallbacks,
-                  "note": (f"{len(fallbacks)} run(s) left no slope for the photo method (e.g. the "
-                           f"heap spread flat); their response is the fallback named per run"
-                           if fallbacks else "")},
+                  # (only when there are: a campaign without keeps the results it always had)
+                  **({"repoured_runs": repoured} if repoured else {}),
+                  "note": "; ".join(filter(None, (
+                      f"{len(fallbacks)} run(s) left no slope for the photo method (e.g. the heap spread "
+                      "flat); their response is the fallback named per run" if fallbacks else "",
+                      f"{len(repoured)} heap(s) could be read by no method (e.g. nothing left the "
+                      "container) and were poured again with fresh seeds, as the lab pours again a heap "
+                      "it cannot measure (repoured_runs)" if repoured else "")))},
         material=measurement.material,
         target_angle_deg=float(measurement.quantities["repose_angle_deg"].value),
         config={k_: (list(v) if isinstance(v, tuple) else v) for k_, v in config.__dict__.items()

@@ -35,6 +35,11 @@ says what the lab data pin down, instead of picking one optimum of one noisy sur
    the lab's heap-to-heap sd, the lab mean's uncertainty included): equivalent, different or
    undecided.
 
+A heap that neither the photo method nor its fallbacks can read (nothing left the container,
+say) is poured again with a fresh seed of its own stream, up to ``MAX_POURS`` pours, as the lab
+pours again a heap it cannot measure and as the virtual lab does for its photos; results.json
+lists those runs (``response.repoured_runs``) and the report counts them in Table A2.
+
 All seeds come from ``config.seed`` through ``numpy.random.SeedSequence``, one stream per stage,
 so ``--seed`` redraws every run of every stage and a replay of the same campaign asks the run
 store for exactly the same runs.
@@ -56,7 +61,11 @@ from demcal.analyse.surrogate import (IMPLAUSIBILITY_CUT, U_STOP, HeapDatum, Noi
 from demcal.errors import AnalysisError
 
 #: Stage numbers of the seed streams (never reorder: they define which seeds a campaign uses).
-SEED_STREAMS = {"noise": 1, "design": 2, "sequential": 3, "validation": 4, "surrogate": 5, "refine": 6}
+SEED_STREAMS = {"noise": 1, "design": 2, "sequential": 3, "validation": 4, "surrogate": 5, "refine": 6,
+                "pour again": 7}
+#: Pours of one run's heap (the first and those poured again with fresh seeds) before a heap the
+#: photo method cannot read ends the campaign.
+MAX_POURS = 5
 #: Marks the seed streams of a workbook's second and further repose rigs.
 RIG_STREAM = 100
 #: Marks the surrogate seeds of a rig's extra targets.
@@ -237,6 +246,7 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
     flank_band = measurement.provenance.options.get("flank_band")
     heap_prior = measured_prior(measurement, factors)
     fallbacks: list = []
+    repoured: list = []      # runs whose heap no method could read, each poured again
     constraints = {}
     if config.likelihood == "joint":
         from demcal.analyse.twin_likelihood import twin_constraints
@@ -248,16 +258,39 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
     box_low, box_high = np.minimum(prior.low, heap_prior.low), np.maximum(prior.high, heap_prior.high)
 
     def run(heap, stage, points, seed_lists):
-        tasks = [heap.setup.task(base.with_(**{n: float(v) for n, v in zip(names, x)}), s, profile=config.profile)
-                 for x, ss in zip(points, seed_lists) for s in ss]
-        records = execute(heap.stage(stage), tasks)
-        y = responses(records, fallbacks)
+        """The responses of each point's runs, their records and the seeds they ran with: a
+        heap the photo method (and its fallbacks) cannot read is poured again with a fresh
+        seed, as the lab pours again a heap it cannot measure (``repoured``)."""
+        def task(i, j):
+            return heap.setup.task(base.with_(**{n: float(v) for n, v in zip(names, points[i])}),
+                                   seed_lists[i][j], profile=config.profile)
+
+        seed_lists = [list(ss) for ss in seed_lists]
+        slots = [(i, j) for i, ss in enumerate(seed_lists) for j in range(len(ss))]
+        records = execute(heap.stage(stage), [task(i, j) for i, j in slots])
+        unread: list = []
+        y = responses(records, fallbacks, unreadable=unread)
+        for _ in range(MAX_POURS - 1):
+            if not unread:
+                break
+            for k, s in zip(unread, heap.seeds.take("pour again", len(unread))):
+                i, j = slots[k]
+                repoured.append({"stage": heap.stage(stage), **run_refs([records[k]])[0], "poured_again_with_seed": s})
+                seed_lists[i][j] = s
+            again = execute(heap.stage(f"{stage}, poured again"), [task(*slots[k]) for k in unread])
+            still: list = []
+            y_again = responses(again, fallbacks, unreadable=still)
+            for n, k in enumerate(unread):
+                records[k], y[k] = again[n], y_again[n]
+            unread = [unread[n] for n in still]
+        if unread:
+            r = records[unread[0]]
+            raise AnalysisError(f"{heap.stage(stage)}: {MAX_POURS} heaps in a row of one run could not be read "
+                                f"(last: DEM run {r['key']}, run record runs/{r['key']}.json); the rig's "
+                                "dimensions leave no measurable heap at these parameters")
         _check_band(records, flank_band)
-        out, i = [], 0
-        for ss in seed_lists:
-            out.append(y[i:i + len(ss)])
-            i += len(ss)
-        return out, records
+        out = [y[[k for k, (i, _) in enumerate(slots) if i == n]] for n in range(len(seed_lists))]
+        return out, records, seed_lists
 
     def add(heap, stage, points, seed_lists, ys, records):
         i = 0
@@ -293,12 +326,14 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
     b = np.minimum(a + 0.5 * prior.sd, prior.high - 1e-9 * (prior.high - prior.low))
     for heap in heaps:
         pair_seeds = heap.seeds.take("noise", config.noise_repeats)
-        (ya, yb), noise_records = run(heap, "noise", [a, b], [pair_seeds, pair_seeds])
-        add(heap, "noise", [a, b], [pair_seeds, pair_seeds], [ya, yb], noise_records)
+        (ya, yb), noise_records, pair_lists = run(heap, "noise", [a, b], [pair_seeds, pair_seeds])
+        add(heap, "noise", [a, b], pair_lists, [ya, yb], noise_records)
         heap.centre_noise = pooled_noise([ya, yb])
         heap.correlation = seed_correlation(ya, yb)
-        heap.pair = {"a": a.tolist(), "b": b.tolist(), "seeds": pair_seeds,
+        heap.pair = {"a": a.tolist(), "b": b.tolist(), "seeds": pair_lists[0],
                      "a_responses": ya.tolist(), "b_responses": yb.tolist()}
+        if pair_lists[1] != pair_lists[0]:      # a heap poured again: that pair shares no seed
+            heap.pair["b_seeds"] = pair_lists[1]
         k = heap.k = int(config.replicates) if config.replicates else replicates_for(heap.centre_noise.sd, heap.tolerance)
 
         # 2. space-filling design (at most half the budget: the rest goes where it informs) ----
@@ -307,7 +342,7 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
         x0 = space_filling(prior, heap.n0, np.random.SeedSequence([config.seed, SEED_STREAMS["design"], 0]))
         s0 = heap.seeds.take("design", len(x0) * k)
         seed_lists = [s0[i * k:(i + 1) * k] for i in range(len(x0))]
-        ys, records = run(heap, "design", list(x0), seed_lists)
+        ys, records, seed_lists = run(heap, "design", list(x0), seed_lists)
         add(heap, "design", list(x0), seed_lists, ys, records)
         fit(heap)
 
@@ -324,7 +359,7 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
                 break
             ss = heap.seeds.take("sequential", len(pts) * k)
             seed_lists = [ss[i * k:(i + 1) * k] for i in range(len(pts))]
-            ys, records = run(heap, f"sequential {r}", list(pts), seed_lists)
+            ys, records, seed_lists = run(heap, f"sequential {r}", list(pts), seed_lists)
             add(heap, f"sequential {r}", list(pts), seed_lists, ys, records)
             spent += len(pts) * k
             heap.rounds.append({"round": r, "u_min": u_min, "points": len(pts)})
@@ -360,7 +395,7 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
         for heap in heaps:
             predicted = [float(v[0]) for v in heap.model.predict(x_r[None, :])]
             ss = heap.seeds.take("refine", config.refine_runs)
-            (y,), records = run(heap, f"refine {r}", [x_r], [ss])
+            (y,), records, (ss,) = run(heap, f"refine {r}", [x_r], [ss])
             add(heap, f"refine {r}", [x_r], [ss], [y], records)
             fit(heap)
             heap.refinements.append({"round": r, "runs": len(ss), "predicted": predicted[0],
@@ -432,6 +467,7 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
         "validation": first.validation,
         "calibrated_parameters": base.with_(**best["values"]).to_dict(),
         "fallback_runs": fallbacks,
+        "repoured_runs": repoured,
     }
     extras = [e for h in heaps for e in h.extras]
     if extras:
@@ -528,7 +564,7 @@ def _validate(heap, config, x_best, best, run, run_refs) -> Validation:
 
     def draw(n):
         ss = heap.seeds.take("validation", n)
-        (y,), records = run(heap, f"validation {len(val['seeds']) + n}", [x_best], [ss])
+        (y,), records, (ss,) = run(heap, f"validation {len(val['seeds']) + n}", [x_best], [ss])
         val["responses"] += y.tolist()
         val["seeds"] += ss
         val["runs"] += run_refs(records)

@@ -204,3 +204,54 @@ def test_results_json_reads_back_into_the_same_typed_result(campaign):
         CampaignResult.from_dict(renamed)
     with pytest.raises(InputError, match="schema version 99"):
         CampaignResult.from_dict({**stored, "schema_version": 99})
+
+
+def unreadable_heap_runner(inputs):
+    """The noisy stand-in, whose heap no method can read for one seed in eleven (as a run
+    that left nothing outside the carton), whatever the parameters."""
+    out = heap_standin_runner(inputs)
+    if inputs.get("rig", "repose") == "repose" and inputs["seed"] % 11 == 0:
+        out["observable"] = {name: None for name in out["observable"]}
+    return out
+
+
+def never_readable_runner(inputs):
+    out = heap_standin_runner(inputs)
+    if inputs.get("rig", "repose") == "repose":
+        out["observable"] = {name: None for name in out["observable"]}
+    return out
+
+
+def test_a_heap_no_method_can_read_is_poured_again_and_the_replay_does_the_same(measurement, tmp_path):
+    """A run whose heap neither the photo method nor its fallbacks can read is poured again with
+    a fresh seed, as the lab pours again a heap it cannot measure: the campaign finishes, every
+    discarded run is listed (stage, key, seed, the seed that replaced it) and counted in the
+    report's runs table, no response comes from an unreadable heap, and a replay from the store
+    takes the same decisions."""
+    from demcal.analyse.runs import RunStore
+    from demcal.report.tables import run_stages
+
+    config = CampaignConfig(workers=1, progress=False, seed=4, budget_runs=40, validation_cap=16)
+    res = calibrate(EXAMPLE, tmp_path, config, runner=unreadable_heap_runner, measurement=measurement)
+    repoured = res.response["repoured_runs"]
+    assert repoured and "poured again" in res.response["note"]
+    store = RunStore(tmp_path / "runs")
+    for r in repoured:
+        assert r["seed"] % 11 == 0 and store.get(r["key"])["inputs"]["seed"] == r["seed"]
+        assert r["poured_again_with_seed"] != r["seed"]
+    used = [s for p in res.design.points for s in p.seeds] + list(res.validation.seeds)
+    assert all(s % 11 for s in used) and {r["poured_again_with_seed"] for r in repoured} <= set(used) | {
+        r["seed"] for r in repoured}
+    assert all(np.isfinite(p.responses).all() for p in res.design.points)
+    assert dict(run_stages(res))["unreadable heaps, each poured again"] == repoured
+    replay = derive_results(measurement, config, tmp_path / "runs")
+    assert replay.response == res.response and replay.calibration.parameters == res.calibration.parameters
+
+
+def test_a_heap_unreadable_at_every_pour_ends_the_campaign_naming_its_run(measurement, tmp_path):
+    from demcal.analyse.plausible import MAX_POURS
+    from demcal.errors import AnalysisError
+
+    config = CampaignConfig(workers=1, progress=False, seed=4, budget_runs=40, likelihood="heap")
+    with pytest.raises(AnalysisError, match=f"{MAX_POURS} heaps in a row of one run could not be read .*runs/"):
+        calibrate(EXAMPLE, tmp_path, config, runner=never_readable_runner, measurement=measurement)

@@ -6,7 +6,7 @@ heap equivalent to the photographed ones.
 The default suite uses a small carton (60 segments): quick, and its heaps scatter by about ten
 degrees, so the lab's heap-to-heap sd sets the tolerance. The paper's carton is opt-in
 (``-m validation``, about 20 minutes on 2 cores), and so are the small cartons of the other
-shapes (the default carton of each at half scale; 4-8 minutes each on 2 cores)."""
+shapes (the default carton of each at half scale; 1-3 minutes each on 2 cores)."""
 
 from dataclasses import replace
 
