@@ -329,7 +329,8 @@ class NoiseStudy(Record):
     replicates : int
         Runs per design point, and how that was chosen (``replicates_rule``).
     pairs : dict
-        The pair's two points (``a``, ``b``), seeds and responses.
+        The pair's two points (``a``, ``b``), seeds and responses (``b_seeds`` when a heap of the
+        pair was poured again, so that the pair no longer shares every seed).
     """
 
     centre: NoiseSummary
