@@ -289,7 +289,10 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
                                 f"(last: DEM run {r['key']}, run record runs/{r['key']}.json); the rig's "
                                 "dimensions leave no measurable heap at these parameters")
         _check_band(records, flank_band)
-        out = [y[[k for k, (i, _) in enumerate(slots) if i == n]] for n in range(len(seed_lists))]
+        out, i = [], 0
+        for ss in seed_lists:
+            out.append(y[i:i + len(ss)])
+            i += len(ss)
         return out, records, seed_lists
 
     def add(heap, stage, points, seed_lists, ys, records):

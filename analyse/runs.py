@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import json
-import multiprocessing as mp
 import time
 import traceback
 from dataclasses import dataclass
@@ -37,7 +36,7 @@ from tqdm.auto import tqdm
 from demcal.errors import InputError
 from demcal.jsonio import read_json, to_jsonable, write_json
 from demcal.provenance import Provenance, run_key
-from demcal.simulate.threads import limit_threads_per_run, threads_limited_to
+from demcal.simulate.threads import run_processes, threads_limited_to
 
 #: How many times a failed run is attempted in all (the first try and one retry).
 MAX_ATTEMPTS = 2
@@ -206,19 +205,13 @@ class Workers:
             if self.prepare is not None:
                 self.prepare()
                 self.prepare = None
-            self._pool = self._new_pool()
+            self._pool = run_processes(self.workers)
         try:
             return self._pool.submit(fn, *args)
         except cf.process.BrokenProcessPool:
             self._pool.shutdown(wait=False, cancel_futures=True)
-            self._pool = self._new_pool()
+            self._pool = run_processes(self.workers)
             return self._pool.submit(fn, *args)
-
-    def _new_pool(self) -> cf.ProcessPoolExecutor:
-        # spawn: worker processes must not inherit numba/threading state from the parent; the
-        # cores are shared among the runs, so each run's DEM stays on one thread
-        return cf.ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"),
-                                      initializer=limit_threads_per_run, initargs=(1,))
 
     def _dask(self):
         if self._client is None:

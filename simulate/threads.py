@@ -60,6 +60,17 @@ def limit_threads_per_run(n: int | None) -> None:
     _limit = None if n is None else int(n)
 
 
+def run_processes(workers: int):
+    """A pool of ``workers`` local processes for separate runs, each run's DEM on one thread (the
+    cores are shared among the runs). Spawned: a worker must not inherit numba or threading
+    state from its parent."""
+    import concurrent.futures as cf
+    import multiprocessing as mp
+
+    return cf.ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"),
+                                  initializer=limit_threads_per_run, initargs=(1,))
+
+
 @contextmanager
 def threads_limited_to(n: int | None):
     """``limit_threads_per_run(n)`` for the duration of a block (None leaves it as it is)."""

@@ -804,16 +804,12 @@ class _Pours:
         self._pool, self._heaps = None, iter(())
         self._seeds = list(seeds)
         if workers > 1 and len(self._seeds) > 1:
-            import concurrent.futures as cf
-            import multiprocessing as mp
-
             from demcal.simulate.scenes import compile_kernels
-            from demcal.simulate.threads import limit_threads_per_run
+            from demcal.simulate.threads import run_processes
 
             compile_kernels()                     # the workers load the kernels, none compiles them
-            self._pool = cf.ProcessPoolExecutor(min(workers, len(self._seeds)), mp_context=mp.get_context("spawn"),
-                                                initializer=limit_threads_per_run, initargs=(1,))
             n = len(self._seeds)
+            self._pool = run_processes(min(workers, n))
             self._heaps = self._pool.map(_pour, [params] * n, [geometry] * n, self._seeds)
         else:
             self._seeds = []
