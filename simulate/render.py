@@ -236,7 +236,8 @@ PHOTO_PX_PER_M = 2500.0
 def heap_photo(profile_x_m, profile_z_m, *, rng, px_per_m=PHOTO_PX_PER_M, camera_roll_deg=0.0,
                light=None, noise_sd=3.0, blur_px=1.0, jpeg_quality=None, grid=True,
                texture=True, heap_tone="dark", size=PHOTO_SIZE, floor_row=0.78,
-               centre_x_m=None, strays=4, particle_m=(SEGMENT_LENGTH_M, SEGMENT_DIAMETER_M)):
+               centre_x_m=None, strays=4, particle_m=(SEGMENT_LENGTH_M, SEGMENT_DIAMETER_M),
+               spheres=None):
     """Photograph of a heap of particles (cut root segments by default) seen from the side.
 
     The scene, in the plane of the profile: a backdrop (grid paper), a floor plate whose far
@@ -287,6 +288,13 @@ def heap_photo(profile_x_m, profile_z_m, *, rng, px_per_m=PHOTO_PX_PER_M, camera
         Length and width of one particle as the photo shows it lying down [m]
         (``Shape.outline_m``); a root segment of the source paper by default. Equal values
         draw round particles.
+    spheres : (centres, radii), optional
+        The heap's own spheres, centres ``(n, 3)`` [m] (x along the profile, y along the line
+        of sight, z up) and radii ``(n,)`` [m]: a simulated heap photographed as it lies, each
+        sphere a shaded disc, nearest the camera (smallest y) in front, instead of a heap
+        drawn under the profile (``texture``, ``strays`` and ``particle_m`` are then unused).
+        The outline is the spheres' own, as the twin's side view shows them
+        (``simulate.render.silhouette``).
 
     Returns
     -------
@@ -348,8 +356,12 @@ def heap_photo(profile_x_m, profile_z_m, *, rng, px_per_m=PHOTO_PX_PER_M, camera
     px = col0 + x * s
     pz = row0 - z * s
     _shadow(img, px, pz, row0, seg_dia, light)
-    _heap(img, px, pz, row0, seg_len, seg_dia, scene, texture, rng)
-    if strays and texture:
+    if spheres is not None:
+        centres, radii = _sphere_rows(spheres)
+        _discs(img, col0 + centres[:, 0] * s, row0 - centres[:, 2] * s, centres[:, 1], radii * s, scene, rng)
+    else:
+        _heap(img, px, pz, row0, seg_len, seg_dia, scene, texture, rng)
+    if strays and texture and spheres is None:
         _strays(img, px, pz, row0, seg_len, seg_dia, scene, int(strays), rng)
     # The floor plate is in front of the heap's base: drawn last, it hides whatever of the
     # segments at the toes reaches below its far edge.
@@ -647,6 +659,30 @@ def _heap(img, px, pz, row0, seg_len, seg_dia, scene, texture, rng):
             tilt = min(abs(rng.normal(0.0, 0.4)), 1.3)
             _draw_segment(img, x + nx * depth_in, y + ny * depth_in, phi, seg_len, seg_dia,
                           tilt, _segment_colour(scene, rng), rng)
+
+
+def _sphere_rows(spheres):
+    try:
+        centres, radii = spheres
+        centres = np.asarray(centres, dtype=float).reshape(-1, 3)
+        radii = np.broadcast_to(np.asarray(radii, dtype=float), (centres.shape[0],))
+    except (TypeError, ValueError):
+        raise InputError("heap_photo: spheres must be (centres (n, 3), radii (n,)) [m]") from None
+    if not (np.all(np.isfinite(centres)) and np.all(np.isfinite(radii)) and np.all(radii > 0)):
+        raise InputError("heap_photo: spheres must have finite centres and positive radii")
+    return centres, radii
+
+
+def _discs(img, cx, cy, depth, r, scene, rng):
+    """Spheres seen from the side (canvas pixels): the farthest first, each a disc shaded from
+    its dark limb to a highlight toward the light (upper left)."""
+    for i in np.argsort(-depth, kind="stable"):
+        colour = _segment_colour(scene, rng)
+        for width, gain, shift in ((1.0, 0.68, 0.0), (0.82, 0.85, 0.04), (0.6, 0.96, 0.08),
+                                   (0.34, 1.06, 0.14), (0.14, 1.12, 0.2)):
+            o = shift * r[i]
+            cv2.circle(img, _pt(cx[i] - o, cy[i] - o), max(int(round(width * r[i] * _ONE)), 1),
+                       _bgr(colour, gain, (gain - 1) * 30), -1, cv2.LINE_AA, _SHIFT)
 
 
 def _strays(img, px, pz, row0, seg_len, seg_dia, scene, n, rng):

@@ -759,14 +759,14 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
                                  size=size, px_per_m=PHOTO_PX_PER_M * size[1] / PHOTO_SIZE[1],
                                  particle_m=truth.params.shape.outline_m)
             else:
-                img, side = _dem_heap_photo(truth, rng, roll, light, seeds, discarded, geometry, pours)
+                img, side, px_per_m = _dem_heap_photo(rng, roll, light, seeds, discarded, geometry, pours)
             name = f"photos/{prefix}heap_{i + 1}.jpg"
             cv2.imwrite(str(root / name), img, [cv2.IMWRITE_JPEG_QUALITY, 95])
             rows.append({"photo_id": row["photo_id"], "file": name, "side": side, "operator": row["operator"],
                          "date": row["date"]})
             if mode == "dem" and rig.run_photo is None:
-                # a twin's heap seen from the side at the renderer's scale: its crest height is the truth's
-                rows[-1]["scale_mm_per_px"] = 1e3 / PHOTO_PX_PER_M
+                # a twin's heap seen from the side at the photo's scale: its crest height is the truth's
+                rows[-1]["scale_mm_per_px"] = 1e3 / px_per_m
     frame = pd.DataFrame(rows)
     for e in tilt:
         q = "flank_difference_deg" if e.quantity == "flanks" else "base_tilt_deg"
@@ -834,27 +834,35 @@ class _Pours:
         return _pour(self.params, self.geometry, seed)
 
 
-def _dem_heap_photo(truth: Truth, rng, roll, light, seeds, discarded: list, geometry, pours: _Pours):
+def _dem_heap_photo(rng, roll, light, seeds, discarded: list, geometry, pours: _Pours):
     """The side photo of a repose-twin heap, poured again (next seed) when the photo method
     cannot read it, as a lab pours again a heap it cannot measure; the seeds of the discarded
-    heaps are appended to ``discarded``. Returns the image and the flank measured."""
+    heaps are appended to ``discarded``. Returns the image, the flank measured and the photo's
+    scale [px/m] (None for a rig's own photo).
+
+    The camera sees the heap's own spheres, framed as the twin's side view frames them (the
+    width of its profile fills the frame), so that photo and twin differ by the camera only.
+    Drawn from the profile at one scale for every carton, a heap a few particles high read
+    1-3 deg lower than its twin."""
     import cv2
 
     from demcal.measure.repose import angle_from_photo
-    from demcal.simulate.render import heap_photo
+    from demcal.simulate.render import PHOTO_SIZE, heap_photo
 
     rig = rig_of_geometry(geometry)
     for _ in range(MAX_POURS):
         seed = next(seeds)
         res = pours(seed)
+        px_per_m = None
         if rig.run_photo is not None:
             img = rig.run_photo(res.record, rng)
         else:
             x = np.asarray(res.record["profile_x"], float)
             z = np.asarray(res.record["profile_z"], float)
+            px_per_m = PHOTO_SIZE[1] / (x[-1] - x[0])
             img = heap_photo(x, z, rng=rng, camera_roll_deg=float(np.clip(roll, -15, 15)), light=light,
                              noise_sd=4.0, blur_px=1.0, jpeg_quality=int(rng.integers(75, 93)),
-                             particle_m=truth.params.shape.outline_m)
+                             px_per_m=px_per_m, spheres=(res.record["sphere_positions"], res.record["sphere_radii"]))
         # read it back as the workbook will hold it (the JPEG written by _photos)
         stored = cv2.imdecode(cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 95])[1], cv2.IMREAD_COLOR)
         try:
@@ -862,7 +870,7 @@ def _dem_heap_photo(truth: Truth, rng, roll, light, seeds, discarded: list, geom
         except DemcalError as exc:
             discarded.append({"seed": seed, "reason": str(exc)})
             continue
-        return img, rig.flanks
+        return img, rig.flanks, px_per_m
     raise SimulationError(f"{MAX_POURS} repose-twin heaps in a row could not be read from their photos "
                           f"(last: {discarded[-1]['reason']}); the rig's dimensions or the truth give no "
                           "measurable flank")

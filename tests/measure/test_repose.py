@@ -252,6 +252,26 @@ def test_profile_spike_is_rejected_but_waviness_is_not():
     assert result.flanks["left"] == pytest.approx(expected, abs=1e-9)
 
 
+def test_band_ends_stay_between_crest_and_toe():
+    """A small heap's flank: 60 deg from a peaked crest down to a shelf one particle high (just
+    above the band's 15 %) that runs 0.3 m out. The first line through the band is shallow and
+    crosses the band heights beyond the crest and beyond the toe; refitting there took in the
+    other flank and the floor (a fitted angle of -1.4 deg, refused). The ends now stay on the
+    flank, and the angle is the least-squares line through them (numpy.polyfit)."""
+    x = np.linspace(-0.2, 0.5, 7001)
+    t60 = math.tan(math.radians(60.0))
+    z = np.where(x < 0, np.maximum(0.1 + x, 0.0), np.maximum(0.1 - t60 * x, 0.016))
+    z = np.where(x > 0.3, np.maximum(0.016 - t60 * (x - 0.3), 0.0), z)
+    fit = angle_from_profile(x, z, side="right").fits["right"]
+    lo, hi = fit.u_range
+    assert -0.005 < lo and hi < 0.3 + 0.016 / t60
+    band = (x >= lo) & (x <= hi)
+    assert fit.n_rejected == 0
+    expected = -math.degrees(math.atan(np.polyfit(x[band], z[band], 1)[0]))
+    assert fit.angle_deg == pytest.approx(expected, abs=1e-9)
+    assert 20.0 < fit.angle_deg < 60.0
+
+
 def test_roughness_is_trend_free_over_flank_and_band():
     """heap_profile's ground truth: with roughness, a least-squares line through the whole
     flank, or through its 15-85 % band, still has the requested angle (computed here with
@@ -355,6 +375,36 @@ def test_heap_photo_of_each_shape_reads_its_angle(particle):
     for flank in ("left", "right"):
         assert result.flanks[flank] == pytest.approx(angle, abs=ANGLE_TOL_DEG), flank
     assert result.base_tilt_deg == pytest.approx(roll, abs=TILT_TOL_DEG)
+
+
+@pytest.mark.parametrize("seed, roll", [(1, 0.0), (2, 1.2), (3, -2.0)])
+def test_photo_of_a_simulated_heap_reads_what_its_side_view_reads(seed, roll):
+    """A simulated heap photographed as it lies (``spheres``): 12 rows of 3 mm spheres, each
+    row of a stepped pile 7.5 mm shorter than the one below (a flank of about 35 deg),
+    jittered. The photo, with camera roll, light, noise, blur and JPEG, reads the angle the
+    twin's own side view reads (``simulate.rigs.heap.side_view_angles``: the spheres'
+    silhouette) within ANGLE_TOL_DEG, and the roll within TILT_TOL_DEG."""
+    from demcal.simulate.rigs.heap import side_view_angles
+
+    rng = np.random.default_rng(seed)
+    r, rows = 0.003, 12
+    centres = []
+    for k in range(rows):
+        z = r + k * math.sqrt(3.0) * r
+        for x in np.arange(-0.08 + k * r, 0.08 - 2.5 * r * k, 2.0 * r):
+            for y in (-0.01, 0.0, 0.01):
+                centres.append((x + rng.uniform(-0.3, 0.3) * r, y, z + rng.uniform(-0.2, 0.2) * r))
+    centres = np.array(centres)
+    radii = np.full(len(centres), r)
+    view = side_view_angles(centres, radii, "right")
+    img = heap_photo(view.profile_x, view.profile_z, rng=seed, camera_roll_deg=roll, jpeg_quality=85,
+                     spheres=(centres, radii), light=Lighting(gradient=0.3, direction_deg=40.0 * seed))
+    photo = angle_from_photo(img, side="right")
+    assert 25.0 < view.angle_deg < 40.0
+    assert photo.angle_deg == pytest.approx(view.angle_deg, abs=ANGLE_TOL_DEG)
+    assert photo.base_tilt_deg == pytest.approx(roll, abs=TILT_TOL_DEG)
+    with pytest.raises(InputError, match="spheres"):
+        heap_photo(view.profile_x, view.profile_z, rng=seed, spheres=(centres, -radii))
 
 
 # ------------------------------------------------------------------------------------------
