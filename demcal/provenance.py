@@ -32,10 +32,7 @@ from demcal.jsonio import to_jsonable
 #: the same physics with the additions in another order. Smaller runs are the same to the bit.
 #: Revision 8: IEEE arithmetic in every kernel (no ``fastmath``), so that a run gives the same
 #: bits whether its kernels were compiled in the process or loaded from the cache.
-#: Revision 9: a heap's flank is fitted between its crest and its toe only
-#: (``measure.repose``); a heap whose first line through the band was shallow (a low tail)
-#: reads another angle. The runs are the same to the bit; what they record may differ.
-MODEL_VERSION = 9
+MODEL_VERSION = 8
 
 
 def run_key(inputs: dict) -> str:

@@ -3,10 +3,16 @@
 the reported 95 % interval of every parameter, and the validation must find the calibrated
 heap equivalent to the photographed ones.
 
-The default suite uses a small carton (60 segments): quick, and its heaps scatter by about ten
-degrees, so the lab's heap-to-heap sd sets the tolerance. The paper's carton is opt-in
-(``-m validation``, about 20 minutes on 2 cores), and so are the small cartons of the other
-shapes (the default carton of each at half scale; 1-3 minutes each on 2 cores)."""
+The default suite uses a small carton of segments (60) and one of round seeds (about 70):
+quick, and their heaps scatter by five to ten degrees, so the lab's heap-to-heap sd sets the
+tolerance. The paper's carton is opt-in (``-m validation``, about 20 minutes on 2 cores), and so
+are the small cartons of the kernel and the two-sphere clump (3-6 and about 2 minutes on 2
+cores).
+
+Measured over seeds (lab seed 20 + k, campaign seed k; k = 1 is the test's own), with the virtual
+lab photographing each twin heap's own spheres: the round seed's carton passed for every k in
+1..6 (2026-11-28, about 100 s each on 2 cores). Six passes in six bound the pass rate below by
+0.61 (one-sided 95 %), no more."""
 
 from dataclasses import replace
 
@@ -72,12 +78,20 @@ def test_small_carton_virtual_lab(tmp_path):
     check_truth_and_verdict(res)
 
 
-@pytest.mark.validation
-@pytest.mark.parametrize("shape", sorted(OTHER_SHAPES))
+#: Each shape's default carton scaled down: the round seed's to 0.35 (about 70 seeds), the
+#: others' to 0.5 (at 0.35 their heaps are too low to read).
+SHAPE_SCALES = {"sphere": 0.35, "kernel": 0.5, "clump": 0.5}
+
+
+@pytest.mark.parametrize("shape", [
+    "sphere",
+    pytest.param("kernel", marks=pytest.mark.validation),
+    pytest.param("clump", marks=pytest.mark.validation),
+])
 def test_small_carton_virtual_lab_of_each_shape(shape, tmp_path):
     truth = replace(TRUTH, shape=OTHER_SHAPES[shape], particle_density_kg_m3=1200.0, shear_modulus_pa=1.04e6,
                     dt=None)
-    geometry = ReposeGeometry.for_particle(truth.shape).scaled(0.5)
+    geometry = ReposeGeometry.for_particle(truth.shape).scaled(SHAPE_SCALES[shape])
     res = virtual_campaign(tmp_path, geometry, SMALL_CONFIG, truth=truth, drop_heights_mm=(400.0,),
                            orientation_range_deg=(0.0, 90.0), **SMALL_LAB)
     check_truth_and_verdict(res, truth)
