@@ -546,6 +546,11 @@ def _bgr(c, gain=1.0, add=0.0):
     return tuple(min(255.0, max(0.0, gain * float(v) + add)) for v in c)
 
 
+#: Shading of a round body seen from the side: nested strokes (width as a fraction of the
+#: diameter, brightness gain, shift toward the light), from the dark limb to the lit middle.
+_SHADING = ((1.0, 0.68, 0.0), (0.82, 0.85, 0.04), (0.6, 0.96, 0.08), (0.34, 1.06, 0.14), (0.14, 1.12, 0.2))
+
+
 def _draw_segment(img, cx, cy, phi, seg_len, seg_dia, tilt, colour, rng, floor_row=None):
     """One root segment: a shaded capsule with bark wrinkles and, when tilted toward the
     camera by ``tilt`` [rad], an elliptical cut face at one end; seen end-on it is a disc.
@@ -562,8 +567,7 @@ def _draw_segment(img, cx, cy, phi, seg_len, seg_dia, tilt, colour, rng, floor_r
     # Cylinder shading: nested strokes from the dark limb to the lit middle, shifted toward
     # the light (upper left).
     side = -1.0 if v[1] > 0 else 1.0
-    for width, gain, shift in ((1.0, 0.68, 0.0), (0.82, 0.85, 0.04), (0.6, 0.96, 0.08),
-                               (0.34, 1.06, 0.14), (0.14, 1.12, 0.2)):
+    for width, gain, shift in _SHADING:
         o = side * shift * dia
         cv2.line(img, _pt(p1[0] + o * v[0], p1[1] + o * v[1]),
                  _pt(p2[0] + o * v[0], p2[1] + o * v[1]), _bgr(colour, gain, (gain - 1) * 30),
@@ -678,8 +682,7 @@ def _discs(img, cx, cy, depth, r, scene, rng):
     its dark limb to a highlight toward the light (upper left)."""
     for i in np.argsort(-depth, kind="stable"):
         colour = _segment_colour(scene, rng)
-        for width, gain, shift in ((1.0, 0.68, 0.0), (0.82, 0.85, 0.04), (0.6, 0.96, 0.08),
-                                   (0.34, 1.06, 0.14), (0.14, 1.12, 0.2)):
+        for width, gain, shift in _SHADING:
             o = shift * r[i]
             cv2.circle(img, _pt(cx[i] - o, cy[i] - o), max(int(round(width * r[i] * _ONE)), 1),
                        _bgr(colour, gain, (gain - 1) * 30), -1, cv2.LINE_AA, _SHIFT)
