@@ -32,7 +32,12 @@ from demcal.jsonio import to_jsonable
 #: the same physics with the additions in another order. Smaller runs are the same to the bit.
 #: Revision 8: IEEE arithmetic in every kernel (no ``fastmath``), so that a run gives the same
 #: bits whether its kernels were compiled in the process or loaded from the cache.
-MODEL_VERSION = 8
+#: Revision 9: a heap's flank is fitted between its crest and its toe only
+#: (``measure.repose``), so a heap whose first line through the band was shallow (a low tail)
+#: reads another angle; and a stated time step above the damped stability limit of the run's
+#: lowest restitution runs in sub-steps (``simulate.timestep``), so runs at restitution below
+#: 0.1 at the paper's step differ.
+MODEL_VERSION = 9
 
 
 def run_key(inputs: dict) -> str:

@@ -847,10 +847,13 @@ def _flank_fits(u, h, band, smooth, min_points, min_scale=0.0):
         slope, intercept, s_lo, s_hi, kept = _robust_line(u[sel], h[sel], min_scale=min_scale)
         # The band's ends where the fitted line, not the rough boundary, crosses the band
         # heights: a bump or dip at an end would otherwise choose the range and bias the slope.
+        # They stay between crest and toe: a shallow first line (a low tail) crosses the band
+        # heights far out, and refitting there would take in the floor and the other flank.
+        flank = sorted((grid[walk[0]], grid[walk[-1]]))
         for _ in range(3):
             if slope == 0 or not (math.degrees(math.atan(abs(slope))) > 0):
                 break
-            ends = sorted(((lo * crest - intercept) / slope, (hi * crest - intercept) / slope))
+            ends = np.clip(sorted(((lo * crest - intercept) / slope, (hi * crest - intercept) / slope)), *flank)
             new_sel = (u >= ends[0]) & (u <= ends[1])
             if new_sel.sum() < min_points or np.array_equal(new_sel, sel):
                 break

@@ -17,8 +17,32 @@ the restitution the integrator realises differs from the set one: measured for a
 steel and two spheres, e = 0.3 gives 0.30-0.32, e = 0.35 gives 0.36-0.37, e = 0.5 gives
 0.51-0.52 and e = 0.1 gives 0.07-0.08. At dt < 0.01 T_R it is within 1 % (the tests).
 
+Damping. The Rayleigh rule ignores the dashpots, and a hard-damped contact needs a smaller
+step. The kick-drift-kick scheme (``simulate.integrate``: the force at step n+1 sees the
+half-step velocity) applied to a spring-dashpot of frequency w and damping ratio z is stable
+for w dt < 2 (sqrt(1 + z^2) - z) (derived from its amplification matrix; the same limit as the
+central-difference scheme, Belytschko, Liu & Moran 2000, sec. 6.3). The Hertz-Mindlin dashpot
+has z = sqrt(5/6) |beta| on the normal tangent stiffness; the tangential one damps with the
+whole mass m* while the contact point of a sphere moves as m*/3.5 (rotation included), so its
+z is sqrt(3.5) times larger and its mode the first to go unstable: at e = 0.01, z_t = 1.41
+and the stable step is 0.32 of the undamped one. demcal allows
+
+    dt <= T_R min(DEFAULT_MAX_FRACTION, DAMPED_LIMIT_SCALE (sqrt(1 + z_t^2) - z_t)),
+
+z_t at the lowest restitution a run can meet (:func:`damped_max_fraction`). The scale 1 puts
+the undamped limit of that mode at one T_R; measured on the paper's heap (the repose twin, its
+segments, 0.41 T_R): the heap ran away at e_pp = 0.012, where the rule allows 0.32 T_R, and
+ran at 0.35 T_R and at e = 0.9 at 0.82 T_R. A step that the material states (the workbook's
+``time_step_s``, ``--set dt``) and that lies above the damped limit but below
+``DEFAULT_MAX_FRACTION`` is divided into the fewest equal sub-steps that satisfy it
+(:func:`material_time_step`; the runs record the step they ran at): a calibration keeps the
+paper's step where it is safe (restitution >= 0.1) and crosses the low restitutions its
+priors allow without running away.
+
 References
 ----------
+Belytschko, T., Liu, W. K., Moran, B. (2000). Nonlinear Finite Elements for Continua and
+Structures. Wiley.
 Li, Y., Xu, Y., Thornton, C. (2005). A comparison of discrete element simulations and
 experiments for 'sandpiles' composed of spherical particles. Powder Technol. 160, 219-228.
 DEM Solutions (2018). EDEM 2018 User Guide, "Time step".
@@ -29,8 +53,18 @@ from __future__ import annotations
 import math
 
 from demcal.errors import InputError, UnsafeTimeStepError
+from demcal.simulate.contact.hertz_mindlin import SQRT_5_6, damping_ratio
 
 DEFAULT_MAX_FRACTION = 0.5
+
+#: The damped limit's scale: the undamped stable step of a sphere's tangential mode, in T_R.
+DAMPED_LIMIT_SCALE = 1.0
+
+#: A sphere's contact point moves as m / (1 + m R^2 / I) = m / 3.5 under a tangential force.
+TANGENTIAL_MASS_FACTOR = 3.5
+
+#: Lowest restitution a velocity-dependent law reaches (``hertz_mindlin.LOG_E_MIN``).
+RESTITUTION_FLOOR = 1e-6
 
 #: Fraction of the Rayleigh time a parameter set without a stated time step runs at.
 TIME_STEP_FRACTION = 0.2
@@ -62,6 +96,36 @@ def check_time_step(dt: float, t_rayleigh: float, max_fraction: float = DEFAULT_
     return fraction
 
 
+def stable_step_ratio(zeta: float) -> float:
+    """sqrt(1 + z^2) - z: the stable step of a spring-dashpot of damping ratio ``zeta`` [-]
+    over the undamped one (w dt < 2 of the kick-drift-kick scheme)."""
+    return math.sqrt(1.0 + zeta * zeta) - zeta
+
+
+def contact_damping_ratios(restitution: float) -> tuple[float, float]:
+    """Damping ratios (normal, tangential) [-] of a Hertz-Mindlin contact of a sphere at
+    ``restitution``: sqrt(5/6) |beta| on the tangent stiffness, and sqrt(3.5) times it for the
+    tangential mode (dashpot on m*, contact point moving as m*/3.5)."""
+    if not (0.0 < restitution <= 1.0):
+        raise InputError(f"restitution must lie in (0, 1], got {restitution!r}")
+    zeta_n = SQRT_5_6 * abs(damping_ratio(restitution))
+    return zeta_n, math.sqrt(TANGENTIAL_MASS_FACTOR) * zeta_n
+
+
+def damped_max_fraction(restitution: float) -> float:
+    """Largest dt / T_R allowed for contacts of ``restitution`` [-]: the undamped
+    ``DEFAULT_MAX_FRACTION``, or less where the tangential dashpot limits the step."""
+    return min(DEFAULT_MAX_FRACTION,
+               DAMPED_LIMIT_SCALE * stable_step_ratio(contact_damping_ratios(restitution)[1]))
+
+
+def lowest_restitution(params) -> float:
+    """The lowest restitution a ``DEMParameters`` can give a contact: its e_pp and e_pw, or
+    ``RESTITUTION_FLOOR`` for a pair whose restitution follows the impact speed."""
+    return min(RESTITUTION_FLOOR if getattr(params, f"e_{pair}_exponent") != 0.0 else getattr(params, f"e_{pair}")
+               for pair in ("pp", "pw"))
+
+
 def smallest_radius(params) -> float:
     """Radius [m] of the smallest sphere a ``DEMParameters`` puts in a scene (its shape's, and
     a size distribution's)."""
@@ -76,10 +140,14 @@ def material_rayleigh_time(params) -> float:
 
 def material_time_step(params) -> float:
     """The time step [s] of the bulk rigs for a ``DEMParameters``: its ``dt`` when it states one
-    (refused above ``DEFAULT_MAX_FRACTION`` of the Rayleigh time, naming the option), else
-    ``TIME_STEP_FRACTION`` of the Rayleigh time of its smallest sphere."""
+    (refused above ``DEFAULT_MAX_FRACTION`` of the Rayleigh time, naming the option; divided
+    into the fewest equal sub-steps below :func:`damped_max_fraction` of its lowest
+    restitution), else ``TIME_STEP_FRACTION`` of the Rayleigh time of its smallest sphere
+    (below the damped limit at every restitution)."""
     t_r = material_rayleigh_time(params)
     if params.dt is None:
         return TIME_STEP_FRACTION * t_r
-    check_time_step(float(params.dt), t_r)
-    return float(params.dt)
+    dt = float(params.dt)
+    check_time_step(dt, t_r)
+    limit = damped_max_fraction(lowest_restitution(params)) * t_r
+    return dt / math.ceil(dt / limit) if dt > limit else dt

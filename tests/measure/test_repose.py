@@ -252,6 +252,26 @@ def test_profile_spike_is_rejected_but_waviness_is_not():
     assert result.flanks["left"] == pytest.approx(expected, abs=1e-9)
 
 
+def test_band_ends_stay_between_crest_and_toe():
+    """A small heap's flank: 60 deg from a peaked crest down to a shelf one particle high (just
+    above the band's 15 %) that runs 0.3 m out. The first line through the band is shallow and
+    crosses the band heights beyond the crest and beyond the toe; refitting there took in the
+    other flank and the floor (a fitted angle of -1.4 deg, refused). The ends now stay on the
+    flank, and the angle is the least-squares line through them (numpy.polyfit)."""
+    x = np.linspace(-0.2, 0.5, 7001)
+    t60 = math.tan(math.radians(60.0))
+    z = np.where(x < 0, np.maximum(0.1 + x, 0.0), np.maximum(0.1 - t60 * x, 0.016))
+    z = np.where(x > 0.3, np.maximum(0.016 - t60 * (x - 0.3), 0.0), z)
+    fit = angle_from_profile(x, z, side="right").fits["right"]
+    lo, hi = fit.u_range
+    assert -0.005 < lo and hi < 0.3 + 0.016 / t60
+    band = (x >= lo) & (x <= hi)
+    assert fit.n_rejected == 0
+    expected = -math.degrees(math.atan(np.polyfit(x[band], z[band], 1)[0]))
+    assert fit.angle_deg == pytest.approx(expected, abs=1e-9)
+    assert 20.0 < fit.angle_deg < 60.0
+
+
 def test_roughness_is_trend_free_over_flank_and_band():
     """heap_profile's ground truth: with roughness, a least-squares line through the whole
     flank, or through its 15-85 % band, still has the requested angle (computed here with

@@ -70,3 +70,80 @@ def test_a_time_step_above_the_safe_limit_is_refused_naming_the_option():
     small = DEMParameters(shape=Sphere(0.002), particle_density_kg_m3=1200.0)     # the paper's step
     with pytest.raises(UnsafeTimeStepError, match=r"give a smaller time step: --set dt=SECONDS"):
         material_time_step(small)
+
+
+# ----------------------------------------------------------------------------------------------
+# the damped limit: w dt < 2 (sqrt(1 + z^2) - z) for the kick-drift-kick scheme
+
+
+def _resting_sphere(restitution, factor, mode):
+    """A sphere resting on the steel floor under gravity, at ``factor`` times the damped stable
+    step of its normal (``"n"``) or tangential (``"t"``) contact mode, linearised about its
+    static overlap d0 by hand: m g = 4/3 E* sqrt(R) d0^1.5, S_n = 2 E* sqrt(R d0),
+    S_t = 8 G* sqrt(R d0), w_n^2 = S_n / m, w_t^2 = 3.5 S_t / m (rotation included)."""
+    from demcal.simulate.contact.hertz_mindlin import effective_modulus, effective_shear_modulus
+    from demcal.simulate.timestep import contact_damping_ratios, stable_step_ratio
+    from tests.simulate.helpers import R, floor, simulation, sphere_mass, sphere_template
+
+    p = DEMParameters(e_pw=restitution, mu_s_pw=50.0, mu_r_pw=0.0)   # no sliding, no rolling torque
+    e_p = 2 * p.shear_modulus_pa * (1 + p.poisson_ratio)
+    e_w = 2 * p.wall_shear_modulus_pa * (1 + p.wall_poisson_ratio)
+    e_star = effective_modulus(e_p, p.poisson_ratio, e_w, p.wall_poisson_ratio)
+    g_star = effective_shear_modulus(p.shear_modulus_pa, p.poisson_ratio, p.wall_shear_modulus_pa,
+                                     p.wall_poisson_ratio)
+    m, g = sphere_mass(), 9.81
+    d0 = (3 * m * g / (4 * e_star * math.sqrt(R))) ** (2 / 3)
+    zeta_n, zeta_t = contact_damping_ratios(restitution)
+    if mode == "n":
+        omega, zeta = math.sqrt(2 * e_star * math.sqrt(R * d0) / m), zeta_n
+    else:
+        omega, zeta = math.sqrt(3.5 * 8 * g_star * math.sqrt(R * d0) / m), zeta_t
+    sim = simulation(p, dt=factor * 2 * stable_step_ratio(zeta) / omega, force=True, gravity=(0, 0, -g))
+    tpl = sphere_template(sim)
+    floor(sim)
+    if mode == "n":   # pressed 0.01 % deeper than at rest (a growing oscillation saturates when it lifts off)
+        sim.add_clump(tpl, (0.0, 0.0, R - 1.0001 * d0))
+        return sim, lambda: abs(R - sim.sphere_positions()[0, 2] - d0)
+    sim.add_clump(tpl, (0.0, 0.0, R - d0), angular_velocity=(0.0, 1e-3, 0.0))   # the contact slips
+    return sim, lambda: abs(sim.velocities()[0, 0] - sim.angular_velocities()[0, 1] * R)
+
+
+@pytest.mark.parametrize("mode", ["n", "t"])
+@pytest.mark.parametrize("restitution", [0.9, 0.3, 0.05, 0.01])
+def test_the_engine_is_stable_below_the_damped_limit_and_not_above(restitution, mode):
+    """Just below the limit the disturbance decays; 5 % above it grows by orders of magnitude
+    (the growth factor per step is 1.1-1.7 there), for both contact modes and every damping."""
+    def largest_disturbance(factor):
+        sim, disturbance = _resting_sphere(restitution, factor, mode)
+        sim.run(n_steps=1)
+        first = disturbance()
+        seen = []
+        for _ in range(300):
+            sim.run(n_steps=1)
+            seen.append(disturbance())
+        return max(seen[10:]) / first
+
+    assert largest_disturbance(0.95) < 1.0
+    assert largest_disturbance(1.05) > 1e3
+
+
+def test_a_stated_step_above_the_damped_limit_is_divided_into_sub_steps():
+    """By hand, e = 0.012: ln e = -4.4228, beta = -4.4228 / sqrt(4.4228^2 + pi^2) = -0.8153,
+    z_t = sqrt(3.5 x 5/6) x 0.8153 = 1.3923, sqrt(1 + z_t^2) - z_t = 0.3219 of T_R: the paper's
+    step (0.41 T_R) runs as two halves. At e = 0.3 (z_t = 0.611, 0.56) it runs whole; a
+    velocity-dependent restitution counts at its floor 1e-6 (0.277 T_R); a step that follows
+    the material (0.2 T_R) is below the damped limit at every restitution."""
+    from demcal.simulate.timestep import damped_max_fraction, material_rayleigh_time, material_time_step
+
+    assert damped_max_fraction(0.012) == pytest.approx(0.3219, abs=1e-4)
+    assert damped_max_fraction(1e-6) == pytest.approx(0.2772, abs=1e-4)
+    assert damped_max_fraction(0.3) == 0.5
+    paper = DEMParameters()
+    assert material_time_step(paper.with_(e_pp=0.3)) == 7.43678e-5
+    assert material_time_step(paper.with_(e_pp=0.012)) == 7.43678e-5 / 2
+    assert material_time_step(paper.with_(e_pw=0.012)) == 7.43678e-5 / 2
+    assert material_time_step(paper.with_(e_pp_exponent=0.1)) == 7.43678e-5 / 2
+    t_r = material_rayleigh_time(paper)
+    assert material_time_step(paper.with_(dt=0.49 * t_r, e_pp=0.01)) == pytest.approx(0.49 * t_r / 2)
+    assert material_time_step(paper.with_(dt=0.5 * t_r, e_pp=1e-6, e_pw=1e-6)) == pytest.approx(0.5 * t_r / 2)
+    assert material_time_step(paper.with_(dt=None, e_pp=1e-6)) == pytest.approx(0.2 * t_r)
