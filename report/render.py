@@ -421,6 +421,34 @@ def differences_plausible(c: Campaign) -> list[str]:
     return out
 
 
+def time_step_text(c: Campaign) -> str:
+    """The bulk rigs' time step in words: its value, its fraction of the Rayleigh time of the
+    smallest sphere and where it came from, and how many runs the damped limit divided into
+    sub-steps (``simulate.timestep``). Empty without base parameters."""
+    from demcal.simulate.params import DEMParameters
+    from demcal.simulate.timestep import (RESTITUTION_FLOOR, lowest_safe_restitution, material_rayleigh_time,
+                                          material_time_step, smallest_radius)
+
+    r = c.results
+    if r is None or not r.base_parameters:
+        return ""
+    base = DEMParameters.from_names(r.base_parameters)
+    t_r = material_rayleigh_time(base)
+    dt = material_time_step(base.with_(e_pp=1.0, e_pw=1.0, e_pp_exponent=0.0, e_pw_exponent=0.0))
+    origin = ("as the workbook states (meta time_step_s)" if base.dt is not None
+              else "following the material")
+    text = (f"The time step is {dt:.4g} s, {dt / t_r:.3f} of the Rayleigh time ({t_r:.4g} s) of the smallest "
+            f"sphere ({smallest_radius(base) * 1e3:.3g} mm radius) at the particles' shear modulus, {origin}.")
+    e_safe = lowest_safe_restitution(dt / t_r)
+    if e_safe <= RESTITUTION_FLOOR:
+        return text + " It is below the stability limit of a contact at any restitution."
+    bulk = [rec for rec in c.runs.values() if rec.get("inputs", {}).get("rig") != "drop"]
+    divided = [rec for rec in bulk if (rec.get("result") or {}).get("dt", dt) < dt * (1 - 1e-9)]
+    return text + (f" A contact whose restitution is below {e_safe:.3g} damps too hard for that step to be stable "
+                   f"(its tangential dashpot); {len(divided)} of the {len(bulk)} runs of the bulk rigs met one "
+                   "and ran in equal sub-steps below the limit.")
+
+
 def rig_text(c: Campaign) -> str:
     """The repose rig of the campaign (its results, else the workbook meta) in words."""
     from demcal.simulate.rigs import ReposeSetup, repose_rig_named, repose_setup
@@ -593,6 +621,7 @@ def render_html(c: Campaign, tables: list[dict], figures: list) -> str:
         "references": REFERENCES, "results": r,
         "critique_ids": [t["id"] for t in tables if t["id"].startswith("C")],
         "particle_model": particle_model(r.base_parameters) if r is not None and r.base_parameters else "",
+        "time_step": time_step_text(c),
         "particle": particle_noun(c.measurement), "particles": particle_noun(c.measurement, plural=True),
         "repose_test": instrument("repose", c.measurement),
         "callipers": calliper_text(c.measurement), "paper_material": paper_material(c),

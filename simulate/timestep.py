@@ -21,7 +21,7 @@ Damping. The Rayleigh rule ignores the dashpots, and a hard-damped contact needs
 step. The kick-drift-kick scheme (``simulate.integrate``: the force at step n+1 sees the
 half-step velocity) applied to a spring-dashpot of frequency w and damping ratio z is stable
 for w dt < 2 (sqrt(1 + z^2) - z) (derived from its amplification matrix; the same limit as the
-central-difference scheme, Belytschko, Liu & Moran 2000, sec. 6.3). The Hertz-Mindlin dashpot
+central-difference scheme, Belytschko, Liu & Moran 2000, ch. 6). The Hertz-Mindlin dashpot
 has z = sqrt(5/6) |beta| on the normal tangent stiffness; the tangential one damps with the
 whole mass m* while the contact point of a sphere moves as m*/3.5 (rotation included), so its
 z is sqrt(3.5) times larger and its mode the first to go unstable: at e = 0.01, z_t = 1.41
@@ -30,13 +30,17 @@ and the stable step is 0.32 of the undamped one. demcal allows
     dt <= T_R min(DEFAULT_MAX_FRACTION, DAMPED_LIMIT_SCALE (sqrt(1 + z_t^2) - z_t)),
 
 z_t at the lowest restitution a run can meet (:func:`damped_max_fraction`). The scale 1 puts
-the undamped limit of that mode at one T_R; measured on the paper's heap (the repose twin, its
-segments, 0.41 T_R): the heap ran away at e_pp = 0.012, where the rule allows 0.32 T_R, and
-ran at 0.35 T_R and at e = 0.9 at 0.82 T_R. A step that the material states (the workbook's
-``time_step_s``, ``--set dt``) and that lies above the damped limit but below
+the undamped limit of that mode at one T_R. Measured on the paper's heap (the quick repose
+twin of its segments, e_pw 0.41, mu_s_pp 0.64, mu_r_pp 0.50; seeds 1-6): at e_pp = 0.012,
+where the rule allows 0.32 T_R, 2 of 6 heaps ran away at 0.41 T_R, none of 4 at 0.35 or 0.29;
+at e = 0.9 none of 4 at 0.82 T_R, 2 of 4 at 1.03 and 4 of 4 at 1.24. The ratio of the onsets,
+about 2.5, is the tangential mode's (2.9) rather than the normal one's (1.9).
+
+A step that the material states (the workbook's ``time_step_s``, ``--set dt``) and that lies
+above the damped limit but below
 ``DEFAULT_MAX_FRACTION`` is divided into the fewest equal sub-steps that satisfy it
 (:func:`material_time_step`; the runs record the step they ran at): a calibration keeps the
-paper's step where it is safe (restitution >= 0.1) and crosses the low restitutions its
+paper's step where it is safe (restitution above 0.102) and crosses the low restitutions its
 priors allow without running away.
 
 References
@@ -117,6 +121,20 @@ def damped_max_fraction(restitution: float) -> float:
     ``DEFAULT_MAX_FRACTION``, or less where the tangential dashpot limits the step."""
     return min(DEFAULT_MAX_FRACTION,
                DAMPED_LIMIT_SCALE * stable_step_ratio(contact_damping_ratios(restitution)[1]))
+
+
+def lowest_safe_restitution(fraction: float) -> float:
+    """The lowest restitution [-] whose damped limit (:func:`damped_max_fraction`) allows a
+    step of ``fraction`` (at most ``DAMPED_LIMIT_SCALE``) of T_R; ``RESTITUTION_FLOOR`` when
+    every one does."""
+    from scipy.optimize import brentq
+
+    def damped(log_e):   # the damped limit alone, without the undamped cap
+        return DAMPED_LIMIT_SCALE * stable_step_ratio(contact_damping_ratios(math.exp(log_e))[1]) - fraction
+
+    if damped(math.log(RESTITUTION_FLOOR)) >= 0.0:
+        return RESTITUTION_FLOOR
+    return math.exp(brentq(damped, math.log(RESTITUTION_FLOOR), 0.0, xtol=1e-12))
 
 
 def lowest_restitution(params) -> float:

@@ -9,6 +9,7 @@ import copy
 import csv
 import hashlib
 import json
+import math
 import re
 import shutil
 from dataclasses import replace
@@ -966,6 +967,36 @@ def test_calibrate_refuses_text_the_report_cannot_render_before_any_run(hostile,
                           f"{hostile['book']}: ValueError: ") and err.count("\n") == 1
     assert "\\frac" in err
     assert ran == [] and not (out / "runs").exists() and not (out / "results.json").exists()
+
+
+def test_the_report_states_the_time_step_and_the_runs_it_divided(campaign):
+    """By hand: the paper's step 7.43678e-5 s against T_R = pi 0.0055 sqrt(912 / 1e7) /
+    (0.1631 x 0.25 + 0.8766) = 1.7987e-4 s of the example's 5.5 mm spheres (the measured
+    diameter, density and Poisson's ratio move it in the fourth digit). The step f T_R is divided below the
+    restitution whose tangential damping ratio z has sqrt(1 + z^2) - z = f, inverted in closed
+    form: z = (1 - f^2) / (2 f), |beta| = z / sqrt(3.5 x 5/6), ln e = -pi |beta| / sqrt(1 -
+    beta^2) (``simulate.timestep``). A run recorded at half the step is counted."""
+    from demcal.report.render import time_step_text
+
+    c = load_campaign(campaign["out"])
+    base = c.results.base_parameters
+    radius = base["shape"]["diameter_m"] / 2     # the measured mean diameter, 10.999 mm
+    t_r = math.pi * radius * math.sqrt(base["particle_density_kg_m3"] / 1e7) / (
+        0.1631 * base["poisson_ratio"] + 0.8766)
+    text = time_step_text(c)
+    assert text.startswith(f"The time step is 7.437e-05 s, {7.43678e-5 / t_r:.3f} of the Rayleigh time "
+                           f"({t_r:.4g} s) of the smallest sphere (5.5 mm radius)")
+    assert "as the workbook states (meta time_step_s)" in text
+    bulk = [k for k, rec in c.runs.items() if rec["inputs"].get("rig") != "drop"]
+    f = 7.43678e-5 / t_r
+    beta = (1 - f * f) / (2 * f) / math.sqrt(3.5 * 5 / 6)
+    e_safe = math.exp(-math.pi * beta / math.sqrt(1 - beta * beta))
+    assert 0.1 < e_safe < 0.105
+    assert f"below {e_safe:.3g} damps too hard" in text and f"0 of the {len(bulk)} runs" in text
+    runs = copy.deepcopy(c.runs)
+    runs[bulk[0]].setdefault("result", {})["dt"] = 7.43678e-5 / 2
+    assert f"1 of the {len(bulk)} runs" in time_step_text(replace(c, runs=runs))
+    assert text in unescape(campaign["html"].read_text())
 
 
 def test_line_breaks_in_workbook_text_leave_the_report_one_line(campaign):
