@@ -443,7 +443,10 @@ def time_step_text(c: Campaign) -> str:
     if e_safe <= RESTITUTION_FLOOR:
         return text + " It is below the stability limit of a contact at any restitution."
     bulk = [rec for rec in c.runs.values() if rec.get("inputs", {}).get("rig") != "drop"]
-    divided = [rec for rec in bulk if (rec.get("result") or {}).get("dt", dt) < dt * (1 - 1e-9)]
+    # a heap rig records its step in the result's meta, the incline twin in the result itself
+    ran_at = [(rec.get("result") or {}).get("meta", {}).get("dt", (rec.get("result") or {}).get("dt", dt))
+              for rec in bulk]
+    divided = [step for step in ran_at if step < dt * (1 - 1e-9)]
     return text + (f" A contact whose restitution is below {e_safe:.3g} damps too hard for that step to be stable "
                    f"(its tangential dashpot); {len(divided)} of the {len(bulk)} runs of the bulk rigs met one "
                    "and ran in equal sub-steps below the limit.")

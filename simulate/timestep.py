@@ -40,7 +40,7 @@ A step that the material states (the workbook's ``time_step_s``, ``--set dt``) a
 above the damped limit but below
 ``DEFAULT_MAX_FRACTION`` is divided into the fewest equal sub-steps that satisfy it
 (:func:`material_time_step`; the runs record the step they ran at): a calibration keeps the
-paper's step where it is safe (restitution above 0.102) and crosses the low restitutions its
+paper's step where it is safe (restitution above about 0.1) and crosses the low restitutions its
 priors allow without running away.
 
 References

@@ -994,8 +994,10 @@ def test_the_report_states_the_time_step_and_the_runs_it_divided(campaign):
     assert 0.1 < e_safe < 0.105
     assert f"below {e_safe:.3g} damps too hard" in text and f"0 of the {len(bulk)} runs" in text
     runs = copy.deepcopy(c.runs)
-    runs[bulk[0]].setdefault("result", {})["dt"] = 7.43678e-5 / 2
+    runs[bulk[0]]["result"]["meta"] = {"dt": 7.43678e-5 / 2}      # as a heap rig records it
     assert f"1 of the {len(bulk)} runs" in time_step_text(replace(c, runs=runs))
+    runs[bulk[1]]["result"]["dt"] = 7.43678e-5 / 3                 # as the incline twin does
+    assert f"2 of the {len(bulk)} runs" in time_step_text(replace(c, runs=runs))
     assert text in unescape(campaign["html"].read_text())
 
 
