@@ -37,11 +37,10 @@ at e = 0.9 none of 4 at 0.82 T_R, 2 of 4 at 1.03 and 4 of 4 at 1.24. The ratio o
 about 2.5, is the tangential mode's (2.9) rather than the normal one's (1.9).
 
 A step that the material states (the workbook's ``time_step_s``, ``--set dt``) and that lies
-above the damped limit but below
-``DEFAULT_MAX_FRACTION`` is divided into the fewest equal sub-steps that satisfy it
-(:func:`material_time_step`; the runs record the step they ran at): a calibration keeps the
-paper's step where it is safe (restitution above about 0.1) and crosses the low restitutions its
-priors allow without running away.
+above the damped limit but below ``DEFAULT_MAX_FRACTION`` is divided into the fewest equal
+sub-steps that satisfy it (:func:`material_time_step`; the runs record the step they ran at):
+a calibration keeps the paper's step where it is safe (restitution above about 0.1) and
+crosses the low restitutions its priors allow without running away.
 
 References
 ----------

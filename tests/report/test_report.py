@@ -57,13 +57,16 @@ def _memoised_audit_inputs():
     """Every audit here measures the example workbook again and reads the stored PDF's words;
     both are pure functions of file contents, so they are computed once per content: the
     measurement keyed by the workbook's path, options and every file beside it (photos
-    included), the PDF's words by its SHA-256. A changed workbook, photo or PDF is computed
-    afresh. Measurements that write annotated photos (``calibrate``) are never cached."""
+    included), the PDF's words by its SHA-256, and the PDF the audit renders again by the
+    SHA-256 of its HTML (the same derived HTML gives the same PDF, wherever the campaign lies). A changed workbook, photo,
+    PDF or HTML is computed afresh. Measurements that write annotated photos (``calibrate``)
+    are never cached."""
     import demcal.measure.pipeline as pipeline
     import demcal.report.audit as audit_module
+    import demcal.report.render as render_module
 
-    measure, words = pipeline.measure_workbook, audit_module.pdf_words
-    measured, read = {}, {}
+    measure, words, write_pdf = pipeline.measure_workbook, audit_module.pdf_words, render_module.write_pdf
+    measured, read, rendered = {}, {}, {}
 
     def measure_workbook(wb, **kwargs):
         if not isinstance(wb, (str, Path)) or kwargs.get("annotate_dir") or kwargs.get("photo_estimator"):
@@ -80,9 +83,18 @@ def _memoised_audit_inputs():
             read[key] = words(path)
         return list(read[key])
 
+    def memo_pdf(text, path, base_url):
+        key = hashlib.sha256(text.encode()).hexdigest()   # the HTML needs no file (test_html_works_offline)
+        if key not in rendered:
+            rendered[key] = Path(write_pdf(text, path, base_url)).read_bytes()
+        else:
+            Path(path).write_bytes(rendered[key])
+        return path
+
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(pipeline, "measure_workbook", measure_workbook)
         mp.setattr(audit_module, "pdf_words", pdf_words)
+        mp.setattr(render_module, "write_pdf", memo_pdf)
         yield
 
 
