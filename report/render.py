@@ -427,14 +427,14 @@ def time_step_text(c: Campaign) -> str:
     sub-steps (``simulate.timestep``). Empty without base parameters."""
     from demcal.simulate.params import DEMParameters
     from demcal.simulate.timestep import (RESTITUTION_FLOOR, lowest_safe_restitution, material_rayleigh_time,
-                                          material_time_step, smallest_radius)
+                                          smallest_radius, stated_time_step)
 
     r = c.results
     if r is None or not r.base_parameters:
         return ""
     base = DEMParameters.from_names(r.base_parameters)
     t_r = material_rayleigh_time(base)
-    dt = material_time_step(base.with_(e_pp=1.0, e_pw=1.0, e_pp_exponent=0.0, e_pw_exponent=0.0))
+    dt = stated_time_step(base)
     origin = ("as the workbook states (meta time_step_s)" if base.dt is not None
               else "following the material")
     text = (f"The time step is {dt:.4g} s, {dt / t_r:.3f} of the Rayleigh time ({t_r:.4g} s) of the smallest "

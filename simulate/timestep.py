@@ -56,7 +56,7 @@ from __future__ import annotations
 import math
 
 from demcal.errors import InputError, UnsafeTimeStepError
-from demcal.simulate.contact.hertz_mindlin import SQRT_5_6, damping_ratio
+from demcal.simulate.contact.hertz_mindlin import LOG_E_MIN, SQRT_5_6, damping_ratio
 
 DEFAULT_MAX_FRACTION = 0.5
 
@@ -66,8 +66,8 @@ DAMPED_LIMIT_SCALE = 1.0
 #: A sphere's contact point moves as m / (1 + m R^2 / I) = m / 3.5 under a tangential force.
 TANGENTIAL_MASS_FACTOR = 3.5
 
-#: Lowest restitution a velocity-dependent law reaches (``hertz_mindlin.LOG_E_MIN``).
-RESTITUTION_FLOOR = 1e-6
+#: Lowest restitution a velocity-dependent law reaches.
+RESTITUTION_FLOOR = math.exp(LOG_E_MIN)
 
 #: Fraction of the Rayleigh time a parameter set without a stated time step runs at.
 TIME_STEP_FRACTION = 0.2
@@ -124,16 +124,18 @@ def damped_max_fraction(restitution: float) -> float:
 
 def lowest_safe_restitution(fraction: float) -> float:
     """The lowest restitution [-] whose damped limit (:func:`damped_max_fraction`) allows a
-    step of ``fraction`` (at most ``DAMPED_LIMIT_SCALE``) of T_R; ``RESTITUTION_FLOOR`` when
-    every one does."""
-    from scipy.optimize import brentq
-
-    def damped(log_e):   # the damped limit alone, without the undamped cap
-        return DAMPED_LIMIT_SCALE * stable_step_ratio(contact_damping_ratios(math.exp(log_e))[1]) - fraction
-
-    if damped(math.log(RESTITUTION_FLOOR)) >= 0.0:
+    step of ``fraction`` of T_R; ``RESTITUTION_FLOOR`` when every one does. The limit inverted
+    in closed form: sqrt(1 + z^2) - z = f gives z = (1 - f^2) / (2 f), then |beta| = z_t /
+    sqrt(3.5 x 5/6) and ln e = -pi |beta| / sqrt(1 - beta^2)."""
+    f = fraction / DAMPED_LIMIT_SCALE
+    if not f > 0.0:
+        raise InputError(f"fraction must be positive, got {fraction!r}")
+    beta = (1.0 - f * f) / (2.0 * f) / (SQRT_5_6 * math.sqrt(TANGENTIAL_MASS_FACTOR))
+    if beta <= 0.0:
+        return 1.0
+    if beta >= 1.0:
         return RESTITUTION_FLOOR
-    return math.exp(brentq(damped, math.log(RESTITUTION_FLOOR), 0.0, xtol=1e-12))
+    return max(RESTITUTION_FLOOR, math.exp(-math.pi * beta / math.sqrt(1.0 - beta * beta)))
 
 
 def lowest_restitution(params) -> float:
@@ -164,7 +166,17 @@ def material_time_step(params) -> float:
     t_r = material_rayleigh_time(params)
     if params.dt is None:
         return TIME_STEP_FRACTION * t_r
-    dt = float(params.dt)
-    check_time_step(dt, t_r)
+    dt = stated_time_step(params)
     limit = damped_max_fraction(lowest_restitution(params)) * t_r
     return dt / math.ceil(dt / limit) if dt > limit else dt
+
+
+def stated_time_step(params) -> float:
+    """The step [s] a ``DEMParameters`` asks for before any sub-step: its ``dt`` (refused above
+    ``DEFAULT_MAX_FRACTION`` of the Rayleigh time, naming the option), else
+    ``TIME_STEP_FRACTION`` of the Rayleigh time."""
+    t_r = material_rayleigh_time(params)
+    if params.dt is None:
+        return TIME_STEP_FRACTION * t_r
+    check_time_step(float(params.dt), t_r)
+    return float(params.dt)

@@ -147,3 +147,17 @@ def test_a_stated_step_above_the_damped_limit_is_divided_into_sub_steps():
     assert material_time_step(paper.with_(dt=0.49 * t_r, e_pp=0.01)) == pytest.approx(0.49 * t_r / 2)
     assert material_time_step(paper.with_(dt=0.5 * t_r, e_pp=1e-6, e_pw=1e-6)) == pytest.approx(0.5 * t_r / 2)
     assert material_time_step(paper.with_(dt=None, e_pp=1e-6)) == pytest.approx(0.2 * t_r)
+
+
+@pytest.mark.parametrize("fraction", [0.25, 0.3185, 0.41, 0.45, 0.5])
+def test_the_lowest_safe_restitution_is_where_the_damped_limit_meets_the_step(fraction):
+    """Its closed-form inverse put back into the forward limit gives the step again; every
+    restitution above it allows the step, every one below does not."""
+    from demcal.simulate.timestep import RESTITUTION_FLOOR, damped_max_fraction, lowest_safe_restitution
+
+    e = lowest_safe_restitution(fraction)
+    if fraction <= damped_max_fraction(RESTITUTION_FLOOR):
+        assert e == RESTITUTION_FLOOR
+        return
+    assert damped_max_fraction(e) == pytest.approx(fraction, rel=1e-12)
+    assert damped_max_fraction(e * 1.01) >= fraction > damped_max_fraction(e * 0.99)
