@@ -32,6 +32,10 @@ driven by demcal itself. Two workflows share the measurement, the run store and 
     the paper's procedure) and its response is their median. Screening runs share their seeds;
     repeated centre points and validation runs use their own seeds.
 
+In both workflows a heap that neither the photo method nor its fallbacks can read (e.g. nothing
+left the container) is poured again with a fresh seed, as the lab pours again a heap it cannot
+measure (``plausible.pour_until_read``); the results list those runs (``repoured_runs``).
+
 Every DEM run goes through the run store (``analyse.runs``): a rerun of a killed campaign
 redoes nothing that had finished.
 """
@@ -382,11 +386,11 @@ def _responses(records, fallbacks: list | None = None, unreadable: list | None =
     return np.array(y)
 
 
-def _point_responses(records, replicates: int, fallbacks: list) -> tuple[np.ndarray, np.ndarray]:
+def _point_responses(y, replicates: int) -> tuple[np.ndarray, np.ndarray]:
     """Median response of each design point and the (points, replicates) array it comes from;
-    ``records`` holds each point's replicates one after the other."""
-    y = _responses(records, fallbacks).reshape(-1, replicates)
-    return np.median(y, axis=1), y
+    ``y`` holds each point's replicates one after the other."""
+    y_all = np.asarray(y, dtype=float).reshape(-1, replicates)
+    return np.median(y_all, axis=1), y_all
 
 
 def _run_refs(records) -> list[dict]:
@@ -547,7 +551,7 @@ def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
                              f"{len(setups)} repose rigs ({', '.join(s.workbook_name for s in setups)}): "
                              "calibrate with --workflow plausible, which conditions on every rig")
         results = _derive_design_expert(measurement, config, execute, factors, base, setup)
-        fallbacks, repoured = results.pop("fallback_runs"), []
+        fallbacks, repoured = results.pop("fallback_runs"), results.pop("repoured_runs")
     # the sections come as their analyses' dictionaries; from_dict types them here, so that a
     # renamed key fails where the result is made
     return CampaignResult.from_dict(dict(
@@ -581,6 +585,8 @@ def _derive(measurement, config: CampaignConfig, execute) -> CampaignResult:
 
 def _derive_design_expert(measurement, config: CampaignConfig, execute, factors, base, setup) -> dict:
     """Steps 2-7 of the source paper's procedure (module docstring)."""
+    from demcal.analyse.plausible import SeedStream, pour_until_read
+
     target = float(measurement.quantities["repose_angle_deg"].value)
     letters = list(factors)
     low = np.array([factors[f]["low"] for f in letters])
@@ -595,15 +601,20 @@ def _derive_design_expert(measurement, config: CampaignConfig, execute, factors,
         return {param_of[f]: float(v) for f, v in actual_by_letter.items()}
 
     fallbacks: list = []  # runs measured by the profile fit because the photo method found no slope
+    repoured: list = []   # runs whose heap no method could read, each poured again
+    seeds = SeedStream(config.seed)     # the fresh seeds of heaps poured again
 
     def run_points(stage: str, points: list) -> tuple[np.ndarray, np.ndarray, list]:
         """Run each (settings, seed) design point ``config.replicates`` times; returns the
-        points' median responses, every replicate's response and the run records."""
+        points' median responses, every replicate's response and the run records. A heap no
+        method can read is poured again with a fresh seed (``plausible.pour_until_read``)."""
         tasks = [inputs(point, seed + REPLICATE_SEED_STRIDE * r)
                  for point, seed in points for r in range(config.replicates)]
-        records = execute(stage, tasks)
-        y, y_all = _point_responses(records, config.replicates, fallbacks)
-        return y, y_all, records
+        y, records = pour_until_read(
+            execute, stage, f"{stage}, poured again", tasks,
+            lambda k, s: inputs(points[k // config.replicates][0], s),
+            lambda n: seeds.take("pour again", n), _responses, fallbacks, repoured, _run_refs)
+        return (*_point_responses(y, config.replicates), records)
 
     # 2. Plackett-Burman screening --------------------------------------------------------
     pb = plackett_burman(len(letters), runs=12)
@@ -708,6 +719,7 @@ def _derive_design_expert(measurement, config: CampaignConfig, execute, factors,
     calibrated = base.with_(**{param_of[f]: means[f] for f in letters}).with_(**val_settings)
     results = {
         "fallback_runs": fallbacks,
+        "repoured_runs": repoured,
         "plackett_burman": {
             "design_coded": pb.coded.tolist(), "columns": list(pb.columns),
             "design_actual": pb_actual.tolist(), "response": y_pb.tolist(),

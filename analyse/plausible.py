@@ -103,6 +103,39 @@ class SeedStream:
         return [int(s % (2 ** 31 - 1)) for s in state[start:]]
 
 
+def pour_until_read(execute, stage: str, again_stage: str, tasks: list, pour_again, fresh_seeds, responses,
+                    fallbacks: list, repoured: list, run_refs) -> tuple[np.ndarray, list]:
+    """Run ``tasks`` (``execute(stage, tasks)``) and read their heaps by ``responses``. A heap
+    the photo method and its fallbacks cannot read is poured again with a fresh seed, as the
+    lab pours again a heap it cannot measure: ``fresh_seeds(n)`` gives n new seeds,
+    ``pour_again(k, seed)`` the task of run ``k`` with one (run in the stage ``again_stage``), and
+    each run set aside is listed in ``repoured`` (stage, key, seed, the seed that replaced it).
+    After ``MAX_POURS`` pours of one run the campaign ends, naming its last record. Returns
+    the responses and the records, those poured again in their runs' places."""
+    records = execute(stage, tasks)
+    unread: list = []
+    y = responses(records, fallbacks, unreadable=unread)
+    for _ in range(MAX_POURS - 1):
+        if not unread:
+            break
+        again_tasks = []
+        for k, s in zip(unread, fresh_seeds(len(unread))):
+            repoured.append({"stage": stage, **run_refs([records[k]])[0], "poured_again_with_seed": s})
+            again_tasks.append(pour_again(k, s))
+        again = execute(again_stage, again_tasks)
+        still: list = []
+        y_again = responses(again, fallbacks, unreadable=still)
+        for n, k in enumerate(unread):
+            records[k], y[k] = again[n], y_again[n]
+        unread = [unread[n] for n in still]
+    if unread:
+        r = records[unread[0]]
+        raise AnalysisError(f"{stage}: {MAX_POURS} heaps in a row of one run could not be read "
+                            f"(last: DEM run {r['key']}, run record runs/{r['key']}.json); the rig's "
+                            "dimensions leave no measurable heap at these parameters")
+    return y, records
+
+
 def measured_prior(measurement, factors, constraints: dict | None = None) -> Prior:
     """The prior of the seven contact parameters: each one's measured mean and sd, or, for a
     parameter in ``constraints`` (``analyse.twin_likelihood``), the mean and sd its lab test's
@@ -267,27 +300,16 @@ def derive_plausible(measurement, config, execute, *, factors, base, setups, res
 
         seed_lists = [list(ss) for ss in seed_lists]
         slots = [(i, j) for i, ss in enumerate(seed_lists) for j in range(len(ss))]
-        records = execute(heap.stage(stage), [task(i, j) for i, j in slots])
-        unread: list = []
-        y = responses(records, fallbacks, unreadable=unread)
-        for _ in range(MAX_POURS - 1):
-            if not unread:
-                break
-            for k, s in zip(unread, heap.seeds.take("pour again", len(unread))):
-                i, j = slots[k]
-                repoured.append({"stage": heap.stage(stage), **run_refs([records[k]])[0], "poured_again_with_seed": s})
-                seed_lists[i][j] = s
-            again = execute(heap.stage(f"{stage}, poured again"), [task(*slots[k]) for k in unread])
-            still: list = []
-            y_again = responses(again, fallbacks, unreadable=still)
-            for n, k in enumerate(unread):
-                records[k], y[k] = again[n], y_again[n]
-            unread = [unread[n] for n in still]
-        if unread:
-            r = records[unread[0]]
-            raise AnalysisError(f"{heap.stage(stage)}: {MAX_POURS} heaps in a row of one run could not be read "
-                                f"(last: DEM run {r['key']}, run record runs/{r['key']}.json); the rig's "
-                                "dimensions leave no measurable heap at these parameters")
+
+        def pour_again(k, s):
+            i, j = slots[k]
+            seed_lists[i][j] = s
+            return task(i, j)
+
+        y, records = pour_until_read(execute, heap.stage(stage), heap.stage(f"{stage}, poured again"),
+                                     [task(i, j) for i, j in slots], pour_again,
+                                     lambda n: heap.seeds.take("pour again", n), responses, fallbacks, repoured,
+                                     run_refs)
         _check_band(records, flank_band)
         out, i = [], 0
         for ss in seed_lists:

@@ -202,11 +202,12 @@ def run_stages(results: CampaignResult) -> list[tuple[str, list]]:
             for p in o.design.points:
                 rig_stages.setdefault(f"{p.stage} ({o.workbook_name})", []).extend(p.runs)
             out += list(rig_stages.items()) + [(f"validation ({o.workbook_name})", o.validation.runs)]
-        repoured = results.response.get("repoured_runs")
-        if repoured:
-            out.append(("unreadable heaps, each poured again", repoured))
-        return out
-    return [(stage, _part_runs(results, part)) for stage, part in _RUN_STAGES]
+    else:
+        out = [(stage, _part_runs(results, part)) for stage, part in _RUN_STAGES]
+    repoured = results.response.get("repoured_runs")
+    if repoured:
+        out.append(("unreadable heaps, each poured again", repoured))
+    return out
 
 
 def _part_runs(results: CampaignResult, part: str) -> list:

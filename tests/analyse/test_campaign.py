@@ -98,10 +98,43 @@ def test_workflow_and_replicates_default_by_profile_and_survive_the_stored_confi
 def test_design_point_response_is_the_median_of_its_replicates():
     from demcal.analyse.campaign import _point_responses
 
-    records = [{"key": str(i), "result": {"observable": {"angle_deg": a}}}
-               for i, a in enumerate([30.0, 47.5, 31.0, 20.0, 22.0, 21.0])]
-    y, y_all = _point_responses(records, 3, [])
+    y, y_all = _point_responses([30.0, 47.5, 31.0, 20.0, 22.0, 21.0], 3)
     assert y.tolist() == [31.0, 21.0] and y_all.shape == (2, 3)
+
+
+def unreadable_heap_runner(inputs):
+    """The stand-in, whose heap no method can read for one seed in eleven (as a run that
+    left nothing outside the carton), whatever the parameters."""
+    out = standin_runner(inputs)
+    if inputs["seed"] % 11 == 0:
+        out["observable"] = {name: None for name in out["observable"]}
+    return out
+
+
+def test_the_paper_workflow_pours_an_unreadable_heap_again_and_the_replay_does_the_same(measurement, tmp_path):
+    """The design-expert workflow, as the plausible one, pours again with a fresh seed a heap
+    neither the photo method nor its fallbacks can read, instead of stopping the campaign: at
+    seed 11 every screening and climb run is such a heap. Every run set aside is listed with
+    the seed that replaced it, counted in the report's runs table, no response comes from an
+    unreadable heap, and a replay from the store takes the same decisions."""
+    from demcal.analyse.campaign import derive_results
+    from demcal.analyse.runs import RunStore
+    from demcal.report.tables import run_stages
+
+    config = CampaignConfig(workers=1, progress=False, workflow="design-expert", seed=11)
+    res = calibrate(EXAMPLE, tmp_path, config, runner=unreadable_heap_runner, measurement=measurement)
+    repoured = res.response["repoured_runs"]
+    assert len(repoured) >= 12 and "poured again" in res.response["note"]
+    store = RunStore(tmp_path / "runs")
+    for r in repoured:
+        assert r["seed"] % 11 == 0 and store.get(r["key"])["inputs"]["seed"] == r["seed"]
+        assert r["poured_again_with_seed"] % 11 != 0 or any(q["seed"] == r["poured_again_with_seed"] for q in repoured)
+    assert {r["stage"] for r in repoured} >= {"Plackett-Burman", "steepest climb"}
+    for part in (res.plackett_burman, res.steepest_climb, res.box_behnken, res.validation):
+        assert all(run["seed"] % 11 for run in part.runs)
+    assert dict(run_stages(res))["unreadable heaps, each poured again"] == repoured
+    replay = derive_results(measurement, config, tmp_path / "runs")
+    assert replay.response == res.response and replay.box_behnken.response == res.box_behnken.response
 
 
 def test_a_time_step_above_the_safe_limit_is_refused_before_any_run(measurement, tmp_path):
