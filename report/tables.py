@@ -1303,6 +1303,11 @@ def table_runs(c: Campaign) -> Table:
         keys += named
     keys = list(dict.fromkeys(keys))
     rows.append(("all runs", *_run_counts([c.runs.get(key, {}) for key in keys]), None, None, None))
+    repoured = r.response.get("repoured_runs") or ()
+    again = (f"{len(repoured)} heap(s) could be read by no method (e.g. nothing left the container) and "
+             "were poured again with fresh seeds, as the lab pours again a heap it cannot measure: the row "
+             "'unreadable heaps, each poured again' counts the runs set aside, and the runs that replaced "
+             "them count in their stages.",) if repoured else ()
     return Table("A2", "DEM runs by stage (every run, with its key, is listed in runs.csv)",
                  ("Stage", "Runs", "Finished", "Failed", "Seeds", "Wall time, total", "Wall time, median",
                   "Observable", "Mean", "SD"),
@@ -1312,7 +1317,8 @@ def table_runs(c: Campaign) -> Table:
                         "attempts, wall time and observables.",
                         "Runs: the distinct run records of the stage; a run used by several stages counts in "
                         "each, and once in 'all runs'. Seeds: distinct seeds. Observable: what the campaign "
-                        "reads from the stage's runs, with its mean and SD (n - 1) over the runs that gave it."),
+                        "reads from the stage's runs, with its mean and SD (n - 1) over the runs that gave it.",
+                        *again),
                  sources=({"kind": "runs", "keys": keys},),
                  formats=("", "d", "d", "d", "d", ".4g", ".3g", "", ".4g", ".3g"))
 

@@ -119,7 +119,7 @@ def test_the_paper_workflow_pours_an_unreadable_heap_again_and_the_replay_does_t
     unreadable heap, and a replay from the store takes the same decisions."""
     from demcal.analyse.campaign import derive_results
     from demcal.analyse.runs import RunStore
-    from demcal.report.tables import run_stages
+    from demcal.report.tables import load_campaign, run_stages, table_runs
 
     config = CampaignConfig(workers=1, progress=False, workflow="design-expert", seed=11)
     res = calibrate(EXAMPLE, tmp_path, config, runner=unreadable_heap_runner, measurement=measurement)
@@ -133,6 +133,10 @@ def test_the_paper_workflow_pours_an_unreadable_heap_again_and_the_replay_does_t
     for part in (res.plackett_burman, res.steepest_climb, res.box_behnken, res.validation):
         assert all(run["seed"] % 11 for run in part.runs)
     assert dict(run_stages(res))["unreadable heaps, each poured again"] == repoured
+    a2 = table_runs(load_campaign(tmp_path))
+    row = next(r for r in a2.rows if r[0] == "unreadable heaps, each poured again")
+    assert row[1] == len({r["key"] for r in repoured})
+    assert any(n.startswith(f"{len(repoured)} heap(s) could be read by no method") for n in a2.notes)
     replay = derive_results(measurement, config, tmp_path / "runs")
     assert replay.response == res.response and replay.box_behnken.response == res.box_behnken.response
 
