@@ -717,6 +717,11 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
 
     from demcal.simulate.render import PHOTO_PX_PER_M, PHOTO_SIZE, Lighting, heap_photo, heap_profile
 
+    rig = rig_of_geometry(geometry) if geometry is not None else rig_named("repose")
+    if size is not None and (mode != "analytic" or rig.analytic_photo is not None):
+        # never dropped silently: only the drawn heap profile can be rendered at any size
+        raise InputError(f"photo_size sets the size of the analytic photos of a heap profile; the "
+                         f"{'DEM' if mode == 'dem' else rig.name} photos are framed by what they show")
     size = PHOTO_SIZE if size is None else size
 
     tilt = [e for e in effects if e.kind == "camera_tilt"]
@@ -734,7 +739,6 @@ def _photos(truth: Truth, rng, effects, n: int, root: Path, mode: str, seed_base
             raise InputError(f"block_effect in the repose sheet: covariate must be operator or date, "
                              f"got {e.covariate!r}")
     spread = _by_day(effects, "repose")
-    rig = rig_of_geometry(geometry) if geometry is not None else rig_named("repose")
     seeds = iter(range(seed_base, seed_base + 100 * n))
     discarded: list = []
     with _Pours(truth.params, geometry, range(seed_base, seed_base + n) if mode == "dem" else (), workers) as pours:
@@ -1013,7 +1017,8 @@ def write_virtual_workbook(truth: Truth, path, effects=(), rng=None, *, photos: 
         a planted drift with it); default each pair's drops in a session of its own.
     photo_size : (int, int), optional
         Height and width of the analytic heap photos [px], the same field of view at any size
-        (default ``simulate.render.PHOTO_SIZE``, 900 x 1200 at 2.5 px/mm).
+        (default ``simulate.render.PHOTO_SIZE``, 900 x 1200 at 2.5 px/mm). Refused for photos
+        that are framed by what they show (``photos="dem"``, a drum's analytic frames).
     workers : int
         Local processes pouring the heaps of ``photos="dem"`` at once; the workbook is the
         same whatever their number.

@@ -10,7 +10,7 @@ import pytest
 from demcal.errors import InputError
 from demcal.measure.pipeline import measure_workbook
 from demcal.measure.workbook import read_workbook
-from demcal.simulate.params import DEMParameters
+from demcal.simulate.params import DEMParameters, parse_shape
 from demcal.simulate.virtual_lab import (EFFECT_KINDS, PlantedEffect, Truth, VirtualWorkbook, drop_twin_ratio,
                                   write_virtual_workbook)
 
@@ -100,6 +100,14 @@ def test_errors_name_the_problem(tmp_path):
         write_virtual_workbook(Truth(), tmp_path / "b", effects=("camera_tilt",), rng=1, photos="none")
     with pytest.raises(InputError, match="e_sd"):
         Truth(e_sd=-0.1)
+    # a photo size is never dropped silently: only a drawn heap profile is rendered at any size
+    with pytest.raises(InputError, match="photo_size sets the size of the analytic photos.*the DEM photos"):
+        write_virtual_workbook(Truth(), tmp_path / "c", rng=1, photos="dem", n_photos=2, photo_size=(450, 600))
+    drum = {"repose_rig": "drum", "drum_diameter_mm": 150, "drum_width_mm": 40, "drum_speed_rpm": 10,
+            "drum_fill_fraction": 0.4}
+    seeds = Truth(params=DEMParameters(shape=parse_shape("sphere:0.00646"), particle_density_kg_m3=1200, dt=None))
+    with pytest.raises(InputError, match="the drum photos are framed"):
+        write_virtual_workbook(seeds, tmp_path / "d", rng=1, n_photos=2, repose_rig=drum, photo_size=(450, 600))
 
 
 def test_a_lifting_cylinder_lab_writes_its_rig_and_reads_back(tmp_path):
