@@ -91,7 +91,6 @@ from scipy import stats
 from demcal.errors import InputError
 from demcal.simulate.clump import ClumpTemplate
 from demcal.simulate.shapes.segment import Segment
-from demcal.simulate.contact.rolling import epsd_damping, epsd_rolling_torque, epsd_stiffness  # noqa: F401
 from demcal.simulate.params import DEMParameters
 from demcal.simulate.shapes import Shape
 from demcal.units import GRAVITY

@@ -15,9 +15,10 @@ import pytest
 import yaml
 
 from demcal.errors import InputError
-from demcal.simulate.extensions import (EXTENSIONS, SizeDistribution, describe, epsd_damping, epsd_rolling_torque,
-                                 epsd_stiffness, fit_velocity_restitution, impact_speed, invert_drop_twin,
-                                 parameters_for_impact, particle_of_size, surface_ripple, with_more_spheres)
+from demcal.simulate.contact.rolling import epsd_damping, epsd_rolling_torque, epsd_stiffness
+from demcal.simulate.extensions import (EXTENSIONS, SizeDistribution, describe, fit_velocity_restitution,
+                                        impact_speed, invert_drop_twin, parameters_for_impact, particle_of_size,
+                                        surface_ripple, with_more_spheres)
 from demcal.simulate.params import DEMParameters
 from demcal.simulate.shapes.segment import Segment
 
