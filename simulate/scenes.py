@@ -141,10 +141,12 @@ def compile_kernels(threaded: bool = False) -> None:
     try:
         step_cases(threads=None)
     finally:
-        if child is not None and child.wait() != 0:
+        if child is not None:
+            child.wait()       # never left running, whatever happened here
+    if threaded:
+        if child.returncode != 0:
             raise RuntimeError(f"compiling the threaded step loop failed in a child process "
                                f"(exit {child.returncode})")
-    if threaded:
         step_cases(threads=2)       # loaded from the cache the child filled
 
 
