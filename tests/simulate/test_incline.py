@@ -88,3 +88,42 @@ def test_a_sled_is_nine_particles_with_their_summed_mass_and_parallel_axis_inert
     assert sled.n_spheres == 9 and sled.mass == pytest.approx(9 * m)
     # about z: 9 (2/5 m r^2) + m step^2 (4 corners x 2 + 4 edges x 1) = 9 (0.4 m r^2) + 12 m step^2
     assert max(sled.principal_moments) == pytest.approx(9 * 0.4 * m * r * r + 12 * m * step ** 2, rel=1e-9)
+
+
+# ---------------------------------------------------------------------------------------------
+# the calibration's runs start tilted below Coulomb's onset
+
+@pytest.mark.parametrize("shape, mode, surface, mu_s", [
+    ("segment", "slide", "steel", 0.6), ("segment", "slide", "particle", 0.4), ("sphere", "sled", "steel", 0.45)])
+def test_a_twin_run_started_tilted_reads_the_onset_of_one_started_flat(shape, mode, surface, mu_s):
+    """The calibration's task starts at 0.8 atan(mu_s): the onset it reads is that of the lab's
+    tilt from 0 within one 0.01 deg chunk, in fewer steps."""
+    from demcal.simulate.rigs.incline import CHUNK_DEG, run_incline, run_task, task
+    from demcal.simulate.shapes.sphere import Sphere
+
+    params = (DEMParameters() if shape == "segment" else
+              DEMParameters(shape=Sphere(0.0066), particle_density_kg_m3=1200.0, dt=None))
+    params = params.with_(**{"mu_s_pw" if surface == "steel" else "mu_s_pp": mu_s})
+    inputs = task(params, mode, surface)
+    assert inputs["start_deg"] == pytest.approx(0.8 * math.degrees(math.atan(mu_s)), abs=0.005)
+    flat = run_incline(params, mode=mode, surface=surface)
+    tilted = run_task(inputs)
+    assert tilted["observable"]["slide_angle_deg"] == pytest.approx(flat.observable["slide_angle_deg"],
+                                                                    abs=CHUNK_DEG)
+    assert tilted["steps"] < flat.meta["steps"] / 3
+
+
+def test_a_twin_run_that_moves_at_once_is_run_again_from_flat():
+    """A single sphere on the sliding twin rolls at once at the tilted start: the task runs it
+    again from 0, so it reports the rolling onset the lab would see, not the start angle."""
+    from demcal.simulate.rigs.incline import run_incline, run_task, task
+    from demcal.simulate.shapes.sphere import Sphere
+
+    params = DEMParameters(shape=Sphere(0.0066), particle_density_kg_m3=1200.0, dt=None, mu_r_pw=0.05,
+                           mu_s_pw=0.45)
+    inputs = task(params, "slide", "steel")
+    assert inputs["start_deg"] > 15.0
+    flat = run_incline(params, mode="slide", surface="steel")
+    again = run_task(inputs)
+    assert again["observable"] == flat.observable
+    assert again["steps"] > flat.meta["steps"]          # both runs are counted

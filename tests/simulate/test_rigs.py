@@ -347,7 +347,7 @@ def test_each_rigs_task_is_the_run_stores_key_layout_and_runs_on_its_rig():
         "rig": "drop", "params": p, "pair": "particle-steel", "height": 0.05, "orientation_deg": 0.0, "seed": 5,
         "template": None, "extension": None}
     assert incline.task(PARAMS, "slide", "steel") == {"rig": "incline", "params": p, "mode": "slide",
-                                                      "surface": "steel", "seed": 0}
+                                                      "surface": "steel", "start_deg": 9.05, "seed": 0}
     geo = ReposeGeometry(box_length=0.08, box_width=0.05, box_height=0.1, fill_count=12)
     assert repose.task(PARAMS, 3, profile="quick", geometry=geo) == {
         "rig": "repose", "profile": "quick", "params": p, "geometry": geo.to_dict(), "seed": 3}
