@@ -262,6 +262,10 @@ def _gravity(tilt_deg: float) -> tuple:
 #: Coulomb's onset: nothing moves in the tilt it skips, and the onset it reads is the same
 #: (within ``CHUNK_DEG``) at a third to a fifth of the steps.
 START_FRACTION = 0.8
+#: A run that reads an onset, or ends, within this tilt of a tilted start [deg] is run again
+#: from flat: its particle moved (or crept) at once, and a slow tilt from 0 might have seen it
+#: move lower. A true sliding onset lies 0.2 atan(mu_s) above the start.
+RESTART_WITHIN_DEG = 0.1
 
 
 def start_angle(params: DEMParameters, mode: str, surface: str) -> float:
@@ -281,25 +285,26 @@ def task(params: DEMParameters, mode: str, surface: str, seed: int = 0) -> dict:
 
 def run_task(inputs: dict) -> dict:
     """One incline run from its :func:`task`: the observable and the run's tally. A run that
-    moved in its first chunk started too steep (a particle that rolls, a friction the slide
-    does not follow) and is run again from 0, as the lab tilts; its tally counts both."""
+    moved at once started too steep (a particle that rolls, a friction the slide does not
+    follow) and is run again from 0, as the lab tilts; its tally counts both."""
     params = DEMParameters.from_names(inputs["params"])
     options = {"mode": inputs["mode"], "surface": inputs["surface"]}
     start = float(inputs.get("start_deg", 0.0))
     res = run_incline(params, int(inputs["seed"]), start_deg=start, **options)
     steps, wall_s = res.meta["steps"], res.meta["wall_s"]
-    if start > 0.0 and _moved_at_once(res):
+    if start > 0.0 and _moved_at_once(res, start):
         res = run_incline(params, int(inputs["seed"]), start_deg=0.0, **options)
         steps, wall_s = steps + res.meta["steps"], wall_s + res.meta["wall_s"]
     return {"rig": "incline", "observable": res.observable, "notes": res.meta.get("notes", []),
             "dt": res.meta["dt"], "steps": steps, "wall_s": wall_s}
 
 
-def _moved_at_once(res: RigResult) -> bool:
-    """Whether a run's first chunk already read an onset, or was its last."""
-    first = float(res.record["tilt_deg"][0])
+def _moved_at_once(res: RigResult, start: float) -> bool:
+    """Whether a run started at ``start`` [deg] read an onset, or ended, within
+    ``RESTART_WITHIN_DEG`` of it."""
+    near = start + RESTART_WITHIN_DEG
     onsets = (res.observable["slide_angle_deg"], res.observable["roll_angle_deg"])
-    return len(res.record["tilt_deg"]) == 1 or any(a <= first for a in onsets if math.isfinite(a))
+    return float(res.record["tilt_deg"][-1]) <= near or any(a <= near for a in onsets if math.isfinite(a))
 
 
 # ----------------------------------------------------------------------------------------------
