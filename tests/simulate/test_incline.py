@@ -127,3 +127,21 @@ def test_a_twin_run_that_moves_at_once_is_run_again_from_flat():
     again = run_task(inputs)
     assert again["observable"] == flat.observable
     assert again["steps"] > flat.meta["steps"]          # both runs are counted
+
+
+def test_the_spring_dashpot_rolling_models_windup_is_not_read_as_rolling():
+    """Under the spring-dashpot rolling model a soft sphere (G 1.04 MPa, mu_r 0.05) winds its
+    rolling spring elastically by up to d_n / (2.25 mu_r) = 37 um of arc before it rolls; read as
+    rolling it gave an onset of 0.79 deg. Counted beyond that windup, the onset is the constant
+    torque model's (within 0.05 deg) and tan(onset) is mu_r within 10 % (the detection lag)."""
+    from demcal.simulate.rigs.incline import run_incline
+    from demcal.simulate.shapes.sphere import Sphere
+
+    params = DEMParameters(shape=Sphere(0.0066), particle_density_kg_m3=1200.0, shear_modulus_pa=1.04e6,
+                           dt=None, mu_r_pw=0.05, mu_s_pw=0.6)
+    cdt = run_incline(params, mode="roll")
+    epsd = run_incline(params.with_(rolling_model="epsd"), mode="roll")
+    assert cdt.record["elastic_rolling_arc"] == 0.0
+    assert 20e-6 < epsd.record["elastic_rolling_arc"] < 60e-6
+    assert epsd.observable["roll_angle_deg"] == pytest.approx(cdt.observable["roll_angle_deg"], abs=0.05)
+    assert epsd.observable["rolling_friction_apparent"] == pytest.approx(0.05, rel=0.1)
