@@ -53,7 +53,7 @@ from demcal.simulate.engine import Simulation
 from demcal.simulate.integrate import axis_angle_quat, matrix_from_quat
 from demcal.simulate.params import DEMParameters
 from demcal.simulate.rigs import Rig, RigResult, RunTally, Trial, TrialGroup, check_seed, run_meta, used_rows
-from demcal.simulate.rigs.surfaces import PARTICLE, make_surface, surface_options
+from demcal.simulate.rigs.surfaces import BUILT_IN_SURFACES, PARTICLE, Surface, make_surface, surface_options
 from demcal.simulate.timestep import material_time_step
 from demcal.simulate.walls import Plane
 from demcal.units import GRAVITY
@@ -250,7 +250,7 @@ def sled_template(particle: ClumpTemplate) -> ClumpTemplate:
                          props.mass, props.centre_of_mass, moments, axes, particle.mass_model)
 
 
-def _elastic_rolling_arc(sim: Simulation, surf, height: float) -> float:
+def _elastic_rolling_arc(sim: Simulation, surf: Surface, height: float) -> float:
     """The largest arc [m] the spring-dashpot rolling model lets a body resting on the plate
     roll elastically (0 under the constant torque). Its spring holds a contact at a rolling angle
     up to M_m / k_r = d_n / (2.25 mu_r R_r) (``simulate.contact.rolling``: M_m = mu_r F_n R_r,
@@ -294,11 +294,13 @@ RESTART_WITHIN_DEG = 0.1
 
 
 def start_angle(params: DEMParameters, mode: str, surface: str) -> float:
-    """The tilt a twin run starts at [deg]: ``START_FRACTION`` of atan(mu_s) of the surface for
-    the sliding modes on a built-in surface, 0 otherwise (a rolling onset has no such bound)."""
-    if ONSET.get(mode) != "slide" or surface not in ("steel", "particle"):
+    """The tilt a twin run starts at [deg]: ``START_FRACTION`` of atan(mu_s) of the particle's
+    contact with the surface for the sliding modes on a surface ``params`` define, 0 otherwise
+    (rolling runs start flat, see ``START_FRACTION``)."""
+    if ONSET.get(mode) != "slide" or surface not in BUILT_IN_SURFACES:
         return 0.0
-    mu = params.mu_s_pw if surface == "steel" else params.mu_s_pp
+    surf = make_surface(params, surface)
+    mu = surf.materials.pair(PARTICLE, surf.plate_material).static_friction
     return round(START_FRACTION * math.degrees(math.atan(mu)), 2)
 
 
