@@ -122,23 +122,40 @@ def _clean_table_alarms(truth, trials_per_specimen, seeds, root, unclustered_too
     return aware, naive
 
 
-@pytest.mark.parametrize("design", ["independent", "10 specimens x 3 trials", "6 specimens x 5 trials"])
-def test_false_alarm_rate_of_clean_workbooks_is_bounded(design, tmp_path):
-    """Over 200 clean workbooks of each design the upper 95 % Clopper-Pearson bound of the rate
-    of workbooks naming any data effect is at most 5 %. Clustered designs have an intraclass
-    correlation of 0.5; counting their trials as independent fails the same bound (its lower
-    bound lies above 5 %)."""
+CLEAN_DESIGNS = {"independent": (Truth(), None), "10 specimens x 3 trials": (Truth(icc=0.5), 3),
+                 "6 specimens x 5 trials": (Truth(icc=0.5), 5)}
+
+
+def check_false_alarms(design, n, bound, tmp_path):
+    """Over ``n`` clean workbooks of ``design`` (seeds from 1000) the upper 95 % Clopper-Pearson
+    bound of the rate of workbooks naming any data effect is at most ``bound``. Clustered
+    designs have an intraclass correlation of 0.5; counting the trials of their first 60
+    workbooks as independent names a cause at a rate whose lower bound lies above 5 %."""
     from scipy import stats
 
-    truth, tps = {"independent": (Truth(), None), "10 specimens x 3 trials": (Truth(icc=0.5), 3),
-                  "6 specimens x 5 trials": (Truth(icc=0.5), 5)}[design]
-    n, n_naive = 200, (60 if tps else 0)
+    truth, tps = CLEAN_DESIGNS[design]
+    n_naive = 60 if tps else 0
     aware, naive = _clean_table_alarms(truth, tps, range(1000, 1000 + n), tmp_path, unclustered_too=n_naive)
     upper = float(stats.beta.ppf(0.95, aware + 1, n - aware))
-    assert upper <= 0.05, (design, aware)
+    assert upper <= bound, (design, aware)
     if n_naive:
         lower = float(stats.beta.ppf(0.05, naive, n_naive - naive + 1)) if naive else 0.0
         assert lower > 0.05, (design, naive)
+
+
+@pytest.mark.parametrize("design", list(CLEAN_DESIGNS))
+def test_false_alarms_of_80_clean_workbooks_stay_rare(design, tmp_path):
+    """The default suite's check: the bound over 80 workbooks at most 0.12 (at the measured rate
+    of about 1 %, 5 or more alarms in 80 happen in about 0.1 % of seed sets)."""
+    check_false_alarms(design, 80, 0.12, tmp_path)
+
+
+@pytest.mark.validation
+@pytest.mark.parametrize("design", list(CLEAN_DESIGNS))
+def test_false_alarm_rate_of_clean_workbooks_is_bounded(design, tmp_path):
+    """Over 200 clean workbooks of each design the bound is at most 5 % (the rates are in
+    benchmarks/critique_power.md)."""
+    check_false_alarms(design, 200, 0.05, tmp_path)
 
 
 DRIFT_TRUTH = """\
