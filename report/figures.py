@@ -90,13 +90,15 @@ def annotated_photos(measurement: dict, folder) -> list[tuple[dict, Path]]:
     return out
 
 
-def heap_photos(measurement: dict, path: Path, folder=None, *, dpi: int = DPI) -> Path | None:
+def heap_photos(measurement: dict, path: Path, folder=None, *, dpi: int = DPI, draw: bool = True) -> Path | None:
     """The heap photos as processed by the measure stage (boundary, floor and fitted flank lines
     drawn on each), side by side with the angle found. None when no annotated photo exists."""
     rows = annotated_photos(measurement, folder)
     if not rows:
         return None
     n = min(len(rows), 3)
+    if not draw:
+        return path
     fig = _new(6.8, 2.1 * math.ceil(len(rows) / n) + 0.2)
     axes = fig.subplots(math.ceil(len(rows) / n), n, squeeze=False).ravel()
     for ax, (rec, image) in zip(axes, rows):
@@ -110,13 +112,15 @@ def heap_photos(measurement: dict, path: Path, folder=None, *, dpi: int = DPI) -
     return _save(fig, path, dpi)
 
 
-def pareto_chart(results: CampaignResult, path: Path, *, dpi: int = DPI) -> Path | None:
+def pareto_chart(results: CampaignResult, path: Path, *, dpi: int = DPI, draw: bool = True) -> Path | None:
     """Pareto chart of the Plackett-Burman effects: |t| of each factor, sorted, with the
     t-value and Bonferroni limits (Design-Expert's chart)."""
     p = results.plackett_burman.screening.pareto if results.plackett_burman else None
     if not p:
         return None
     names, t, signs = p["names"], np.abs(p["t_values"]), p["signs"]
+    if not draw:
+        return path
     fig = _new(5.2, 2.6)
     ax = fig.subplots()
     colours = [_RED if s > 0 else _BLUE for s in signs]
@@ -153,7 +157,7 @@ def polynomial(coefficients: dict, x: dict):
 
 
 def response_surfaces(results: CampaignResult, path: Path, target: float | None = None,
-                      labels: dict | None = None, *, dpi: int = DPI) -> Path | None:
+                      labels: dict | None = None, *, dpi: int = DPI, draw: bool = True) -> Path | None:
     """Contours of the fitted quadratic over each pair of Box-Behnken factors, in actual
     units, the remaining factors held at the preferred solution (at their centre when there is
     none), so the preferred solution lies on the drawn target contour. Box-Behnken runs of the
@@ -174,6 +178,8 @@ def response_surfaces(results: CampaignResult, path: Path, target: float | None 
         return None
     ncol = min(3, len(pairs))
     nrow = math.ceil(len(pairs) / ncol)
+    if not draw:
+        return path
     fig = _new(2.35 * ncol + 0.3, 2.35 * nrow + 0.2)
     axes = np.atleast_1d(fig.subplots(nrow, ncol, squeeze=False).ravel())
     g = np.linspace(-1.0, 1.0, 81)
@@ -211,7 +217,7 @@ def response_surfaces(results: CampaignResult, path: Path, target: float | None 
     return _save(fig, path, dpi)
 
 
-def climb_curve(results: CampaignResult, path: Path, *, dpi: int = DPI) -> Path | None:
+def climb_curve(results: CampaignResult, path: Path, *, dpi: int = DPI, draw: bool = True) -> Path | None:
     """Relative error of the simulated angle along the steepest climb, the chosen centre and
     its neighbours marked."""
     sc = results.steepest_climb
@@ -221,6 +227,8 @@ def climb_curve(results: CampaignResult, path: Path, *, dpi: int = DPI) -> Path 
     y = np.asarray(sc.response, float)
     lv = np.arange(1, err.size + 1)
     best = int(sc.result.best_level)
+    if not draw:
+        return path
     fig = _new(5.2, 2.5)
     ax = fig.subplots()
     ax.plot(lv, err, "o-", color=_BLUE, lw=1.2, ms=4, label="relative error")
@@ -271,7 +279,7 @@ def _flank_midpoint(x: np.ndarray, z: np.ndarray) -> tuple[float, float, int]:
 
 
 def validation_heaps(results: CampaignResult, runs: dict, measurement: dict, path: Path,
-                     paper: dict | None = None, folder=None, *, dpi: int = DPI) -> Path | None:
+                     paper: dict | None = None, folder=None, *, dpi: int = DPI, draw: bool = True) -> Path | None:
     """Simulated heap profiles of the validation runs against the photographed heap: one
     annotated photo, the profiles with the photo's mean angle drawn through their flank, and
     the simulated angles against the measured one (the paper's values beside)."""
@@ -285,6 +293,8 @@ def validation_heaps(results: CampaignResult, runs: dict, measurement: dict, pat
     est = measurement.get("quantities", {}).get("repose_angle_deg", {})
     sd = est.get("sd")
     panels = (1 if photo_rows else 0) + (1 if any(profiles) else 0) + 1
+    if not draw:
+        return path
     fig = _new(6.8, 2.4)
     axes = list(np.atleast_1d(fig.subplots(1, panels, width_ratios=[1.4] * (panels - 1) + [1])))
     if photo_rows:
@@ -335,13 +345,15 @@ def validation_heaps(results: CampaignResult, runs: dict, measurement: dict, pat
     return _save(fig, path, dpi)
 
 
-def noise_panels(results: CampaignResult, path: Path, *, dpi: int = DPI) -> Path | None:
+def noise_panels(results: CampaignResult, path: Path, *, dpi: int = DPI, draw: bool = True) -> Path | None:
     """Plausible workflow: the same-seed pairs of the noise measurement, and every design
     point's runs around its mean against the pooled noise."""
     n = results.noise
     if not isinstance(n, NoiseStudy):
         return None
     pairs = n.pairs
+    if not draw:
+        return path
     fig = _new(6.4, 2.5)
     ax1, ax2 = fig.subplots(1, 2)
     a, b = np.asarray(pairs["a_responses"]), np.asarray(pairs["b_responses"])
@@ -368,7 +380,7 @@ def noise_panels(results: CampaignResult, path: Path, *, dpi: int = DPI) -> Path
 
 
 def plausible_set(results: CampaignResult, path: Path, labels: dict, panels: int = 4, *,
-                  dpi: int = DPI) -> Path | None:
+                  dpi: int = DPI, draw: bool = True) -> Path | None:
     """Plausible workflow: pairwise panels of the ``panels`` parameters the heap narrows most:
     prior samples (grey), the plausible ones (light blue, implausibility < 3), posterior draws
     (blue), the prior mean (+) and the recommended point (red star)."""
@@ -386,6 +398,8 @@ def plausible_set(results: CampaignResult, path: Path, labels: dict, panels: int
     pairs = list(combinations(range(len(order)), 2))
     cols = 3 if len(pairs) > 3 else len(pairs)
     rows = math.ceil(len(pairs) / cols)
+    if not draw:
+        return path
     fig = _new(6.8, 2.2 * rows)
     axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
     for ax, (i, j) in zip(axes, pairs):
@@ -405,7 +419,7 @@ def plausible_set(results: CampaignResult, path: Path, labels: dict, panels: int
     return _save(fig, path, dpi)
 
 
-def validation_runs(results: CampaignResult, path: Path, *, dpi: int = DPI) -> Path | None:
+def validation_runs(results: CampaignResult, path: Path, *, dpi: int = DPI, draw: bool = True) -> Path | None:
     """Plausible workflow: every validation run, the running mean with the interval of each
     look, the target and the tolerance band."""
     v = results.validation
@@ -413,6 +427,8 @@ def validation_runs(results: CampaignResult, path: Path, *, dpi: int = DPI) -> P
         return None
     ys = np.asarray(v.responses, float)
     target, tol = v.target_deg, v.tolerance_deg
+    if not draw:
+        return path
     fig = _new(6.0, 2.4)
     ax = fig.subplots()
     ax.plot(np.arange(1, ys.size + 1), ys, "o", color=_BLUE, ms=3, alpha=0.6, label="runs")
@@ -433,9 +449,10 @@ def validation_runs(results: CampaignResult, path: Path, *, dpi: int = DPI) -> P
     return _save(fig, path, dpi)
 
 
-def make_figures(campaign, fig_dir, *, dpi: int = DPI) -> list[Figure]:
+def make_figures(campaign, fig_dir, *, dpi: int = DPI, draw: bool = True) -> list[Figure]:
     """Draw every figure the stored results allow into ``fig_dir`` at ``dpi``; return them in
-    order."""
+    order. With ``draw`` False nothing is drawn: the figures are those that would be, at the
+    paths they would be written to (the audit renders the report again with its own PNGs)."""
     fig_dir = Path(fig_dir)
     m, r = campaign.measurement, campaign.results
     target = r.target_angle_deg if r else None
@@ -445,39 +462,39 @@ def make_figures(campaign, fig_dir, *, dpi: int = DPI) -> list[Figure]:
         if path is not None:
             out.append(Figure(fid, path, caption))
 
-    add("photos", heap_photos(m, fig_dir / "heap_photos.png", campaign.folder, dpi=dpi),
+    add("photos", heap_photos(m, fig_dir / "heap_photos.png", campaign.folder, dpi=dpi, draw=draw),
         "Image processing of the heap photos: heap boundary, floor line and the straight line fitted "
         "to each measured flank (measure stage, annotated images).")
     wall = str(m.get("meta", {}).get("contact_material", "steel")).lower()
     if r and r.workflow == "plausible":
         labels = {n: parameter_label(n, wall)[1] for n in r.prior}
-        add("noise", noise_panels(r, fig_dir / "noise.png", dpi=dpi),
+        add("noise", noise_panels(r, fig_dir / "noise.png", dpi=dpi, draw=draw),
             "Seed-to-seed noise: runs with the same seed at two nearby points (dotted: equal angles), "
             "and every design point's runs about their mean with the pooled noise (red).")
-        add("plausible", plausible_set(r, fig_dir / "plausible_set.png", labels, dpi=dpi),
+        add("plausible", plausible_set(r, fig_dir / "plausible_set.png", labels, dpi=dpi, draw=draw),
             "The plausible set for the parameters the heap narrows most: prior samples (grey), those "
             "not ruled out by the measured angle (light blue, implausibility < 3), posterior draws "
             "(blue), the measured means (+) and the recommended point (red star).")
-        add("validation", validation_runs(r, fig_dir / "validation.png", dpi=dpi),
+        add("validation", validation_runs(r, fig_dir / "validation.png", dpi=dpi, draw=draw),
             "Validation: every run at the recommended point, their running mean, and at each look the "
             "interval of the difference from the lab (red), against the lab's angle and the "
             "equivalence tolerance (green).")
     elif r:
-        add("pareto", pareto_chart(r, fig_dir / "pareto.png", dpi=dpi),
+        add("pareto", pareto_chart(r, fig_dir / "pareto.png", dpi=dpi, draw=draw),
             "Pareto chart of the Plackett-Burman effects (|t| of each factor; dashed: t limit at "
             "p = 0.05, dotted: Bonferroni limit).")
-        add("climb", climb_curve(r, fig_dir / "steepest_climb.png", dpi=dpi),
+        add("climb", climb_curve(r, fig_dir / "steepest_climb.png", dpi=dpi, draw=draw),
             "Steepest climb: relative error between simulated and measured angle at each level "
             "(circle: the Box-Behnken centre, dotted: its -1/+1 neighbours).")
         labels = {f: parameter_label(v["parameter"], wall)[1] for f, v in r.factors.items()}
-        add("surfaces", response_surfaces(r, fig_dir / "response_surfaces.png", target, labels, dpi=dpi),
+        add("surfaces", response_surfaces(r, fig_dir / "response_surfaces.png", target, labels, dpi=dpi, draw=draw),
             "Response surfaces of the fitted quadratic model for each factor pair, the remaining "
             "factor held at the preferred solution (dashed red: the measured angle; star: the "
             "preferred solution; circles: Box-Behnken runs of the plane through the centre).")
         # the paper's validation heaps are of its own material only
         paper = campaign.paper if paper_material(campaign) else None
         add("validation", validation_heaps(r, campaign.runs, m, fig_dir / "validation.png", paper,
-                                           campaign.folder, dpi=dpi),
+                                           campaign.folder, dpi=dpi, draw=draw),
             "Validation: the photographed heap, the simulated heap profiles of the validation runs "
             "with the photos' mean angle (± SD, dotted) drawn through their flank (grey dotted: the "
             "carton's end plate, when recorded), and the "
