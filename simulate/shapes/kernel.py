@@ -54,6 +54,11 @@ class Kernel(Shape):
         super().__post_init__()
         if int(self.n_spheres) != self.n_spheres or self.n_spheres < 1:
             raise InputError(f"kernel shape: n_spheres must be a positive integer, got {self.n_spheres!r}")
+        if self.n_spheres == 2:
+            # the middle row runs tip to tip: two spheres are its tip spheres and nothing between
+            raise InputError("kernel shape: n_spheres 2 puts the middle row's two spheres at the kernel's tips, "
+                             "with nothing between them: give 1, "
+                             "or 3 or more (spheres_per_particle)")
         object.__setattr__(self, "n_spheres", int(self.n_spheres))
         _check_axes(self.length_m, self.width_m, self.thickness_m)
 

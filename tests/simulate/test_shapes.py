@@ -96,6 +96,21 @@ def test_a_kernels_body_is_the_exact_ellipsoid_and_the_approximation_is_reported
     assert rows["sphere model / ellipsoid volume"] == ratio["volume_ratio"]
 
 
+def test_a_kernel_of_two_spheres_is_refused_naming_the_option():
+    """The middle row runs tip to tip, so two spheres would be its tip spheres only: a
+    dumbbell holding a small part of the kernel (computed here, against three spheres)."""
+    from demcal.simulate.shapes.kernel import _inscribed_spheres, union_mass_properties
+
+    dims = (10.54e-3, 7.26e-3, 4.57e-3)     # a flat maize kernel
+    with pytest.raises(InputError, match="n_spheres 2 .*spheres_per_particle"):
+        Kernel(*dims, n_spheres=2)
+    semi = tuple(np.array(dims) / 2)
+    ellipsoid = 4 / 3 * math.pi * np.prod(semi)
+    two = union_mass_properties(*_inscribed_spheres(semi, 2), 1.0).mass / ellipsoid
+    three = union_mass_properties(*_inscribed_spheres(semi, 3), 1.0).mass / ellipsoid
+    assert two < 0.15 < 0.4 < three
+
+
 def test_a_clump_table_is_centred_ordered_by_extent_and_scaled_to_the_specimen():
     # two touching spheres along z in the lab's frame, off-centre
     table = ((0.01, 0.0, 0.002, 0.002), (0.01, 0.0, 0.006, 0.002))
