@@ -806,6 +806,13 @@ def _parse_meta(frame: pd.DataFrame, file: Path, options: ReadOptions) -> dict:
             except InputError as exc:
                 raise bad(str(exc)) from None
         meta[key] = value
+    if meta.get("spheres_per_particle") is not None:
+        try:
+            shape_class(meta.get("shape") or DEFAULT_SHAPE).check_spheres(int(meta["spheres_per_particle"]))
+        except InputError as exc:
+            raise WorkbookError(f"meta spheres_per_particle: {exc}", file=str(file), sheet="meta",
+                                row=seen["spheres_per_particle"], column="value",
+                                value=meta["spheres_per_particle"]) from None
     if not isinstance(meta.get("material"), str) or not meta["material"]:
         raise WorkbookError("meta key 'material' is missing or empty", file=str(file), sheet="meta",
                             row=seen.get("material"), column="value" if "material" in seen else "key",

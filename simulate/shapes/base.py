@@ -89,6 +89,11 @@ class Shape:
             specimen_value(row, column, cls.name)
 
     @classmethod
+    def check_spheres(cls, n_spheres: int) -> None:
+        """Refuse (:class:`InputError`) a sphere count (the meta ``spheres_per_particle``) the
+        shape cannot take; any count does by default."""
+
+    @classmethod
     def from_specimen(cls, row: dict, **settings) -> "Shape":
         """The shape of one specimen from its calliper readings ``row`` (column -> mm).
 

@@ -54,17 +54,20 @@ class Kernel(Shape):
         super().__post_init__()
         if int(self.n_spheres) != self.n_spheres or self.n_spheres < 1:
             raise InputError(f"kernel shape: n_spheres must be a positive integer, got {self.n_spheres!r}")
-        if self.n_spheres == 2:
-            # the middle row runs tip to tip: two spheres are its tip spheres and nothing between
-            raise InputError("kernel shape: n_spheres 2 puts the middle row's two spheres at the kernel's tips, "
-                             "with nothing between them: give 1, "
-                             "or 3 or more (spheres_per_particle)")
+        self.check_spheres(self.n_spheres)
         object.__setattr__(self, "n_spheres", int(self.n_spheres))
         _check_axes(self.length_m, self.width_m, self.thickness_m)
 
     @classmethod
     def check_specimen(cls, row: dict) -> None:
         _check_axes(*cls._axes(row), columns=True)
+
+    @classmethod
+    def check_spheres(cls, n_spheres: int) -> None:
+        if n_spheres == 2:
+            # the middle row runs tip to tip: two spheres are its tip spheres, nothing between
+            raise InputError("kernel shape: n_spheres 2 puts the middle row's two spheres at the kernel's "
+                             "tips, with nothing between them: give 1, or 3 or more (spheres_per_particle)")
 
     @classmethod
     def from_specimen(cls, row: dict, n_spheres: int = 9, **_) -> "Kernel":

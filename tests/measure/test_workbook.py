@@ -354,6 +354,14 @@ def test_bad_meta_value(campaign, fmt, key, row, value, message):
     assert message in str(err)
 
 
+def test_a_sphere_count_the_shape_cannot_take_is_refused_in_the_meta(campaign, fmt):
+    def edit(s):
+        s["meta"]["shape"] = "kernel"                 # new keys: rows 13 and 14
+        s["meta"]["spheres_per_particle"] = 2
+    err = expect_error(campaign(edit), fmt, "meta", 14, "value", 2)
+    assert "tips" in str(err) and "3 or more" in str(err)
+
+
 def test_meta_material_missing(campaign, fmt):
     def edit(s):
         s["meta"].pop("material")
