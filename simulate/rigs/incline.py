@@ -85,9 +85,13 @@ def rotation_vector(R) -> np.ndarray:
     return angle * skew / (2.0 * math.sin(angle))
 
 
+#: The steepest tilt a run reaches, unless told [deg].
+MAX_TILT_DEG = 60.0
+
+
 def run_incline(params: DEMParameters, seed: int = 0, *, mode: str = "slide", surface: str = "steel",
                 surface_material: dict | None = None, surface_contact: dict | None = None,
-                tilt_rate_deg_s: float = 1.0, start_deg: float = 0.0, max_tilt_deg: float = 60.0,
+                tilt_rate_deg_s: float = 1.0, start_deg: float = 0.0, max_tilt_deg: float = MAX_TILT_DEG,
                 threshold: float = 1.0e-5, settle_time: float = 0.05,
                 template: ClumpTemplate | None = None, dt: float | None = None,
                 callback=None) -> RigResult:
@@ -301,7 +305,9 @@ def start_angle(params: DEMParameters, mode: str, surface: str) -> float:
         return 0.0
     surf = make_surface(params, surface)
     mu = surf.materials.pair(PARTICLE, surf.plate_material).static_friction
-    return round(START_FRACTION * math.degrees(math.atan(mu)), 2)
+    start = round(START_FRACTION * math.degrees(math.atan(mu)), 2)
+    # a friction whose slide lies beyond the tilt a run reaches: flat, as it reads no onset anyway
+    return start if start < MAX_TILT_DEG - RESTART_WITHIN_DEG else 0.0
 
 
 def task(params: DEMParameters, mode: str, surface: str, seed: int = 0) -> dict:

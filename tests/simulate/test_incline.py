@@ -113,6 +113,17 @@ def test_a_twin_run_started_tilted_reads_the_onset_of_one_started_flat(shape, mo
     assert tilted["steps"] < flat.meta["steps"] / 3
 
 
+def test_a_friction_whose_tilted_start_lies_beyond_the_runs_last_tilt_starts_flat():
+    """mu_s may reach 5 in a calibration's prior: 0.8 atan(4) = 60.8 deg lies beyond the 60 deg a
+    run tilts to, so the run starts flat (and reads no onset, as before), instead of being
+    refused; just below, it starts tilted."""
+    from demcal.simulate.rigs.incline import MAX_TILT_DEG, RESTART_WITHIN_DEG, task
+
+    assert task(DEMParameters(mu_s_pw=4.0), "slide", "steel")["start_deg"] == 0.0
+    below = math.tan(math.radians((MAX_TILT_DEG - 2 * RESTART_WITHIN_DEG) / 0.8))
+    assert 0.0 < task(DEMParameters(mu_s_pw=below), "slide", "steel")["start_deg"] < MAX_TILT_DEG
+
+
 def test_a_twin_run_that_moves_at_once_is_run_again_from_flat():
     """A single sphere on the sliding twin rolls at once at the tilted start: the task runs it
     again from 0, so it reports the rolling onset the lab would see, not the start angle."""
