@@ -443,6 +443,16 @@ def _copy(campaign, tmp_path) -> Path:
     return out
 
 
+def test_audit_draws_the_figures_again_when_the_reports_are_gone(campaign, capsys, tmp_path):
+    """The audit renders with the report's own PNGs; without them it draws them again, and the
+    report still agrees with its sources."""
+    out = _copy(campaign, tmp_path)
+    shutil.rmtree(out / "figures")
+    code, text = _audit(capsys, out)
+    assert code == 0, text
+    assert re.search(r"^report\.pdf: OK$", text, re.M) and not (out / "figures").exists()
+
+
 def test_audit_names_a_changed_number_in_results_json(campaign, capsys, tmp_path):
     out = _copy(campaign, tmp_path)
     res = json.loads((out / "results.json").read_text())
