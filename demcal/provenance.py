@@ -42,7 +42,10 @@ from demcal.jsonio import to_jsonable
 #: tilt's 0.01 deg chunk at a fifth of the steps, but their last bits and the runs' keys differ.
 #: And under the spring-dashpot rolling model the incline twin counts a roll beyond the rolling
 #: spring's elastic windup (a soft seed read 0.79 deg for atan(mu_r) = 2.86 deg before).
-MODEL_VERSION = 10
+#: Revision 11: the incline twin adds up the rolled arc piece by piece
+#: (``simulate.rigs.incline._run_adding_up_rotation``); taken from the whole rotation it wrapped
+#: at half a turn, and a sphere that only rolled read a slide (a 6.6 mm sphere at 3.66 deg).
+MODEL_VERSION = 11
 
 
 def run_key(inputs: dict) -> str:

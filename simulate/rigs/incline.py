@@ -20,7 +20,9 @@ frame; the frame's rotation adds inertial accelerations of order omega^2 r and o
 Onsets, from the centre of mass and the orientation after each chunk:
 - rolled arc = phi_y h, with phi_y the rotation about the across-slope axis (y) since the tilt
   began and h the height of the centre of mass above the plate (rolling without slip moves
-  the centre by exactly this arc);
+  the centre by exactly this arc). phi_y is added up over pieces of the run short enough that
+  each turns the particle by less than ``MAX_PIECE_TURN`` at its angular speed, so it keeps
+  counting past half a turn, where the rotation vector of the whole turn would wrap;
 - slip = displacement down the slope minus the rolled arc;
 - ``slide_angle_deg``: tilt at which the slip first exceeds ``threshold`` (moving while not
   rolling); ``roll_angle_deg``: tilt at which the rolled arc first exceeds it, beyond the
@@ -67,6 +69,10 @@ SLED_GAP = 0.2
 CHUNK_DEG = 0.01
 #: Movement after which the run ends [m].
 STOP_DISTANCE = 0.05
+#: The most a piece of a run may turn the particle at its angular speed at the piece's start
+#: [rad]. The rolled arc adds up the pieces' rotation vectors, each unambiguous below half a
+#: turn; a quarter leaves room for the speed to grow within the piece.
+MAX_PIECE_TURN = 0.25 * math.pi
 
 
 def rotation_vector(R) -> np.ndarray:
@@ -83,6 +89,23 @@ def rotation_vector(R) -> np.ndarray:
         k = int(np.argmax(np.linalg.norm(m, axis=0)))
         return angle * m[:, k] / np.linalg.norm(m[:, k])
     return angle * skew / (2.0 * math.sin(angle))
+
+
+def _run_adding_up_rotation(sim: Simulation, n_steps: int, R_last, tally: RunTally):
+    """Runs ``sim`` ``n_steps`` steps in pieces that turn its one body by at most
+    ``MAX_PIECE_TURN`` at the angular speed each starts with; returns the sum of the pieces'
+    rotation vectors [rad] and the body's rotation matrix at the end."""
+    turned = np.zeros(3)
+    left = n_steps
+    while left > 0:
+        speed = float(np.linalg.norm(sim.angular_velocities()[0]))
+        n = left if speed * left * sim.dt <= MAX_PIECE_TURN else max(1, int(MAX_PIECE_TURN / (speed * sim.dt)))
+        tally.add(sim.run(n_steps=n))
+        R = sim.rotation_matrices()[0]
+        turned += rotation_vector(R @ R_last.T)
+        R_last = R
+        left -= n
+    return turned, R_last
 
 
 #: The steepest tilt a run reaches, unless told [deg].
@@ -177,7 +200,8 @@ def run_incline(params: DEMParameters, seed: int = 0, *, mode: str = "slide", su
     t_end = settle_time + (max_tilt_deg - start_deg) / tilt_rate_deg_s
     tally.add(sim.run(duration=settle_time))
     x0 = sim.positions()[0]
-    R0 = sim.rotation_matrices()[0]
+    R_last = sim.rotation_matrices()[0]
+    phi = np.zeros(3)           # rotation since the tilt began [rad], added up piece by piece
     height = float(x0[2])
     windup = _elastic_rolling_arc(sim, surf, height)
     t0 = sim.time
@@ -188,9 +212,9 @@ def run_incline(params: DEMParameters, seed: int = 0, *, mode: str = "slide", su
         # tilt at the middle of the coming chunk
         tilt = start_deg + tilt_rate_deg_s * (sim.time - t0 + 0.5 * n_chunk * dt)
         sim.gravity = _gravity(tilt)
-        tally.add(sim.run(n_steps=n_chunk))
+        turned, R_last = _run_adding_up_rotation(sim, n_chunk, R_last, tally)
         x = sim.positions()[0]
-        phi = rotation_vector(sim.rotation_matrices()[0] @ R0.T)
+        phi += turned
         moved = float(x[0] - x0[0])
         arc = float(phi[1]) * height
         slip = moved - arc
@@ -223,7 +247,7 @@ def run_incline(params: DEMParameters, seed: int = 0, *, mode: str = "slide", su
                "settle_time": settle_time, "template": tpl.name if template is not None else None,
                "dt": dt}
     notes = [] if not math.isnan(onset[ONSET[mode]]) else [
-        f"no {mode} onset up to {tilt:.2f} deg" + (" (the segment moved otherwise first)"
+        f"no {mode} onset up to {tilt:.2f} deg" + (" (the particle moved otherwise first)"
                                                     if rows and abs(rows[-1][2]) > STOP_DISTANCE else "")]
     meta = run_meta(seed, dt, tally, sim.n_spheres, sim.time, notes=notes, surface=surf.to_dict(),
                     template=tpl.to_dict())
@@ -325,10 +349,12 @@ def run_task(inputs: dict) -> dict:
     start = float(inputs.get("start_deg", 0.0))
     res = run_incline(params, int(inputs["seed"]), start_deg=start, **options)
     steps, wall_s = res.meta["steps"], res.meta["wall_s"]
+    restarted = []
     if start > 0.0 and _moved_at_once(res, start):
         res = run_incline(params, int(inputs["seed"]), start_deg=0.0, **options)
         steps, wall_s = steps + res.meta["steps"], wall_s + res.meta["wall_s"]
-    return {"rig": "incline", "observable": res.observable, "notes": res.meta.get("notes", []),
+        restarted = [f"moved at once when started tilted at {start:.2f} deg: run again from 0 deg"]
+    return {"rig": "incline", "observable": res.observable, "notes": restarted + res.meta.get("notes", []),
             "dt": res.meta["dt"], "steps": steps, "wall_s": wall_s}
 
 

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 import pytest
 
 from demcal.simulate import DEMParameters
@@ -136,8 +138,32 @@ def test_a_twin_run_that_moves_at_once_is_run_again_from_flat():
     assert inputs["start_deg"] > 15.0
     flat = run_incline(params, mode="slide", surface="steel")
     again = run_task(inputs)
-    assert again["observable"] == flat.observable
+    # the sphere only rolls: no sliding onset (NaN) in either
+    assert math.isnan(flat.observable["slide_angle_deg"])
+    same = {k: v for k, v in flat.observable.items() if not (isinstance(v, float) and math.isnan(v))}
+    assert {k: again["observable"][k] for k in same} == same
+    assert all(math.isnan(again["observable"][k]) for k in flat.observable.keys() - same.keys())
     assert again["steps"] > flat.meta["steps"]          # both runs are counted
+    assert any(n.startswith("moved at once when started tilted") for n in again["notes"])
+
+
+def test_the_rolled_arc_keeps_counting_past_half_a_turn():
+    """A sphere that only rolls moves its centre by exactly its rolled arc. Taken from the
+    rotation since the start, the arc wrapped at half a turn (pi h, 10.4 mm for a 6.6 mm sphere)
+    and the slip jumped by twice that, read as a slide at 3.66 deg. Added up piece by piece, it
+    follows the 50 mm the sphere rolls: the slip stays below the threshold, and no slide is read."""
+    from demcal.simulate.rigs.incline import STOP_DISTANCE, run_incline
+    from demcal.simulate.shapes.sphere import Sphere
+
+    params = DEMParameters(shape=Sphere(0.0066), particle_density_kg_m3=1200.0, dt=None, mu_r_pw=0.05,
+                           mu_s_pw=0.45)
+    res = run_incline(params, mode="slide", surface="steel")
+    rec = res.record
+    assert rec["displacement"][-1] > STOP_DISTANCE > 4 * math.pi * rec["rolling_height"]   # two turns
+    assert rec["rolled_arc"][-1] == pytest.approx(rec["displacement"][-1], abs=1e-4)
+    assert np.all(np.abs(rec["slip"]) < res.provenance.options["threshold"])
+    assert math.isnan(res.observable["slide_angle_deg"])
+    assert math.degrees(math.atan(0.05)) < res.observable["roll_angle_deg"] < 3.5
 
 
 def test_the_spring_dashpot_rolling_models_windup_is_not_read_as_rolling():
