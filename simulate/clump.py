@@ -243,7 +243,7 @@ class ClumpTemplate:
     def n_spheres(self) -> int:
         return int(self.radii.size)
 
-    @property
+    @functools.cached_property
     def bounding_radius(self) -> float:
         """Radius of the smallest sphere about the centre of mass holding every member [m]."""
         return float((np.linalg.norm(self.offsets, axis=1) + self.radii).max())

@@ -370,8 +370,12 @@ def quaternions_from_uniforms(u) -> np.ndarray:
     distributed for uniform rows."""
     u1, u2, u3 = np.asarray(u, dtype=float).T
     a, b = np.sqrt(1.0 - u1), np.sqrt(u1)
-    return np.column_stack([a * np.sin(2 * np.pi * u2), a * np.cos(2 * np.pi * u2),
-                            b * np.sin(2 * np.pi * u3), b * np.cos(2 * np.pi * u3)])
+    q = np.empty((u1.size, 4))
+    q[:, 0] = a * np.sin(2 * np.pi * u2)
+    q[:, 1] = a * np.cos(2 * np.pi * u2)
+    q[:, 2] = b * np.sin(2 * np.pi * u3)
+    q[:, 3] = b * np.cos(2 * np.pi * u3)
+    return q
 
 
 def matrices_from_quats(q) -> np.ndarray:
@@ -381,9 +385,9 @@ def matrices_from_quats(q) -> np.ndarray:
     norm = np.sqrt(np.array([row.dot(row) for row in q]))
     w, x, y, z = (q / norm[:, None]).T
     R = np.empty((q.shape[0], 3, 3))
-    R[:, 0] = np.column_stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)])
-    R[:, 1] = np.column_stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)])
-    R[:, 2] = np.column_stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)])
+    R[:, 0, 0], R[:, 0, 1], R[:, 0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
+    R[:, 1, 0], R[:, 1, 1], R[:, 1, 2] = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
+    R[:, 2, 0], R[:, 2, 1], R[:, 2, 2] = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
     return R
 
 
