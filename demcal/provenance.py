@@ -45,7 +45,10 @@ from demcal.jsonio import to_jsonable
 #: Revision 11: the incline twin adds up the rolled arc piece by piece
 #: (``simulate.rigs.incline._run_adding_up_rotation``); taken from the whole rotation it wrapped
 #: at half a turn, and a sphere that only rolled read a slide (a 6.6 mm sphere at 3.66 deg).
-MODEL_VERSION = 11
+#: Revision 12: the incline twin reads a slide only when the slip keeps growing
+#: (``simulate.rigs.incline.CONFIRM_SLIP``); a kernel that rolled onto its next sphere and
+#: slipped 0.01-0.05 mm in the knock read a slide at the tilt of its roll, whatever its friction.
+MODEL_VERSION = 12
 
 
 def run_key(inputs: dict) -> str:

@@ -182,3 +182,23 @@ def test_the_spring_dashpot_rolling_models_windup_is_not_read_as_rolling():
     assert 20e-6 < epsd.record["elastic_rolling_arc"] < 60e-6
     assert epsd.observable["roll_angle_deg"] == pytest.approx(cdt.observable["roll_angle_deg"], abs=0.05)
     assert epsd.observable["rolling_friction_apparent"] == pytest.approx(0.05, rel=0.1)
+
+
+@pytest.mark.parametrize("mu_s", [0.12, 0.25])
+def test_a_kernel_that_rocks_onto_its_next_sphere_is_not_read_as_sliding(mu_s):
+    """The kernel shape on its flat side rests on its middle sphere, whose centre is its centre
+    of mass: it balances like a ball, rolls at tan(theta) = mu_r until an end sphere meets the
+    plate (17.6 deg of turn for this maize kernel), and that landing slips it by tens of
+    micrometres whatever its friction. The reading is the slide that follows, at tan(theta) =
+    mu_s (Coulomb, within the detection lag), and the knock is in the run's notes."""
+    from demcal.simulate.rigs.incline import run_incline
+    from demcal.simulate.shapes.kernel import Kernel
+
+    mu_r = 0.0782
+    params = DEMParameters(shape=Kernel(10.54e-3, 7.26e-3, 4.57e-3, n_spheres=3), dt=None,
+                           particle_density_kg_m3=1425.0, shear_modulus_pa=1.04e6, poisson_ratio=0.3,
+                           e_pp=0.318, mu_s_pp=mu_s, mu_r_pp=mu_r)
+    res = run_incline(params, mode="slide", surface="particle")
+    assert res.observable["roll_angle_deg"] == pytest.approx(math.degrees(math.atan(mu_r)), abs=0.3)
+    assert res.observable["static_friction_apparent"] == pytest.approx(mu_s, abs=0.005)
+    assert any(note.endswith("and stopped: not read as a slide") for note in res.meta["notes"])
