@@ -20,8 +20,13 @@ Steps:
 6. build ``runs.csv`` again from the run records and compare it cell by cell, and its SHA-256
    with the one ``tables.json`` records (``artefacts``);
 7. render the report again from the stored results and the re-derived tables and compare what
-   a reader reads: the text of every cell and paragraph of ``report.html``, and the text of
-   ``report.pdf`` read back with a PDF text extractor (pypdf) against a PDF rendered afresh.
+   a reader reads: the text of every cell and paragraph of ``report.html``, and the text and
+   images of ``report.pdf`` read back with pypdf against a PDF rendered afresh;
+8. draw the figures again from the same results and compare each PNG byte for byte (SHA-256)
+   with the report's, and with the SHA-256 ``tables.json`` recorded when the report drew them.
+   Drawn with another matplotlib than the report's (``tables.json`` records its version), the
+   bytes may differ without a number differing: the figures are then reported as not compared,
+   and the audit fails, as it has not checked what the reader sees.
 
 The critique tables are rebuilt from the stored ``critique.json`` (checked by its hash): the
 critique stage's own re-derivation is not part of this audit.
@@ -29,8 +34,11 @@ critique stage's own re-derivation is not part of this audit.
 
 from __future__ import annotations
 
+import base64
+import hashlib
 import json
 import math
+import re
 import tempfile
 from dataclasses import dataclass, replace
 from difflib import SequenceMatcher
@@ -48,6 +56,8 @@ from demcal.report.tables import (RESULT_TABLE_IDS, Campaign, build_tables, load
 #: Relative and absolute tolerance of a float cell.
 REL_TOL = 1e-9
 ABS_TOL = 1e-12
+#: Status of figures drawn again by another matplotlib than the report's, whose bytes differ.
+NOT_COMPARED = "not compared"
 
 
 @dataclass(frozen=True)
@@ -189,7 +199,7 @@ class AuditResult:
         n_tables = sum(t.status != "ok" for t in self.tables)
         n_art = [a.artefact for a in self.artefacts if a.status != "ok"]
         out.append("audit: OK, every table re-derived from its sources, and results.json, runs.csv, "
-                   "report.html and report.pdf agree with them" if self.ok else
+                   "report.html, report.pdf and the figures agree with them" if self.ok else
                    f"audit: FAILED ({len(bad)} missing or changed file(s), {n_tables} table(s) not "
                    f"matching, {n_cells} differing cell(s)"
                    + (f"; differs: {', '.join(n_art)}" if n_art else "") + ")")
@@ -226,7 +236,8 @@ class ArtefactCheck:
     ----------
     artefact : str
     status : str
-        ``ok``, ``differs``, ``missing`` or ``not checked`` (see ``reason``).
+        ``ok``, ``differs``, ``missing``, ``not checked`` (see ``reason``) or, for the figures
+        only, ``not compared`` (drawn again by another matplotlib, whose bytes differ).
     differences : tuple of PlaceDifference
     reason : str
     """
@@ -493,12 +504,41 @@ def pdf_words(path) -> list[tuple[str, tuple]]:
     return words
 
 
+def pdf_images(path) -> list[tuple[int, str]]:
+    """Every image of a PDF once, in the order of the pages that first show it: the page and
+    the SHA-256 of its stream as stored (with its transparency mask's)."""
+    from pypdf import PdfReader
+
+    seen, images = set(), []
+    for n, page in enumerate(PdfReader(str(path)).pages, 1):
+        xobjects = page.get("/Resources", {}).get_object().get("/XObject")
+        for ref in (xobjects.get_object().values() if xobjects else ()):
+            obj = ref.get_object()
+            if obj.get("/Subtype") != "/Image" or ref.idnum in seen:
+                continue
+            seen.add(ref.idnum)
+            h = hashlib.sha256(obj.get_data())
+            if obj.get("/SMask") is not None:
+                h.update(obj["/SMask"].get_object().get_data())
+            images.append((n, h.hexdigest()))
+    return images
+
+
 def compare_pdf(stored_pdf, derived_pdf) -> list[PlaceDifference]:
-    """Where the text of a stored PDF report differs from a freshly rendered one."""
+    """Where the text of a stored PDF report differs from a freshly rendered one, and which
+    of its images differ from the fresh one's (drawn from the same PNGs)."""
     def describe(place):
         page, line = place
         return f"page {page}, line '{line[:90]}'"
-    return _word_differences(pdf_words(stored_pdf), pdf_words(derived_pdf), describe)
+    diffs = _word_differences(pdf_words(stored_pdf), pdf_words(derived_pdf), describe)
+    stored, derived = pdf_images(stored_pdf), pdf_images(derived_pdf)
+    for k in range(max(len(stored), len(derived))):
+        a, b = (stored[k] if k < len(stored) else None), (derived[k] if k < len(derived) else None)
+        if a is None or b is None or a[1] != b[1]:
+            page = (a or b)[0]
+            diffs.append(PlaceDifference(f"page {page}, image {k + 1}, SHA-256",
+                                         a[1] if a else "no image", b[1] if b else "no image"))
+    return diffs
 
 
 def compare_runs_csv(path: Path, campaign: Campaign, recorded: str | None) -> list[PlaceDifference]:
@@ -534,13 +574,13 @@ def check_artefacts(out: Path, campaign: Campaign, derived_tables: list[dict],
     campaign ran) and the re-derived tables, so that a change in any one artefact is reported
     in that artefact only.
     """
-    from demcal.report.figures import make_figures
+    from demcal.report.figures import FIGURES, make_figures
     from demcal.report.render import render_html, write_pdf
 
     if campaign.results is None:
         why = reason or "the analysis was not replayed"
         return [ArtefactCheck(name, "not checked", reason=why)
-                for name in ("results.json", RUNS_CSV, "report.html", "report.pdf")]
+                for name in ("results.json", RUNS_CSV, "report.html", "report.pdf", FIGURES)]
     stored = read_json(out / "results.json")
     derived = campaign.results.to_dict()
     checks = [_check("results.json", compare_results(stored, derived))]
@@ -566,7 +606,53 @@ def check_artefacts(out: Path, campaign: Campaign, derived_tables: list[dict],
         else:
             fresh = write_pdf(html_text, Path(tmp) / "report.pdf", base_url=out)
             checks.append(_check("report.pdf", compare_pdf(pdf_path, fresh)))
+        checks.append(compare_figures(rendered, out, html_path.read_text(encoding="utf-8"),
+                                      (recorded or {}).get(FIGURES) or {}, Path(tmp) / "redrawn"))
     return checks
+
+
+def html_images(html_text: str) -> dict:
+    """The PNG bytes of each figure an HTML report embeds, by its number."""
+    return {int(n): base64.b64decode(data) for data, n in
+            re.findall(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]*)" alt="Fig\. (\d+)">', html_text)}
+
+
+def compare_figures(rendered: Campaign, out: Path, html_text: str, record: dict, tmp: Path) -> ArtefactCheck:
+    """Each figure of the report (embedded in ``html_text``, and its PNG in ``figures/`` when
+    there) against the one drawn again from ``rendered`` into ``tmp`` and against the SHA-256
+    ``record`` holds (``report.figures.figure_record``). Only the comparisons with the figures
+    drawn again depend on matplotlib's version: when they alone differ and the version is not
+    the report's, the figures are ``not compared``."""
+    import matplotlib
+
+    from demcal.report.figures import DPI, FIGURES, make_figures
+
+    theirs = make_figures(rendered, out / "figures", draw=False)
+    fresh = make_figures(rendered, tmp, dpi=int(record.get("dpi", DPI)))
+    embedded, recorded = html_images(html_text), record.get("sha256", {})
+    changed, redrawn = [], []
+    for n, (mine, new) in enumerate(zip(theirs, fresh), 1):
+        name, drawn = mine.path.relative_to(out).as_posix(), sha256_file(new.path)
+        kept = sha256_file(mine.path) if mine.path.is_file() else None
+        known = recorded.get(name, kept)
+        if kept is not None and known != kept:
+            changed.append(PlaceDifference(f"{name}, SHA-256 (the one tables.json records)", kept, known))
+        elif kept is not None and kept != drawn:
+            redrawn.append(PlaceDifference(f"{name}, SHA-256 (drawn again from the sources)", kept, drawn))
+        shown = hashlib.sha256(embedded[n]).hexdigest() if n in embedded else "no image"
+        if known is not None and shown != known:
+            changed.append(PlaceDifference(f"report.html, Fig. {n}, SHA-256 ({name})", shown, known))
+        elif shown != drawn:
+            redrawn.append(PlaceDifference(f"report.html, Fig. {n}, SHA-256 (drawn again from the sources)",
+                                           shown, drawn))
+    extra = sorted(set(embedded) - set(range(1, len(theirs) + 1)))
+    changed += [PlaceDifference(f"report.html, Fig. {n}", "an image", "no such figure") for n in extra]
+    version = record.get("matplotlib")
+    if redrawn and not changed and version != matplotlib.__version__:
+        return ArtefactCheck(FIGURES, NOT_COMPARED, reason=(
+            f"drawn with matplotlib {version or '(not recorded)'}, drawn again with {matplotlib.__version__}, "
+            f"whose bytes differ: audit where the report was built, or build it again ('demcal report')"))
+    return _check(FIGURES, changed + redrawn)
 
 
 def with_run_record(derived, stored, path: str = ""):

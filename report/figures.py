@@ -449,6 +449,22 @@ def validation_runs(results: CampaignResult, path: Path, *, dpi: int = DPI, draw
     return _save(fig, path, dpi)
 
 
+#: Key of the figures' record in ``tables.json`` ``artefacts`` (:func:`figure_record`).
+FIGURES = "figures"
+
+
+def figure_record(figures: list, out_dir, dpi: int) -> dict:
+    """What ``tables.json`` records of the drawn ``figures`` for the audit: the matplotlib
+    version and resolution they were drawn with, and each PNG's SHA-256 by its path relative to
+    ``out_dir``. Drawn again with the same version and resolution, a figure gives the same bytes."""
+    import matplotlib
+
+    from demcal.provenance import sha256_file
+
+    return {"matplotlib": matplotlib.__version__, "dpi": int(dpi),
+            "sha256": {f.path.relative_to(out_dir).as_posix(): sha256_file(f.path) for f in figures}}
+
+
 def make_figures(campaign, fig_dir, *, dpi: int = DPI, draw: bool = True) -> list[Figure]:
     """Draw every figure the stored results allow into ``fig_dir`` at ``dpi``; return them in
     order. With ``draw`` False nothing is drawn: the figures are those that would be, at the

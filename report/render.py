@@ -27,7 +27,7 @@ from demcal.analyse.results import CampaignResult
 from demcal.errors import DemcalError, InputError
 from demcal.jsonio import read_json, write_json
 from demcal.provenance import sha256_file
-from demcal.report.figures import DPI, make_figures
+from demcal.report.figures import DPI, FIGURES, figure_record, make_figures
 from demcal.report.runs_csv import RUNS_CSV, write_runs_csv
 from demcal.report.tables import (SIZES, Campaign, build_tables, instrument, load_campaign, load_paper, paper_material,
                                   parameter_label, particle_noun, quantity_label, tables_document,
@@ -660,7 +660,11 @@ def _render(c: Campaign, out: Path, pdf: bool, dpi: int = DPI) -> tuple[Path, ..
     """Write the tables, figures (at ``dpi``), HTML and (``pdf``) PDF of ``c`` in ``out``."""
     # rendered from what was written, so the report shows exactly what audit checks
     stored = _write_tables(c, out)
-    text = render_html(c, stored, make_figures(c, out / "figures", dpi=dpi))
+    figures = make_figures(c, out / "figures", dpi=dpi)
+    doc = read_json(out / "tables.json")
+    doc["artefacts"][FIGURES] = figure_record(figures, out, dpi)
+    write_json(out / "tables.json", doc)
+    text = render_html(c, stored, figures)
     html_path = out / "report.html"
     html_path.write_text(text, encoding="utf-8")
     if not pdf:

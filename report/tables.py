@@ -1358,7 +1358,8 @@ def build_tables(c: Campaign) -> list[Table]:
 
 def tables_document(tables: list[Table], inputs: dict, artefacts: dict | None = None) -> dict:
     """The content of ``tables.json``: the tables, the SHA-256 of every file they rest on
-    (``inputs``) and of the report's files written beside them (``artefacts``: runs.csv)."""
+    (``inputs``) and of the report's files written beside them (``artefacts``: runs.csv, and
+    the figures once drawn, ``report.figures.figure_record``)."""
     return {"format": "demcal-tables/1", "inputs": dict(inputs), "artefacts": dict(artefacts or {}),
             "tables": [t.to_dict() for t in tables]}
 

@@ -5,6 +5,7 @@ records; ``demcal audit`` passes on a fresh report and names the table and cell,
 that was changed; the HTML needs no network; workbook text of any kind is printed as typed, and
 text the report could not render stops ``demcal calibrate`` before its first DEM run."""
 
+import base64
 import copy
 import csv
 import hashlib
@@ -398,7 +399,7 @@ def test_audit_passes_on_a_fresh_report(campaign, capsys):
     assert code == 0, out
     for tid in ("1", "2", "3", "4", "5", "6", "7", "8", "9", "A1", "A2"):
         assert re.search(rf"^Table {tid} \(.*\): OK$", out, re.M), tid
-    for artefact in ("results.json", "runs.csv", "report.html", "report.pdf"):
+    for artefact in ("results.json", "runs.csv", "report.html", "report.pdf", "figures"):
         assert re.search(rf"^{re.escape(artefact)}: OK$", out, re.M), artefact
     assert "audit: OK" in out
 
@@ -451,6 +452,78 @@ def test_audit_draws_the_figures_again_when_the_reports_are_gone(campaign, capsy
     code, text = _audit(capsys, out)
     assert code == 0, text
     assert re.search(r"^report\.pdf: OK$", text, re.M) and not (out / "figures").exists()
+
+
+def _embedded(html: str) -> list[tuple[str, str]]:
+    """(base64 PNG, figure number) of each figure report.html embeds."""
+    return re.findall(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]*)" alt="Fig\. (\d+)">', html)
+
+
+def test_audit_names_a_figure_swapped_in_report_html(campaign, capsys, tmp_path):
+    """Two figures' images exchanged in the HTML: every number in the text still agrees, the
+    figures do not."""
+    out = _copy(campaign, tmp_path)
+    html = (out / "report.html").read_text(encoding="utf-8")
+    (a, _), (b, _) = _embedded(html)[:2]
+    html = html.replace(a, "\0").replace(b, a).replace("\0", b)
+    (out / "report.html").write_text(html, encoding="utf-8")
+    record = json.loads((out / "tables.json").read_text())["artefacts"]["figures"]["sha256"]
+    first = next(iter(record))
+    code, text = _audit(capsys, out)
+    assert code == 1
+    assert (f"figures, report.html, Fig. 1, SHA-256 ({first}): reads "
+            f"'{hashlib.sha256(base64.b64decode(b)).hexdigest()}', re-derived '{record[first]}'") in text
+    assert re.search(r"^report\.html: OK$", text, re.M) and re.search(r"^report\.pdf: OK$", text, re.M)
+    assert "audit: FAILED" in text and "differs: figures" in text
+
+
+def test_audit_draws_each_figure_again_and_names_one_the_sources_do_not_give(campaign, capsys, tmp_path):
+    """A figure replaced everywhere the report keeps it (its PNG, the HTML, the PDF and the
+    SHA-256 in tables.json): drawn again from the results, it differs. Under another
+    matplotlib the figures are not compared, and the audit says so and fails."""
+    from demcal.report.figures import make_figures
+    from demcal.report.render import write_pdf
+
+    out = _copy(campaign, tmp_path)
+    figures = make_figures(load_campaign(out), out / "figures", draw=False)
+    true, other = figures[-1].path, figures[0].path
+    drawn = sha256_file(true)
+    shutil.copyfile(other, true)
+    doc = json.loads((out / "tables.json").read_text())
+    name = f"figures/{true.name}"
+    doc["artefacts"]["figures"]["sha256"][name] = sha256_file(true)
+    (out / "tables.json").write_text(json.dumps(doc))
+    c = load_campaign(out)
+    html = render_html(c, doc["tables"], figures)
+    (out / "report.html").write_text(html, encoding="utf-8")
+    write_pdf(html, out / "report.pdf", base_url=out)
+    code, text = _audit(capsys, out)
+    assert code == 1
+    assert f"figures, {name}, SHA-256 (drawn again from the sources): reads '{sha256_file(true)}', re-derived '{drawn}'" in text
+    assert f"figures, report.html, Fig. {len(figures)}, SHA-256 (drawn again from the sources)" in text
+    assert re.search(r"^report\.html: OK$", text, re.M) and re.search(r"^report\.pdf: OK$", text, re.M)
+
+    doc["artefacts"]["figures"]["matplotlib"] = "0.0"
+    (out / "tables.json").write_text(json.dumps(doc))
+    code, text = _audit(capsys, out)
+    assert code == 1
+    assert re.search(r"^figures: NOT COMPARED: drawn with matplotlib 0\.0, drawn again with ", text, re.M)
+
+
+def test_audit_names_an_image_changed_in_report_pdf(campaign, capsys, tmp_path):
+    from demcal.report.audit import pdf_images
+    from demcal.report.render import write_pdf
+
+    out = _copy(campaign, tmp_path)
+    html = (out / "report.html").read_text(encoding="utf-8")
+    (a, _), (b, _) = _embedded(html)[:2]
+    write_pdf(html.replace(a, b), out / "report.pdf", base_url=out)
+    code, text = _audit(capsys, out)
+    assert code == 1
+    page, image = pdf_images(campaign["pdf"])[0]
+    assert re.search(rf"^  report\.pdf, page {page}, image 1, SHA-256: reads '[0-9a-f]{{64}}', re-derived '{image}'$",
+                     text, re.M)
+    assert re.search(r"^report\.html: OK$", text, re.M) and re.search(r"^figures: OK$", text, re.M)
 
 
 def test_audit_names_a_changed_number_in_results_json(campaign, capsys, tmp_path):
