@@ -27,11 +27,11 @@ Onsets, from the centre of mass and the orientation after each chunk:
 - ``slide_angle_deg``: tilt at which the slip first exceeds ``threshold`` (moving while not
   rolling) and then keeps growing, by ``CONFIRM_SLIP`` (or to the run's end) without a chunk in
   which it stands still (grows by less than ``REST_FRACTION`` of the threshold). A slip that
-  stops is a knock,
-  not a slide: a clump resting on one sphere whose centre is near its centre of mass (the
-  kernel shape on its flat side) balances like a ball, rolls at tan(theta) = mu_r until its
-  next sphere meets the plate, and that landing slips it by tens of micrometres whatever its
-  friction. The slip is then counted afresh from where it stopped (the run's notes say so);
+  stops is a knock, not a slide: a clump resting on one sphere whose centre is near its centre
+  of mass (the kernel shape on its flat side) balances like a ball, rolls at tan(theta) = mu_r
+  until its next sphere meets the plate, and that landing slips it by tens of micrometres
+  whatever its friction. The slip is then counted afresh from where it stopped (the run's
+  notes say so);
   ``roll_angle_deg``: tilt at which the rolled arc first exceeds ``threshold``, beyond the
   elastic windup the spring-dashpot rolling model allows (``_elastic_rolling_arc``).
 The run stops at the onset asked for by ``mode`` (or when the segment has moved 50 mm, or at

@@ -114,7 +114,8 @@ def test_the_report_shows_the_extra_target_and_the_audit_rederives_it(crest):
     checked = audit(out)
     assert all(f.status == "ok" for f in checked.files) and all(t.status == "ok" for t in checked.tables)
     assert {a.artefact: a.status for a in checked.artefacts} == {"results.json": "ok", "runs.csv": "ok",
-                                                                 "report.html": "ok", "report.pdf": "missing"}
+                                                                 "report.html": "ok", "report.pdf": "missing",
+                                                                 "figures": "ok"}
     assert not checked.problems
 
 

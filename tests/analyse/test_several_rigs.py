@@ -167,7 +167,8 @@ def test_both_rigs_validate_and_the_report_shows_each(two):
     checked = audit(out)
     assert all(t.status == "ok" for t in checked.tables) and not checked.problems
     assert {a.artefact: a.status for a in checked.artefacts} == {"results.json": "ok", "runs.csv": "ok",
-                                                                 "report.html": "ok", "report.pdf": "missing"}
+                                                                 "report.html": "ok", "report.pdf": "missing",
+                                                                 "figures": "ok"}
 
 
 def test_the_design_expert_workflow_refuses_two_rigs(two, tmp_path):
