@@ -506,8 +506,17 @@ def pdf_words(path) -> list[tuple[str, tuple]]:
 
 def pdf_images(path) -> list[tuple[int, str]]:
     """Every image of a PDF once, in the order of the pages that first show it: the page and
-    the SHA-256 of its stream as stored (with its transparency mask's)."""
+    the SHA-256 of its stream as stored, encoded, with its filter and its transparency mask's.
+
+    The encoded bytes, not the pixels: the fresh PDF is written by the same code from the same
+    PNGs, so its streams are the same bytes, and decoding the PNG predictor in Python took
+    about 10 s a report."""
     from pypdf import PdfReader
+
+    def stored(obj) -> bytes:
+        raw = getattr(obj, "_data", None)      # pypdf keeps a stream's bytes as read there
+        data = raw if isinstance(raw, bytes) else obj.get_data()
+        return repr((obj.get("/Filter"), obj.get("/DecodeParms"))).encode() + data
 
     seen, images = set(), []
     for n, page in enumerate(PdfReader(str(path)).pages, 1):
@@ -517,9 +526,9 @@ def pdf_images(path) -> list[tuple[int, str]]:
             if obj.get("/Subtype") != "/Image" or ref.idnum in seen:
                 continue
             seen.add(ref.idnum)
-            h = hashlib.sha256(obj.get_data())
+            h = hashlib.sha256(stored(obj))
             if obj.get("/SMask") is not None:
-                h.update(obj["/SMask"].get_object().get_data())
+                h.update(stored(obj["/SMask"].get_object()))
             images.append((n, h.hexdigest()))
     return images
 
