@@ -637,12 +637,15 @@ def render_html(c: Campaign, tables: list[dict], figures: list) -> str:
     return _environment().get_template("report.html.j2").render(**context)
 
 
-def _write_tables(c: Campaign, out: Path) -> list[dict]:
+def _write_tables(c: Campaign, out: Path, figures: dict | None = None) -> list[dict]:
     """Write ``runs.csv`` (when the campaign has results) and ``tables.json`` (with the SHA-256
-    of every file the tables rest on and of runs.csv) in ``out``; return the tables as written."""
+    of every file the tables rest on, of runs.csv and, given their record, of the figures) in
+    ``out``; return the tables as written."""
     artefacts = {}
     if c.results is not None:
         artefacts[RUNS_CSV] = sha256_file(write_runs_csv(c, out / RUNS_CSV))
+    if figures is not None:
+        artefacts[FIGURES] = figures
     write_json(out / "tables.json", tables_document(build_tables(c), input_hashes(c, out), artefacts))
     return read_json(out / "tables.json")["tables"]
 
@@ -658,12 +661,9 @@ def write_tables(out_dir) -> Path:
 
 def _render(c: Campaign, out: Path, pdf: bool, dpi: int = DPI) -> tuple[Path, ...]:
     """Write the tables, figures (at ``dpi``), HTML and (``pdf``) PDF of ``c`` in ``out``."""
-    # rendered from what was written, so the report shows exactly what audit checks
-    stored = _write_tables(c, out)
     figures = make_figures(c, out / "figures", dpi=dpi)
-    doc = read_json(out / "tables.json")
-    doc["artefacts"][FIGURES] = figure_record(figures, out, dpi)
-    write_json(out / "tables.json", doc)
+    # rendered from what was written, so the report shows exactly what audit checks
+    stored = _write_tables(c, out, figure_record(figures, out, dpi))
     text = render_html(c, stored, figures)
     html_path = out / "report.html"
     html_path.write_text(text, encoding="utf-8")
