@@ -304,6 +304,15 @@ def _contacts(ranged, step, dt, settings, bodies, spheres, lists, walls, table, 
                        e_exp, log_v_ref, v_min)
 
 
+@loop_kernel
+def _copy_rows(src, dst, n):
+    """``dst[:n] = src[:n]`` for rows of 3, as a loop: a slice assignment compiles numba's
+    shape-mismatch error and its message formatting into the step loop."""
+    for i in range(n):
+        for a in range(3):
+            dst[i, a] = src[i, a]
+
+
 @evaluator
 def _steps(ranged, step, n_steps, t, dt, mode, resume, rebuild, settings, bodies, spheres, lists, walls, table,
            wcv, aside):
@@ -384,13 +393,13 @@ def _advance(ranged, n_steps, t, dt, settings, bodies, spheres, lists, walls, ta
             pstart, ppi, pj, ph = build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo,
                                                   inv_cell, dims, cell_start, pstart, pj, ph, sallow,
                                                   pool_size)
-            sx0[:n_spheres] = sx[:n_spheres]
+            _copy_rows(sx, sx0, n_spheres)
             n_rebuilds += 1
         if need_rebuild or walls_stale:
             wstart, ws, wk, wh = build_wall_list(n_spheres, sx, srad, sbody, bactive, skin, wkind,
                                                  worig, wnorm, wu, wv, whalf, wstart, wk, wh, swallow)
-            sxw[:n_spheres] = sx[:n_spheres]
-            wx0[:] = worig
+            _copy_rows(sx, sxw, n_spheres)
+            _copy_rows(worig, wx0, worig.shape[0])
             n_wall_rebuilds += 1
         need_rebuild = False
         if wcv.shape[0] < ws.shape[0]:
