@@ -64,8 +64,22 @@ def _new(width_in: float, height_in: float) -> _MplFigure:
 
 def _save(fig: _MplFigure, path: Path, dpi: int) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
+    # zlib level 1: a photo panel encodes three times faster for a file about 13 % larger
+    fig.savefig(path, dpi=dpi, pil_kwargs={"compress_level": 1})
     return path
+
+
+def _photo(image: Path, width_in: float, dpi: int) -> np.ndarray:
+    """The image ``image`` area-averaged down to twice the pixels of the ``width_in`` [in] it
+    is drawn across, so that matplotlib does not resample the whole photo at every draw."""
+    import cv2
+
+    pixels = imread(image)
+    width = int(2 * width_in * dpi)
+    if pixels.shape[1] <= width:
+        return pixels
+    height = max(1, round(pixels.shape[0] * width / pixels.shape[1]))
+    return cv2.resize(pixels, (width, height), interpolation=cv2.INTER_AREA)
 
 
 def workbook_label(text) -> str:
@@ -102,7 +116,7 @@ def heap_photos(measurement: dict, path: Path, folder=None, *, dpi: int = DPI, d
     fig = _new(6.8, 2.1 * math.ceil(len(rows) / n) + 0.2)
     axes = fig.subplots(math.ceil(len(rows) / n), n, squeeze=False).ravel()
     for ax, (rec, image) in zip(axes, rows):
-        ax.imshow(imread(image))
+        ax.imshow(_photo(image, 6.8 / n, dpi))
         flanks = ", ".join(f"{k} {v:.2f}°" for k, v in (rec.get("flanks") or {}).items() if v is not None)
         used = "" if rec.get("used", True) else " (rejected)"
         ax.set_title(f"{workbook_label(rec.get('id', ''))}: {rec['value']:.2f}°{used}\n{flanks}", fontsize=7,
@@ -299,7 +313,7 @@ def validation_heaps(results: CampaignResult, runs: dict, measurement: dict, pat
     axes = list(np.atleast_1d(fig.subplots(1, panels, width_ratios=[1.4] * (panels - 1) + [1])))
     if photo_rows:
         ax = axes.pop(0)
-        ax.imshow(imread(photo_rows[0][1]))
+        ax.imshow(_photo(photo_rows[0][1], 6.8 * 1.4 / (1.4 * (panels - 1) + 1), dpi))
         ax.set_title(f"photographed heap {workbook_label(photo_rows[0][0].get('id', ''))}", fontsize=7,
                      **PLAIN_TEXT)
         ax.set_axis_off()
