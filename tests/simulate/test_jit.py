@@ -32,7 +32,10 @@ _POURS = textwrap.dedent("""
 """)
 
 
+@pytest.mark.validation
 def test_a_run_is_the_same_compiled_or_loaded_from_the_cache(tmp_path):
+    # opt-in: compiling every kernel in an empty cache takes a core for over a minute; the
+    # default suite checks the flags whose absence it guards (below)
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), NUMBA_NUM_THREADS="2")
 
     def pours():
@@ -45,6 +48,24 @@ def test_a_run_is_the_same_compiled_or_loaded_from_the_cache(tmp_path):
     loaded = pours()         # the same kernels loaded from the cache
     assert len(compiled) == 3
     assert compiled == loaded
+
+
+def test_every_kernel_is_compiled_in_ieee_arithmetic():
+    """``fastmath`` is what made a run's bits depend on whether its kernels were compiled or
+    loaded from the cache (``simulate._jit``); no kernel of the package may set it."""
+    import importlib
+    import pkgutil
+
+    import demcal.simulate
+    from numba.core.dispatcher import Dispatcher
+
+    kernels = {}
+    for module in pkgutil.walk_packages(demcal.simulate.__path__, "demcal.simulate."):
+        for value in vars(importlib.import_module(module.name)).values():
+            if isinstance(value, Dispatcher) and value.__module__.startswith("demcal."):
+                kernels[f"{value.__module__}.{value.__name__}"] = value.targetoptions
+    assert len(kernels) > 40 and "demcal.simulate.engine._advance_serial" in kernels
+    assert {name for name, options in kernels.items() if options.get("fastmath") is not False} == set()
 
 
 def _twice(x):

@@ -140,13 +140,17 @@ def test_history_survives_rebuilds():
 
 
 def _listed_contacts_missing(sim):
-    """Touching sphere pairs and sphere-wall pairs (brute force) that the lists lack."""
+    """Touching sphere pairs (found by a k-d tree, independent of the engine's cells) and
+    sphere-wall pairs (brute force) that the lists lack."""
+    from scipy.spatial import cKDTree
+
     n = sim.n_spheres
     x, r, body = sim.sphere_positions(), sim.sphere_radii(), sim.sphere_body()
     on = sim.active()[body]
-    d = np.linalg.norm(x[:, None] - x[None], axis=2)
-    i, j = np.nonzero(np.triu(d < r[:, None] + r[None], k=1))
-    keep = (body[i] != body[j]) & on[i] & on[j]
+    near = (cKDTree(x).query_pairs(2.0 * float(r.max()), output_type="ndarray") if n    # each pair i < j
+            else np.zeros((0, 2), dtype=int))
+    i, j = near[:, 0], near[:, 1]
+    keep = (np.linalg.norm(x[i] - x[j], axis=1) < r[i] + r[j]) & (body[i] != body[j]) & on[i] & on[j]
     sid = sim._s["sid"]                 # sphere id of each row of the engine's arrays
     _, pi, pj, _ = sim._pairs
     listed = {(min(a, b), max(a, b)) for a, b in zip(sid[pi].tolist(), sid[pj].tolist())}
