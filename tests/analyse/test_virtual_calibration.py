@@ -6,7 +6,8 @@ heap equivalent to the photographed ones.
 The default suite uses a small carton of each shape: 60 segments, about 70 round seeds, and
 a carton scaled to 0.5 of three-sphere kernels and of two-sphere clumps (2-3.5 minutes of 2
 cores each). Their heaps scatter by five to ten degrees, so the lab's heap-to-heap sd sets the
-tolerance. The paper's carton is opt-in (``-m validation``, about 20 minutes on 2 cores).
+tolerance. The full cartons are opt-in (``-m validation``): the paper's (about 20 minutes on 2
+cores) and each other shape's default carton.
 
 Measured over seeds (lab seed 20 + k, campaign seed k; k = 1 is the test's own), with the virtual
 lab photographing each twin heap's own spheres: the round seed's carton passed for every k in
@@ -93,6 +94,18 @@ def test_small_carton_virtual_lab_of_each_shape(shape, tmp_path):
     geometry = ReposeGeometry.for_particle(truth.shape).scaled(SHAPE_SCALES[shape])
     res = virtual_campaign(tmp_path, geometry, SMALL_CONFIG, truth=truth, drop_heights_mm=(400.0,),
                            orientation_range_deg=(0.0, 90.0), **SMALL_LAB)
+    check_truth_and_verdict(res, truth)
+
+
+@pytest.mark.validation
+@pytest.mark.parametrize("shape", ["sphere", "kernel", "clump"])
+def test_full_carton_virtual_lab_of_each_shape(shape, tmp_path):
+    # each shape's default carton (1705 round seeds, 1136 kernels of 3 spheres, 852 clumps of 2)
+    # with the paper carton's campaign and 16 photographed heaps
+    truth = replace(TRUTH, shape=OTHER_SHAPES[shape], particle_density_kg_m3=1200.0, shear_modulus_pa=1.04e6,
+                    dt=None)
+    res = virtual_campaign(tmp_path, ReposeGeometry.for_particle(truth.shape), CampaignConfig(seed=1, progress=False),
+                           truth=truth, drop_heights_mm=(400.0,), orientation_range_deg=(0.0, 90.0), n_photos=16)
     check_truth_and_verdict(res, truth)
 
 
