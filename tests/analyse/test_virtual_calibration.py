@@ -10,7 +10,10 @@ tolerance. The full cartons are opt-in (``-m validation``): the paper's (about 2
 cores) and each other shape's default carton. On 2026-11-29, on 2 cores, the clump's passed in
 13 min 15 s (every truth inside its 95 % interval; 40 heaps at 37.27 deg against the photos'
 37.29, tolerance 3.46) and the kernel's in 18 min 56 s (40 heaps at 33.32 deg against 33.81,
-tolerance 1.35).
+tolerance 1.35). The round seed's (14 min 3 s) put every truth inside its interval but ended
+*undecided*: 40 heaps at 30.46 deg [30.09, 30.84] against the photos' 30.99, tolerance 1.0.
+Its 16 photos give the validation about 80 % power when on target, as for the paper's carton,
+so this test fails one run in five by design unless the lab photographs more heaps.
 
 Measured over seeds (lab seed 20 + k, campaign seed k; k = 1 is the test's own), with the virtual
 lab photographing each twin heap's own spheres: the round seed's carton passed for every k in
