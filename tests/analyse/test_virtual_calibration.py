@@ -9,8 +9,9 @@ a carton scaled to 0.5 of three-sphere kernels and of two-sphere clumps (the two
 tolerance. The full cartons are opt-in (``-m validation``): the paper's (about 20 minutes on 2
 cores, the paper's 16 photos) and each other shape's default carton, photographed FULL_PHOTOS
 (30) times, with up to FULL_VALIDATION_CAP (80) validation runs. The round seed's and the
-kernel's heaps scatter by about 1.4 deg, so the tolerance is about that: with 16 photos and 40 runs the validation had about
-89 % power when on target and 67 % at a bias of 0.5 deg (``analyse.equivalence.tost_power``),
+kernel's heaps scatter by about 1.4 deg, so the tolerance is about that: with 16 photos and 40
+runs the validation had about 89 % power when on target and 67 % at a bias of 0.5 deg
+(``analyse.equivalence.tost_power``),
 and the round seed's ended *undecided* once (30.46 deg [30.09, 30.84] against 30.99,
 tolerance 1.0); with 30 photos and 80 runs it has 99.7 % and 91 %. On 2026-11-29, on 2 cores,
 alone, every truth lay inside its 95 % interval and each validation was *equivalent*: the round
