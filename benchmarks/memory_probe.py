@@ -22,6 +22,8 @@ can be read against it: if the probe stays flat where the engine does not, the e
     python benchmarks/memory_probe.py                      # 2,500, 20,000 and 100,000 spheres
     python benchmarks/memory_probe.py --rounds 5 --spheres 2500 100000
     python benchmarks/memory_probe.py --index-bits 32      # the pair list's indices in 32 bits
+    python benchmarks/memory_probe.py --spheres 20000 100000 --threads 1 2   # the engine's ranged
+                                                           # kernels on 1, then 2 threads
 """
 
 from __future__ import annotations
@@ -91,6 +93,76 @@ def body_pass(body, sx, dt):
         sx[b, 0] = body[b, 0]
 
 
+@numba.njit(parallel=True, cache=False, fastmath=False)
+def pair_pass_ranged(pi, pj, sx, body, hist, stiffness, n_ranges, aside_f):
+    """``pair_pass`` as the engine's threads run it (``simulate.forces.contact_forces_ranged``):
+    the list cut into ``n_ranges`` runs of whole rows, each run summing into its own bodies and
+    keeping a second body's share aside when that body is another run's; the shares set aside
+    are added after, run by run."""
+    n = pi.size
+    cut = np.empty(n_ranges + 1, np.int64)
+    for c in range(n_ranges):
+        cut[c] = np.searchsorted(pi, pi[n * c // n_ranges])
+    cut[n_ranges] = n
+    aside = np.zeros(n_ranges, np.int64)
+    for c in numba.prange(n_ranges):
+        hi = pi[cut[c + 1]] if c + 1 < n_ranges else body.shape[0]
+        m = 0
+        for k in range(cut[c], cut[c + 1]):
+            i = pi[k]
+            j = pj[k]
+            dx = sx[j, 0] - sx[i, 0]
+            dy = sx[j, 1] - sx[i, 1]
+            dz = sx[j, 2] - sx[i, 2]
+            rsum = sx[i, 3] + sx[j, 3]
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 >= rsum * rsum:
+                hist[k, 0] = 0.0
+                hist[k, 1] = 0.0
+                hist[k, 2] = 0.0
+                continue
+            d = math.sqrt(d2)
+            f = stiffness * (rsum - d) / d
+            vr = (body[i, 3] - body[j, 3]) * dx + (body[i, 4] - body[j, 4]) * dy + (body[i, 5] - body[j, 5]) * dz
+            wr = (body[i, 6] - body[j, 6]) + (body[i, 7] - body[j, 7]) + (body[i, 8] - body[j, 8])
+            hist[k, 0] += 1e-9 * vr
+            hist[k, 1] += 1e-9 * wr
+            hist[k, 2] = f
+            own_j = j < hi
+            for a in range(3):
+                g = f * (dx, dy, dz)[a]
+                body[i, 9 + a] -= g
+                body[i, 12 + a] += 1e-3 * g
+                if own_j:
+                    body[j, 9 + a] += g
+                    body[j, 12 + a] += 1e-3 * g
+                else:
+                    aside_f[cut[c] + m, a] = g
+            if not own_j:
+                aside_f[cut[c] + m, 3] = j
+                m += 1
+        aside[c] = m
+    for c in range(n_ranges):
+        for e in range(cut[c], cut[c] + aside[c]):
+            j = int(aside_f[e, 3])
+            for a in range(3):
+                body[j, 9 + a] += aside_f[e, a]
+                body[j, 12 + a] += 1e-3 * aside_f[e, a]
+
+
+@numba.njit(parallel=True, cache=False, fastmath=False)
+def body_pass_threaded(body, sx, dt):
+    for b in numba.prange(body.shape[0]):
+        for c in range(3):
+            body[b, 3 + c] += dt * body[b, 9 + c]
+            body[b, 6 + c] += dt * body[b, 12 + c]
+            body[b, 9 + c] = 0.0
+            body[b, 12 + c] = 0.0
+        for c in range(9):
+            body[b, 15 + c] += 1e-12 * body[b, 6 + c % 3]
+        sx[b, 0] = body[b, 0]
+
+
 def bed(n: int, seed: int, index_dtype=np.int64):
     """A jittered body-centred cubic lattice of ``n`` spheres of radius 1, each touching its 8
     nearest neighbours at 1.95 (about 4 pairs a sphere within a skin of 0.1, as the settled
@@ -115,15 +187,26 @@ def bed(n: int, seed: int, index_dtype=np.int64):
             np.zeros((len(pairs), HISTORY_COLUMNS)))
 
 
-def measure(n: int, seconds: float, seed: int, index_dtype=np.int64) -> dict:
+def measure(n: int, seconds: float, seed: int, index_dtype=np.int64, threads: int | None = None) -> dict:
+    """Sphere-steps per second of the probe's passes on a bed of ``n`` spheres: the serial
+    kernels, or with ``threads`` the ranged ones on that many threads."""
     sx, body, pi, pj, hist = bed(n, seed, index_dtype)
-    pair_pass(pi, pj, sx, body, hist, 1.0)
-    body_pass(body, sx, 0.0)
+    if threads:
+        numba.set_num_threads(threads)
+        aside_f = np.zeros((pi.size, 4))
+
+        def step():
+            pair_pass_ranged(pi, pj, sx, body, hist, 1.0, 16, aside_f)
+            body_pass_threaded(body, sx, 0.0)
+    else:
+        def step():
+            pair_pass(pi, pj, sx, body, hist, 1.0)
+            body_pass(body, sx, 0.0)
+    step()
     steps, start = 0, time.perf_counter()
     while time.perf_counter() - start < seconds:
         for _ in range(20):
-            pair_pass(pi, pj, sx, body, hist, 1.0)
-            body_pass(body, sx, 0.0)
+            step()
         steps += 20
     wall = time.perf_counter() - start
     nbytes = sx.nbytes + body.nbytes + pi.nbytes + pj.nbytes + hist.nbytes
@@ -138,30 +221,46 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--index-bits", type=int, choices=(32, 64), default=64,
                     help="width of the pair list's sphere indices (the engine's: 64)")
+    ap.add_argument("--threads", type=int, nargs="+",
+                    help="run each size with the engine's ranged kernels on these thread counts, in turn "
+                         "(default: the serial kernels, one thread)")
     ap.add_argument("--json", help="write the numbers here")
     args = ap.parse_args(argv)
     numba.set_num_threads(1)
+    index_dtype = np.int32 if args.index_bits == 32 else np.int64
+    configs = args.threads or [None]
     rows = []
-    for r in range(args.rounds):
+    for r in range(1, args.rounds + 1):
         for n in args.spheres:
-            row = {"round": r + 1, "index_bits": args.index_bits,
-                   **measure(n, args.seconds, seed=r, index_dtype=np.int32 if args.index_bits == 32 else np.int64)}
-            rows.append(row)
-            print(f"round {r + 1}  {n:>7} spheres  {row['pairs_per_sphere']:.2f} pairs/sphere  "
-                  f"{row['bytes_per_sphere']:.0f} B/sphere ({row['state_mb']:.1f} MB)  "
-                  f"{row['sphere_steps_per_s']:.3g} sphere-steps/s", flush=True)
-    first = args.spheres[0]
+            for t in configs:
+                row = {"round": r, "index_bits": args.index_bits, "threads": t or 1, "ranged": t is not None,
+                       **measure(n, args.seconds, seed=r, index_dtype=index_dtype, threads=t)}
+                rows.append(row)
+                print(f"round {r}  {n:>7} spheres  {'serial' if t is None else f'{t} thread(s), ranged'}  "
+                      f"{row['pairs_per_sphere']:.2f} pairs/sphere  {row['bytes_per_sphere']:.0f} B/sphere "
+                      f"({row['state_mb']:.1f} MB)  {row['sphere_steps_per_s']:.3g} sphere-steps/s", flush=True)
+
+    def rate(r, n, t):
+        return next(x["sphere_steps_per_s"] for x in rows if (x["round"], x["spheres"], x["threads"]) == (r, n, t or 1))
+
+    def show(label, values):
+        print(f"{label}: " + ", ".join(f"{v:.2f}" for v in values) + f" (median {statistics.median(values):.2f})")
+        return values
+
     ratios = {}
-    for n in args.spheres[1:]:
-        ratios[n] = [next(x for x in rows if x["round"] == r and x["spheres"] == n)["sphere_steps_per_s"]
-                     / next(x for x in rows if x["round"] == r and x["spheres"] == first)["sphere_steps_per_s"]
-                     for r in range(1, args.rounds + 1)]
-        print(f"{n} / {first}: " + ", ".join(f"{v:.2f}" for v in ratios[n])
-              + f" (median {statistics.median(ratios[n]):.2f})")
+    for t in configs:
+        for n in args.spheres[1:]:
+            ratios[f"{n}/{args.spheres[0]} spheres, {t or 1} thread(s)"] = show(
+                f"{n} / {args.spheres[0]} spheres, {t or 1} thread(s)",
+                [rate(r, n, t) / rate(r, args.spheres[0], t) for r in range(1, args.rounds + 1)])
+    for t in configs[1:]:
+        for n in args.spheres:
+            ratios[f"{n} spheres, {t}/{configs[0]} threads"] = show(
+                f"{n} spheres, {t} / {configs[0]} threads",
+                [rate(r, n, t) / rate(r, n, configs[0]) for r in range(1, args.rounds + 1)])
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"machine": machine(), "versions": versions(), "rows": rows,
-                       "ratios_to_first": {str(k): v for k, v in ratios.items()}}, f, indent=1)
+            json.dump({"machine": machine(), "versions": versions(), "rows": rows, "ratios": ratios}, f, indent=1)
     return 0
 
 
