@@ -93,6 +93,8 @@ def body_pass(body, sx, dt):
         sx[b, 0] = body[b, 0]
 
 
+# The pair's arithmetic is written out again below rather than shared through an inlined
+# helper: with the helper the ranged pass ran a third slower on one thread (twice, 2026-11-29).
 @numba.njit(parallel=True, cache=False, fastmath=False)
 def pair_pass_ranged(pi, pj, sx, body, hist, stiffness, n_ranges, aside_f):
     """``pair_pass`` as the engine's threads run it (``simulate.forces.contact_forces_ranged``):
