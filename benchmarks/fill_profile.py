@@ -2,7 +2,8 @@
 ``--spheres`` spheres (as ``dem_scaling.py``), 0.6 s of fill, with the engine's Python-side
 steps wrapped in timers: the compiled step loop (``Simulation._advance``, admitting new spheres
 included), the factory's insertions (``ParticleFactory.insert_due``), admitting new spheres
-(``admit_spheres``) and the sorts in memory.
+(``admit_spheres``) and the sorts in memory; and each of ``--windows`` equal parts of the fill
+timed apart, with the spheres present at its end.
 
     python benchmarks/fill_profile.py                       # 20,000 spheres, 1 then 2 threads, twice
     python benchmarks/fill_profile.py --spheres 100000 --rounds 1
@@ -46,7 +47,8 @@ def timed(seconds: collections.Counter):
         setattr(owner, name, wrapper)
 
 
-def fill(n_spheres: int, threads: int, seconds: collections.Counter) -> float:
+def fill(n_spheres: int, threads: int, seconds: collections.Counter, windows: int) -> list[tuple[float, int]]:
+    """Wall time and spheres at the end of each of ``windows`` equal parts of the fill."""
     n_clumps = n_spheres // 5
     scale = math.sqrt(n_clumps / 500)
     sim = build_paper_repose_case(DEMParameters().with_(**BENCHMARK_PARAMETERS), seed=1, n_clumps=n_clumps,
@@ -54,9 +56,12 @@ def fill(n_spheres: int, threads: int, seconds: collections.Counter) -> float:
     sim.threads = threads
     sim.run(n_steps=1)          # load the kernels before timing
     seconds.clear()
-    start = time.perf_counter()
-    sim.run(duration=FILL_PHASE)
-    return time.perf_counter() - start
+    parts = []
+    for _ in range(windows):
+        start = time.perf_counter()
+        summary = sim.run(duration=FILL_PHASE / windows)
+        parts.append((time.perf_counter() - start, summary.n_spheres))
+    return parts
 
 
 def main(argv=None) -> int:
@@ -64,15 +69,27 @@ def main(argv=None) -> int:
     ap.add_argument("--spheres", type=int, default=20000)
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--windows", type=int, default=6, help="equal parts of the fill timed apart")
     args = ap.parse_args(argv)
     seconds = collections.Counter()
     timed(seconds)
+    best = {}       # (threads, window) -> the shortest wall time over the rounds
     for r in range(1, args.rounds + 1):
         for t in args.threads:
-            wall = fill(args.spheres, t, seconds)
+            parts = fill(args.spheres, t, seconds, args.windows)
+            wall = sum(w for w, _ in parts)
             print(f"round {r}, {args.spheres} spheres, {t} thread(s): fill {wall:.2f} s")
             for label, s in seconds.most_common():
                 print(f"  {label:42s} {s:6.2f} s  {s / wall:6.1%}")
+            for w, (s, n) in enumerate(parts):
+                best[t, w] = (min(s, best.get((t, w), (math.inf, n))[0]), n)
+    first = args.threads[0]
+    for w in range(args.windows):
+        line = f"window {w + 1} (to {best[first, w][1]} spheres): " + ", ".join(
+            f"{t} thread(s) {best[t, w][0]:.2f} s" for t in args.threads)
+        if len(args.threads) > 1:
+            line += ", gain " + ", ".join(f"{best[first, w][0] / best[t, w][0]:.2f}" for t in args.threads[1:])
+        print(line + " (shortest of the rounds)")
     return 0
 
 
