@@ -53,12 +53,18 @@ def phase(sim, duration: float) -> dict:
             "spheres_at_end": summary.n_spheres}
 
 
-def case(n_spheres: int, fill_time: float, seed: int, threads: int | None) -> dict:
+def scaled_carton(n_spheres: int, fill_time: float, seed: int):
+    """The paper's repose case with its carton scaled in x and y to ``n_spheres`` spheres (the
+    fill depth kept), its plate never lifted."""
     params = DEMParameters().with_(**BENCHMARK_PARAMETERS)
     n_clumps = n_spheres // 5
     scale = math.sqrt(n_clumps / 500)
-    sim = build_paper_repose_case(params, seed=seed, n_clumps=n_clumps, box_length=0.2 * scale,
-                                  box_width=0.1 * scale, fill_time=fill_time, lift_time=100.0)
+    return build_paper_repose_case(params, seed=seed, n_clumps=n_clumps, box_length=0.2 * scale,
+                                   box_width=0.1 * scale, fill_time=fill_time, lift_time=100.0)
+
+
+def case(n_spheres: int, fill_time: float, seed: int, threads: int | None) -> dict:
+    sim = scaled_carton(n_spheres, fill_time, seed)
     sim.threads = threads
     with threads_limited_to(1 if threads is None else None):
         used = sim.threads_in_use() if threads else "by size, 1"

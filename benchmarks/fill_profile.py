@@ -3,7 +3,8 @@
 steps wrapped in timers: the compiled step loop (``Simulation._advance``, admitting new spheres
 included), the factory's insertions (``ParticleFactory.insert_due``), admitting new spheres
 (``admit_spheres``) and the sorts in memory; and each of ``--windows`` equal parts of the fill
-timed apart, with the spheres present at its end.
+timed apart, with the spheres present at its end; and one build of the sphere-wall list (on
+one thread) for the filled bed.
 
     python benchmarks/fill_profile.py                       # 20,000 spheres, 1 then 2 threads, twice
     python benchmarks/fill_profile.py --spheres 100000 --rounds 1
@@ -22,10 +23,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import demcal.simulate.engine as engine  # noqa: E402
 import demcal.simulate.factory as factory  # noqa: E402
-from benchmarks.dem_scaling import FILL_PHASE  # noqa: E402
-from benchmarks.dem_throughput import BENCHMARK_PARAMETERS  # noqa: E402
-from demcal.simulate.params import DEMParameters  # noqa: E402
-from demcal.simulate.scenes import build_paper_repose_case  # noqa: E402
+from benchmarks.dem_scaling import FILL_PHASE, scaled_carton  # noqa: E402
+from demcal.simulate.neighbours import build_wall_list  # noqa: E402
 
 TIMED = ((engine.Simulation, "_advance", "compiled step loop (admitting included)"),
          (factory.ParticleFactory, "insert_due", "factory insertions"),
@@ -47,12 +46,10 @@ def timed(seconds: collections.Counter):
         setattr(owner, name, wrapper)
 
 
-def fill(n_spheres: int, threads: int, seconds: collections.Counter, windows: int) -> list[tuple[float, int]]:
-    """Wall time and spheres at the end of each of ``windows`` equal parts of the fill."""
-    n_clumps = n_spheres // 5
-    scale = math.sqrt(n_clumps / 500)
-    sim = build_paper_repose_case(DEMParameters().with_(**BENCHMARK_PARAMETERS), seed=1, n_clumps=n_clumps,
-                                  box_length=0.2 * scale, box_width=0.1 * scale, fill_time=0.5, lift_time=100.0)
+def fill(n_spheres: int, threads: int, seconds: collections.Counter, windows: int):
+    """The filled carton, and the wall time and spheres at the end of each of ``windows`` equal
+    parts of the fill."""
+    sim = scaled_carton(n_spheres, fill_time=0.5, seed=1)
     sim.threads = threads
     sim.run(n_steps=1)          # load the kernels before timing
     seconds.clear()
@@ -61,7 +58,20 @@ def fill(n_spheres: int, threads: int, seconds: collections.Counter, windows: in
         start = time.perf_counter()
         summary = sim.run(duration=FILL_PHASE / windows)
         parts.append((time.perf_counter() - start, summary.n_spheres))
-    return parts
+    return sim, parts
+
+
+def wall_list_build(sim, repeats: int = 50) -> float:
+    """Wall time [s] of one build of the sphere-wall list (on one thread) for the bed as it is."""
+    S, B, W = sim._s, sim._b, sim._w
+    wstart, _, wk, wh = sim._wpairs
+    args = (sim.n_spheres, S["sx"], S["srad"], S["sbody"], B["bactive"], sim.skin, W["kind"], W["origin"],
+            W["normal"], W["axis_u"], W["axis_v"], W["half"], wstart, wk, wh, S["swallow"].copy())
+    build_wall_list(*args)
+    start = time.perf_counter()
+    for _ in range(repeats):
+        build_wall_list(*args)
+    return (time.perf_counter() - start) / repeats
 
 
 def main(argv=None) -> int:
@@ -76,9 +86,11 @@ def main(argv=None) -> int:
     best = {}       # (threads, window) -> the shortest wall time over the rounds
     for r in range(1, args.rounds + 1):
         for t in args.threads:
-            parts = fill(args.spheres, t, seconds, args.windows)
+            sim, parts = fill(args.spheres, t, seconds, args.windows)
             wall = sum(w for w, _ in parts)
-            print(f"round {r}, {args.spheres} spheres, {t} thread(s): fill {wall:.2f} s")
+            print(f"round {r}, {args.spheres} spheres, {t} thread(s): fill {wall:.2f} s, "
+                  f"{sim.total_wall_rebuilds} wall-list builds; one build of the filled bed's "
+                  f"{wall_list_build(sim) * 1e3:.2f} ms")
             for label, s in seconds.most_common():
                 print(f"  {label:42s} {s:6.2f} s  {s / wall:6.1%}")
             for w, (s, n) in enumerate(parts):
