@@ -63,14 +63,15 @@ def scaled_carton(n_spheres: int, fill_time: float, seed: int):
                                    box_width=0.1 * scale, fill_time=fill_time, lift_time=100.0)
 
 
-def case(n_spheres: int, fill_time: float, seed: int, threads: int | None) -> dict:
+def case(n_spheres: int, fill_time: float, seed: int, threads: int | None, fill_phase: float = FILL_PHASE,
+         settled_phase: float = SETTLED_PHASE) -> dict:
     sim = scaled_carton(n_spheres, fill_time, seed)
     sim.threads = threads
     with threads_limited_to(1 if threads is None else None):
         used = sim.threads_in_use() if threads else "by size, 1"
         sim.run(n_steps=1)      # load the kernels before timing
-        fill = phase(sim, FILL_PHASE)
-        settled = phase(sim, SETTLED_PHASE)
+        fill = phase(sim, fill_phase)
+        settled = phase(sim, settled_phase)
     return {"spheres": n_spheres, "threads": threads, "threads_used": used, "fill": fill, "settled": settled,
             "fill_over_settled_throughput": fill["sphere_steps_per_s"] / settled["sphere_steps_per_s"],
             "fill_over_settled_rebuild_rate": (fill["pair_rebuilds_per_1000_steps"]

@@ -49,8 +49,10 @@ The step (``run`` pseudocode; the whole loop runs in numba, returning to Python 
             to the nearest sphere not listed with it), the sphere-wall list if a sphere and the
             walls moved beyond its wall allowance together (at least skin); contact history
             carried over; spheres added between steps are admitted without a rebuild when they
-            have room (``simulate.neighbours``)
-        contact forces: sphere-sphere pairs, then sphere-wall pairs (Hertz-Mindlin, rolling)
+            have room (``simulate.neighbours``); the near pairs selected again if a sphere moved
+            beyond its near allowance
+        contact forces: the near sphere-sphere pairs (those of the list within a margin, the
+            only ones that may touch), then sphere-wall pairs (Hertz-Mindlin, rolling)
     (kicks are half steps at the start and end of a chunk and whole steps in between: the
      velocity Verlet scheme of ``simulate.integrate``; Python always sees synchronous
      positions and velocities)
@@ -104,7 +106,7 @@ from demcal.simulate.integrate import (drift, half_kick, matrix_from_quat, quat_
 from demcal.simulate.materials import MaterialTable
 from demcal.simulate.neighbours import (admit_spheres, ascending_pairs, build_pair_list, build_wall_list,
                                         grid_shape, morton_keys, padded_cell_count, renumber_pair_list,
-                                        renumber_wall_list)
+                                        renumber_wall_list, select_near_pairs)
 from demcal.simulate.threads import THREADS_MIN_SPHERES, threads_per_run
 from demcal.simulate.timestep import DEFAULT_MAX_FRACTION, check_time_step, rayleigh_time
 from demcal.simulate.walls import WALL_TYPES, pack_walls, wall_distance, wall_distances
@@ -114,10 +116,11 @@ from demcal.units import GRAVITY
 # kernels
 
 @evaluator
-def _place_sphere(s, b, soff, bx, bR, sx, sx0, sxw, sallow, swallow, wmove):
+def _place_sphere(s, b, soff, bx, bR, sx, sx0, sxw, sxn, sallow, swallow, snear, wmove):
     """World position of sphere ``s`` of body ``b``; whether it moved beyond its allowance since
-    the last pair-list rebuild (``sx0``, ``sallow``), and whether it plus the walls' largest
-    move ``wmove`` went beyond its wall allowance (``sxw``, ``swallow``; ``simulate.neighbours``)."""
+    the last pair-list rebuild (``sx0``, ``sallow``), whether it plus the walls' largest move
+    ``wmove`` went beyond its wall allowance (``sxw``, ``swallow``), and whether it moved beyond
+    its near-pair allowance (``sxn``, ``snear``; ``simulate.neighbours``)."""
     ox = soff[s, 0]
     oy = soff[s, 1]
     oz = soff[s, 2]
@@ -137,29 +140,37 @@ def _place_sphere(s, b, soff, bx, bR, sx, sx0, sxw, sallow, swallow, wmove):
     dz = z - sxw[s, 2]
     d2 = dx * dx + dy * dy + dz * dz
     lim = swallow[s] - wmove
-    return pair_stale, (lim <= 0.0) | (d2 > lim * lim)
+    wall_stale = (lim <= 0.0) | (d2 > lim * lim)
+    dx = x - sxn[s, 0]
+    dy = y - sxn[s, 1]
+    dz = z - sxn[s, 2]
+    d2 = dx * dx + dy * dy + dz * dz
+    return pair_stale, wall_stale, d2 > snear[s] * snear[s]
 
 
 @loop_kernel
-def _update_sphere_rows(s0, s1, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sallow, swallow, wmove):
-    """World positions of spheres ``s0``..``s1 - 1``; returns whether the pair list and the wall
-    list need a rebuild (``_place_sphere``)."""
+def _update_sphere_rows(s0, s1, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sxn, sallow, swallow, snear, wmove):
+    """World positions of spheres ``s0``..``s1 - 1``; returns whether the pair list, the wall
+    list and the near pairs are stale (``_place_sphere``)."""
     pairs_stale = False
     walls_stale = False
+    near_stale = False
     for s in range(s0, s1):
         b = sbody[s]
         if bactive[b]:
-            p, w = _place_sphere(s, b, soff, bx, bR, sx, sx0, sxw, sallow, swallow, wmove)
+            p, w, n = _place_sphere(s, b, soff, bx, bR, sx, sx0, sxw, sxn, sallow, swallow, snear, wmove)
             pairs_stale |= p
             walls_stale |= w
-    return pairs_stale, walls_stale
+            near_stale |= n
+    return pairs_stale, walls_stale, near_stale
 
 
 @loop_kernel
-def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sallow, swallow, wmove):
-    """World positions of the spheres; returns whether the pair list and the wall list need a
-    rebuild."""
-    return _update_sphere_rows(0, n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sallow, swallow, wmove)
+def _update_spheres(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sxn, sallow, swallow, snear, wmove):
+    """World positions of the spheres; returns whether the pair list, the wall list and the near
+    pairs are stale."""
+    return _update_sphere_rows(0, n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sxn, sallow, swallow,
+                               snear, wmove)
 
 
 #: Blocks of rows the threaded kicks and sphere updates are split into.
@@ -167,16 +178,19 @@ N_BLOCKS = 64
 
 
 @threaded_kernel
-def _update_spheres_threaded(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sallow, swallow, wmove):
+def _update_spheres_threaded(n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sxn, sallow, swallow, snear,
+                             wmove):
     """``_update_spheres`` over threads, a block of rows each."""
     n_pairs_stale = 0
     n_walls_stale = 0
+    n_near_stale = 0
     for c in numba.prange(N_BLOCKS):
-        p, w = _update_sphere_rows(n_spheres * c // N_BLOCKS, n_spheres * (c + 1) // N_BLOCKS, sbody, soff, bx, bR,
-                                   bactive, sx, sx0, sxw, sallow, swallow, wmove)
+        p, w, n = _update_sphere_rows(n_spheres * c // N_BLOCKS, n_spheres * (c + 1) // N_BLOCKS, sbody, soff, bx,
+                                      bR, bactive, sx, sx0, sxw, sxn, sallow, swallow, snear, wmove)
         n_pairs_stale += p
         n_walls_stale += w
-    return n_pairs_stale > 0, n_walls_stale > 0
+        n_near_stale += n
+    return n_pairs_stale > 0, n_walls_stale > 0, n_near_stale > 0
 
 
 @loop_kernel
@@ -256,10 +270,10 @@ def _aside_buffers(n):
 def _move(ranged, step, t, dt, mode, settings, bodies, spheres, walls):
     """The first part of a step: kick and drift the bodies (``step`` >= 0; a half kick at step
     0, a whole one after), move the walls, place the spheres. Returns the new time and whether
-    the pair list and the wall list are stale."""
+    the pair list, the wall list and the near pairs are stale."""
     gx, gy, gz = settings[0], settings[1], settings[2]
     n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, bactive = bodies
-    n_spheres, sbody, soff, srad, sx, sx0, sxw, sallow, swallow = spheres
+    n_spheres, sbody, soff, srad, sx, sx0, sxw, sxn, sallow, swallow, snear = spheres
     wkind, worig, wnorm, wu, wv, whalf, wvel, wspin, wwin, wmat, wx0, wvel_now, wspin_now = walls
     h = 0.5 * dt
     n_walls = wkind.shape[0]
@@ -279,9 +293,8 @@ def _move(ranged, step, t, dt, mode, settings, bodies, spheres, walls):
         for a in range(3):
             dw2 += (worig[k, a] - wx0[k, a]) ** 2
         wmax2 = max(wmax2, dw2)
-    pairs_stale, walls_stale = update_spheres(ranged, n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw,
-                                              sallow, swallow, math.sqrt(wmax2))
-    return t, pairs_stale, walls_stale
+    return (t, *update_spheres(ranged, n_spheres, sbody, soff, bx, bR, bactive, sx, sx0, sxw, sxn, sallow, swallow,
+                               snear, math.sqrt(wmax2)))
 
 
 @evaluator
@@ -289,15 +302,15 @@ def _contacts(ranged, step, dt, settings, bodies, spheres, lists, walls, table, 
     """The second part of a step: the contact forces from the (fresh) lists."""
     lever_mode, rolling_model, eta_r, effective_mass = settings[4], settings[5], settings[6], settings[7]
     n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, bactive = bodies
-    n_spheres, sbody, soff, srad, sx, sx0, sxw, sallow, swallow = spheres
-    pstart, ppi, pj, ph, wstart, ws, wk, wh = lists
+    n_spheres, sbody, soff, srad, sx, sx0, sxw, sxn, sallow, swallow, snear = spheres
+    pstart, ppi, pj, ph, wstart, ws, wk, wh, near, near_start = lists
     wkind, worig, wnorm, wu, wv, whalf, wvel, wspin, wwin, wmat, wx0, wvel_now, wspin_now = walls
     e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min = table
     aside_body, aside_f, aside_t, aside_rv, aside_rm = aside
     # the first evaluation of a fresh state must not advance the contact history
     hist_dt = dt if step >= 0 else 0.0
     _wall_contact_velocities(ws, wk, sx, srad, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wspin_now, wcv)
-    all_contact_forces(ranged, aside_body, aside_f, aside_t, aside_rm, aside_rv, pstart, wstart, hist_dt, dt,
+    all_contact_forces(ranged, aside_body, aside_f, aside_t, aside_rm, aside_rv, near, near_start, wstart, hist_dt, dt,
                        lever_mode, rolling_model, eta_r, effective_mass, n_bodies, n_spheres, bx, bv, bw, bR,
                        bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph, ws, wk,
                        wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat, e_star, g_star, damp, mu_s, mu_r, log_e,
@@ -318,17 +331,19 @@ def _steps(ranged, step, n_steps, t, dt, mode, resume, rebuild, settings, bodies
            wcv, aside):
     """Whole steps from ``step`` until ``n_steps``, or until a step finds a list stale (or
     ``rebuild``, the first): it returns then, after that step's first part, with the step, the
-    new time and which lists are stale, for the caller to rebuild them and go on with ``resume``
-    (the first part of ``step`` is done and its lists are fresh)."""
+    new time and which lists are stale (pairs, walls, near pairs), for the caller to rebuild
+    them and go on with ``resume`` (the first part of ``step`` is done and its lists are
+    fresh)."""
     while step < n_steps:
         if not resume:
-            t, pairs_stale, walls_stale = _move(ranged, step, t, dt, mode, settings, bodies, spheres, walls)
-            if pairs_stale or walls_stale or rebuild:
-                return step, t, pairs_stale, walls_stale
+            t, pairs_stale, walls_stale, near_stale = _move(ranged, step, t, dt, mode, settings, bodies, spheres,
+                                                            walls)
+            if pairs_stale or walls_stale or near_stale or rebuild:
+                return step, t, pairs_stale, walls_stale, near_stale
         resume = False
         _contacts(ranged, step, dt, settings, bodies, spheres, lists, walls, table, wcv, aside)
         step += 1
-    return step, t, False, False
+    return step, t, False, False, False
 
 
 @loop_kernel
@@ -352,6 +367,11 @@ def _steps_ranged(step, n_steps, t, dt, mode, resume, rebuild, settings, bodies,
 steps_until_stale = serial_or_threaded(_steps_serial, _steps_ranged)
 
 
+#: Steps a near-pair selection should last at least (under it the margin doubles) and at most
+#: (over it the margin halves), and the smallest margin as a fraction of the skin.
+NEAR_SHORT, NEAR_LONG, NEAR_MIN_MARGIN = 16, 128, 1.0 / 16.0
+
+
 @kernel
 def _advance(ranged, n_steps, t, dt, settings, bodies, spheres, lists, walls, table, grid):
     """Advance the state by ``n_steps`` steps (see the module docstring for the step).
@@ -359,7 +379,16 @@ def _advance(ranged, n_steps, t, dt, settings, bodies, spheres, lists, walls, ta
     Between two steps the second half kick of one and the first of the next are one full kick
     (leapfrog); the chunk starts and ends with half kicks, so velocities are synchronous with
     positions whenever Python sees them. Returns the new time, the (possibly rebuilt) Verlet
-    lists and the numbers of pair-list and wall-list rebuilds.
+    lists, the numbers of pair-list and wall-list rebuilds and the near-pair margin to start the
+    next call with.
+
+    The contact loops visit only the near pairs of the Verlet list, those whose gap is under a
+    margin (``simulate.neighbours.select_near_pairs``), selected again whenever a sphere moved
+    beyond its near allowance, the pair list was rebuilt, or a call starts (Python may have
+    added, sorted or renumbered spheres between calls). The margin adapts: doubled when a
+    selection lasted under ``NEAR_SHORT`` steps, up to the skin, where every listed pair is
+    visited (a bed filling or flowing fast); halved when one lasted over ``NEAR_LONG``, down to
+    ``NEAR_MIN_MARGIN`` of the skin. It changes only which pairs are visited, not the result.
 
     ``ranged`` (a constant: ``_advance_serial``, ``_advance_ranged``) runs the kicks, the sphere
     positions and the contact forces on numba's threads (``simulate.forces.contact_forces_ranged``;
@@ -367,9 +396,10 @@ def _advance(ranged, n_steps, t, dt, settings, bodies, spheres, lists, walls, ta
     ``steps_until_stale``. The other arguments are tuples, in the order ``Simulation._advance``
     packs them.
     """
-    gx, gy, gz, skin, lever_mode, rolling_model, eta_r, effective_mass, need_rebuild, need_forces, pool_size = settings
+    (gx, gy, gz, skin, lever_mode, rolling_model, eta_r, effective_mass, need_rebuild, need_forces, pool_size,
+     margin) = settings
     n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, bactive = bodies
-    n_spheres, sbody, soff, srad, sx, sx0, sxw, sallow, swallow = spheres
+    n_spheres, sbody, soff, srad, sx, sx0, sxw, sxn, sallow, swallow, snear = spheres
     pstart, ppi, pj, ph, wstart, ws, wk, wh = lists
     wkind, worig, wnorm, wu, wv, whalf, wvel, wspin, wwin, wmat, wx0, wvel_now, wspin_now = walls
     lo, inv_cell, dims, cell_start = grid
@@ -380,13 +410,18 @@ def _advance(ranged, n_steps, t, dt, settings, bodies, spheres, lists, walls, ta
     n_rebuilds = 0
     n_wall_rebuilds = 0
     step = -1 if need_forces else 0
+    near = np.empty(ppi.shape[0], np.int64)
+    near_start = np.empty(pstart.shape[0], np.int64)
+    select_near_pairs(n_spheres, pstart, ppi, pj, ph, sx, srad, margin if margin < skin else np.inf, near,
+                      near_start, sxn, snear)
+    selected_at = step
     # the first part of ``step`` is done and its lists are fresh (a plain bool from the start: a
     # literal False would compile the steps a second time, for that type)
     resume = np.bool_(False)
     while step < n_steps:
-        step, t, pairs_stale, walls_stale = steps_until_stale(
+        step, t, pairs_stale, walls_stale, near_stale = steps_until_stale(
             ranged, step, n_steps, t, dt, mode, resume, need_rebuild, settings, bodies, spheres,
-            (pstart, ppi, pj, ph, wstart, ws, wk, wh), walls, table, wcv, aside)
+            (pstart, ppi, pj, ph, wstart, ws, wk, wh, near, near_start), walls, table, wcv, aside)
         if step >= n_steps:
             break
         if need_rebuild or pairs_stale:
@@ -395,6 +430,17 @@ def _advance(ranged, n_steps, t, dt, settings, bodies, spheres, lists, walls, ta
                                                   pool_size)
             _copy_rows(sx, sx0, n_spheres)
             n_rebuilds += 1
+            near = np.empty(ppi.shape[0], np.int64)
+            near_start = np.empty(pstart.shape[0], np.int64)
+        if need_rebuild or pairs_stale or near_stale:
+            lasted = step - selected_at
+            if near_stale and lasted < NEAR_SHORT:
+                margin = min(2.0 * margin, skin)
+            elif lasted > NEAR_LONG:
+                margin = max(0.5 * margin, NEAR_MIN_MARGIN * skin)
+            select_near_pairs(n_spheres, pstart, ppi, pj, ph, sx, srad, margin if margin < skin else np.inf,
+                              near, near_start, sxn, snear)
+            selected_at = step
         if need_rebuild or walls_stale:
             wstart, ws, wk, wh = build_wall_list(n_spheres, sx, srad, sbody, bactive, skin, wkind,
                                                  worig, wnorm, wu, wv, whalf, wstart, wk, wh, swallow)
@@ -410,7 +456,9 @@ def _advance(ranged, n_steps, t, dt, settings, bodies, spheres, lists, walls, ta
     if n_steps > 0:
         kick_drift(ranged, n_bodies, 0.5 * dt, 0.0, gx, gy, gz, mode, bactive, bx, bv, bq, bL, bw, bR, bf, bt, brm,
                    brv, brn, binvm, binvi)
-    return t, pstart, ppi, pj, ph, wstart, ws, wk, wh, n_rebuilds, n_wall_rebuilds
+    if step - selected_at > NEAR_LONG:
+        margin = max(0.5 * margin, NEAR_MIN_MARGIN * skin)
+    return t, pstart, ppi, pj, ph, wstart, ws, wk, wh, n_rebuilds, n_wall_rebuilds, margin
 
 
 @kernel
@@ -502,6 +550,7 @@ _SPHERE_FIELDS = {
     "sbody": ((), np.int64), "soff": ((3,), np.float64), "srad": ((), np.float64),
     "sx": ((3,), np.float64), "sx0": ((3,), np.float64), "sxw": ((3,), np.float64),
     "sallow": ((), np.float64), "swallow": ((), np.float64), "sid": ((), np.int64),
+    "sxn": ((3,), np.float64), "snear": ((), np.float64),
 }
 
 
@@ -617,6 +666,7 @@ class Simulation:
         self._need_rebuild = True
         self._need_forces = True
         self._admit_from = 0          # spheres from here on were added since the lists were made
+        self._near_fraction = 0.25    # the contact loops' near-pair margin over the skin (see _advance)
         self.total_rebuilds = 0
         self.total_wall_rebuilds = 0
 
@@ -920,16 +970,18 @@ class Simulation:
             self.sort_in_memory()
         self._steps_since_sort += n_steps
         g = self._gravity
+        skin = self.skin
         ranged = self.threads is not None or self.n_spheres >= THREADS_MIN_SPHERES
         numba.set_num_threads(self.threads_in_use())   # the list rebuilds too (one thread below the size)
         out = (_advance_ranged if ranged else _advance_serial)(
             n_steps, self.time, self.dt,
-            (g[0], g[1], g[2], self.skin, self._lever, pt.rolling_model, pt.rolling_damping_ratio,
-             pt.contact_effective_mass, self._need_rebuild, self._need_forces, numba.config.NUMBA_NUM_THREADS),
+            (g[0], g[1], g[2], skin, self._lever, pt.rolling_model, pt.rolling_damping_ratio,
+             pt.contact_effective_mass, self._need_rebuild, self._need_forces, numba.config.NUMBA_NUM_THREADS,
+             self._near_fraction * skin),
             (self.n_bodies, B["bx"], B["bv"], B["bq"], B["bL"], B["bw"], B["bR"], B["bf"], B["bt"], B["brm"],
              B["brv"], B["brn"], B["binvm"], B["binvi"], B["bmat"], B["bcount"], B["bactive"]),
-            (self.n_spheres, S["sbody"], S["soff"], S["srad"], S["sx"], S["sx0"], S["sxw"], S["sallow"],
-             S["swallow"]),
+            (self.n_spheres, S["sbody"], S["soff"], S["srad"], S["sx"], S["sx0"], S["sxw"], S["sxn"], S["sallow"],
+             S["swallow"], S["snear"]),
             (*self._pairs, *self._wpairs),
             (W["kind"], W["origin"], W["normal"], W["axis_u"], W["axis_v"], W["half"], W["velocity"], W["spin"],
              W["window"], W["material"], self._wx0, self._wvel_now, self._wspin_now),
@@ -939,6 +991,7 @@ class Simulation:
         self._pairs = out[1:5]
         self._wpairs = out[5:9]
         self.total_wall_rebuilds += int(out[10])
+        self._near_fraction = float(out[11]) / skin
         self._need_rebuild = False
         self._need_forces = False
         return int(out[9])

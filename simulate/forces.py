@@ -46,13 +46,17 @@ def history_width(velocity_restitution: bool, rolling_model: int) -> int:
 
 
 @loop_kernel
-def contact_forces(fbody, ff, ft, frm, frv, pstart, wstart, hist_dt, dt, lever_mode, rolling_model, eta_r,
-                   effective_mass, n_bodies, n_spheres, bx, bv, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat,
+def contact_forces(fbody, ff, ft, frm, frv, near, near_start, wstart, hist_dt, dt, lever_mode, rolling_model,
+                   eta_r, effective_mass, n_bodies, n_spheres, bx, bv, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat,
                    bcount, sbody, sx, srad, ppi, pj, ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat,
                    e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min):
     """Contact forces, torques and rolling torques on every body from the Verlet lists (the
     arguments of ``contact_forces_ranged``; its row pointers unused here, and nothing put aside
     in its work arrays, since every body is in the one range).
+
+    The sphere-sphere loop visits the listed pairs ``near`` (``near_start``: their row pointers,
+    the last one their number; ``simulate.neighbours.select_near_pairs``), the only ones that
+    may touch: the rest of the list ``ppi``, ``pj``, ``ph`` is not read.
 
     ``hist_dt`` is the time step used to accumulate tangential displacement (0 for a force
     evaluation that must not advance the contact history). A pair with ``e_exp`` != 0 takes
@@ -75,9 +79,10 @@ def contact_forces(fbody, ff, ft, frm, frv, pstart, wstart, hist_dt, dt, lever_m
         _count_contacts(n_bodies, bcount, sbody, sx, srad, ppi, pj, ws, wk, wkind, worig, wnorm,
                         wu, wv, whalf)
     _zero(0, n_bodies, bf, bt, brm, brv, brn)
-    pair_forces(0, ppi.shape[0], hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass, bx, bv, bw, bR,
-                binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph, e_star, g_star, damp, mu_s, mu_r,
-                log_e, e_exp, log_v_ref, v_min, bf, bt, brm, brv, 0, n_bodies, fbody, ff, ft, frm, frv)
+    pair_forces(0, near_start[near_start.shape[0] - 1], hist_dt, dt, lever_mode, rolling_model, eta_r,
+                effective_mass, bx, bv, bw, bR, binvm, binvi, bmat, bcount, sbody, sx, srad, near, ppi, pj, ph,
+                e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min, bf, bt, brm, brv, 0, n_bodies,
+                fbody, ff, ft, frm, frv)
     wall_forces(0, ws.shape[0], hist_dt, lever_mode, rolling_model, eta_r, effective_mass, bx, bv, bw, bR,
                 binvm, binvi, bmat, bcount, sbody, sx, srad, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv,
                 wmat, e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min, bf, bt, brm, brv, brn)
@@ -88,15 +93,15 @@ N_RANGES = 32
 
 
 @threaded_kernel
-def contact_forces_ranged(fbody, ff, ft, frm, frv, pstart, wstart, hist_dt, dt, lever_mode, rolling_model,
+def contact_forces_ranged(fbody, ff, ft, frm, frv, near, near_start, wstart, hist_dt, dt, lever_mode, rolling_model,
                           eta_r, effective_mass, n_bodies, n_spheres, bx, bv, bw, bR, bf, bt, brm, brv, brn, binvm,
                           binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph, ws, wk, wh, wkind, worig, wnorm,
                           wu, wv, whalf, wcv, wmat, e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref,
                           v_min):
     """``contact_forces`` on threads: the bodies split into ``N_RANGES`` runs of about equal
-    numbers of pairs, each run computing the contacts of its bodies' spheres (the first sphere
-    of each pair; the lists are in rows by sphere, ``pstart`` and ``wstart``) and summing into
-    its own bodies directly. A pair's share for a body of another run is kept aside in
+    numbers of listed pairs, each run computing the near pairs of its bodies' spheres (the first
+    sphere of each pair; the lists are in rows by sphere, ``near_start`` and ``wstart``) and
+    summing into its own bodies directly. A pair's share for a body of another run is kept aside in
     ``fbody``, ``ff``, ``ft``, ``frm``, ``frv`` (work arrays, >= the pairs) and added after, run
     by run. No two threads write the same memory, and the order of every sum is fixed by the
     lists alone: the result is the same on any number of threads.
@@ -104,6 +109,8 @@ def contact_forces_ranged(fbody, ff, ft, frm, frv, pstart, wstart, hist_dt, dt, 
     if effective_mass:
         _count_contacts(n_bodies, bcount, sbody, sx, srad, ppi, pj, ws, wk, wkind, worig, wnorm,
                         wu, wv, whalf)
+    # the runs are split by the whole list, so they do not change with the near pairs (nor the
+    # order of the sums)
     n_pairs = ppi.shape[0]
     first = np.empty(N_RANGES + 1, np.int64)     # first body of each run
     first[0] = 0
@@ -116,14 +123,14 @@ def contact_forces_ranged(fbody, ff, ft, frm, frv, pstart, wstart, hist_dt, dt, 
     k = np.empty(N_RANGES + 1, np.int64)
     q = np.empty(N_RANGES + 1, np.int64)
     for c in range(N_RANGES + 1):
-        k[c] = pstart[min(rows[c], pstart.shape[0] - 1)]   # spheres added since have no pairs
+        k[c] = near_start[min(rows[c], near_start.shape[0] - 1)]   # spheres added since have no pairs
         q[c] = wstart[min(rows[c], wstart.shape[0] - 1)]
     aside = np.zeros(N_RANGES, np.int64)
     for c in numba.prange(N_RANGES):
         _zero(first[c], first[c + 1], bf, bt, brm, brv, brn)
         aside[c] = pair_forces(k[c], k[c + 1], hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass,
-                               bx, bv, bw, bR, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph, e_star,
-                               g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min, bf, bt, brm, brv,
+                               bx, bv, bw, bR, binvm, binvi, bmat, bcount, sbody, sx, srad, near, ppi, pj, ph,
+                               e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min, bf, bt, brm, brv,
                                first[c], first[c + 1], fbody, ff, ft, frm, frv)
         wall_forces(q[c], q[c + 1], hist_dt, lever_mode, rolling_model, eta_r, effective_mass, bx, bv, bw, bR,
                     binvm, binvi, bmat, bcount, sbody, sx, srad, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf,
@@ -152,9 +159,9 @@ def _zero(b0, b1, bf, bt, brm, brv, brn):
 
 @loop_kernel
 def pair_forces(k0, k1, hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass, bx, bv, bw, bR, binvm,
-                binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph, e_star, g_star, damp, mu_s, mu_r, log_e,
+                binvi, bmat, bcount, sbody, sx, srad, near, ppi, pj, ph, e_star, g_star, damp, mu_s, mu_r, log_e,
                 e_exp, log_v_ref, v_min, bf, bt, brm, brv, b_lo, b_hi, fbody, ff, ft, frm, frv):
-    """Sphere-sphere contacts ``k0``..``k1 - 1`` of the list, added to the body sums.
+    """Sphere-sphere contacts ``near[k0]``..``near[k1 - 1]`` of the list, added to the body sums.
 
     The second body of a pair outside ``b_lo``..``b_hi - 1`` gets its share in the next row of
     ``fbody``, ``ff``, ``ft``, ``frm``, ``frv`` from row ``k0`` on instead (added later by the
@@ -162,7 +169,8 @@ def pair_forces(k0, k1, hist_dt, dt, lever_mode, rolling_model, eta_r, effective
     pw = ph.shape[1]
     store = hist_dt > 0.0
     n_aside = 0
-    for k in range(k0, k1):
+    for e in range(k0, k1):
+        k = near[e]
         i = ppi[k]
         j = pj[k]
         xi = sx[i, 0]
