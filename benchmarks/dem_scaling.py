@@ -103,6 +103,11 @@ def ratio_lines(rows: list[dict]) -> list[str]:
                                   []).append(row["fill"]["sphere_steps_per_s"] / base["fill"]["sphere_steps_per_s"])
                 ratios.setdefault(f"{row['threads']} threads / {base['threads']}: settled faster",
                                   []).append(settled(row) / settled(base))
+    return round_by_round(ratios)
+
+
+def round_by_round(ratios: dict) -> list[str]:
+    """A line per ratio: its value in each round, then (several rounds) median and range."""
     lines = []
     for name, values in ratios.items():
         each = ", ".join(f"{v:.2f}" for v in values)

@@ -33,7 +33,6 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import math
-import statistics
 import sys
 import time
 from pathlib import Path
@@ -121,13 +120,7 @@ def ratio_lines(runs: list, cores: int) -> list[str]:
                 add(f"demcal settled throughput at {n:,} spheres / at {sizes[0]:,} (one core)",
                     one[n]["demcal"]["settled"]["sphere_steps_per_s"]
                     / one[sizes[0]]["demcal"]["settled"]["sphere_steps_per_s"])
-    out = []
-    for name, values in found.items():
-        each = ", ".join(f"{v:.2f}" for v in values)
-        spread = (f"; median {statistics.median(values):.2f}, {min(values):.2f}-{max(values):.2f}"
-                  if len(values) > 1 else "")
-        out.append(f"{name}: {each}{spread}")
-    return out
+    return dem_scaling.round_by_round(found)
 
 
 def main(argv=None) -> int:
