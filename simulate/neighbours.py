@@ -336,15 +336,22 @@ def select_near_pairs(n_spheres, start, pi, pj, hist, sx, srad, margin, near, ne
     spheres may move ``NEAR_ALLOWANCE`` g (into ``near_allow``, the smallest over its pairs; from
     ``sxn``, set to the positions now) before it could touch. Until a sphere moves that far the
     loops over the near pairs give the forces of a loop over the whole list to the bit: the same
-    touching pairs in the same order.
+    touching pairs in the same order. An infinite ``margin`` takes every pair without a distance.
     """
     for s in range(n_spheres):
         near_allow[s] = np.inf
         for a in range(3):
             sxn[s, a] = sx[s, a]
+    n_rows = start.shape[0] - 1
+    if margin == np.inf:
+        # a bed filling or flowing: after every rebuild, so a pass with no arithmetic
+        for k in range(start[n_rows]):
+            near[k] = k
+        for r in range(n_rows + 1):
+            near_start[r] = start[r]
+        return start[n_rows]
     width = hist.shape[1]
     n = 0
-    n_rows = start.shape[0] - 1
     for r in range(n_rows):
         near_start[r] = n
         for k in range(start[r], start[r + 1]):
