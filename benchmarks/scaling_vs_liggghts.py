@@ -177,7 +177,8 @@ def main(argv=None) -> int:
     liggghts_version = liggghts_scaling.package_version() if use_liggghts else None
     write_json(out, {"machine": info, "versions": {**versions(), "liggghts": liggghts_version,
                                                    "mpi": liggghts_scaling.mpi_version() if use_liggghts else None},
-                     "date": stamp.isoformat(timespec="seconds"), "arguments": vars(args) | {"workdir": str(args.workdir)},
+                     "date": stamp.isoformat(timespec="seconds"),
+                     "arguments": vars(args) | {"workdir": str(args.workdir)},
                      "runs": runs, "ratios": lines})
     print(f"written: {out}")
     if args.record:

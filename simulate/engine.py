@@ -310,8 +310,8 @@ def _contacts(ranged, step, dt, settings, bodies, spheres, lists, walls, table, 
     # the first evaluation of a fresh state must not advance the contact history
     hist_dt = dt if step >= 0 else 0.0
     _wall_contact_velocities(ws, wk, sx, srad, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wspin_now, wcv)
-    all_contact_forces(ranged, aside_body, aside_f, aside_t, aside_rm, aside_rv, near, near_start, wstart, hist_dt, dt,
-                       lever_mode, rolling_model, eta_r, effective_mass, n_bodies, n_spheres, bx, bv, bw, bR,
+    all_contact_forces(ranged, aside_body, aside_f, aside_t, aside_rm, aside_rv, near, near_start, wstart, hist_dt,
+                       dt, lever_mode, rolling_model, eta_r, effective_mass, n_bodies, n_spheres, bx, bv, bw, bR,
                        bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph, ws, wk,
                        wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat, e_star, g_star, damp, mu_s, mu_r, log_e,
                        e_exp, log_v_ref, v_min)

@@ -47,8 +47,8 @@ def history_width(velocity_restitution: bool, rolling_model: int) -> int:
 
 @loop_kernel
 def contact_forces(fbody, ff, ft, frm, frv, near, near_start, wstart, hist_dt, dt, lever_mode, rolling_model,
-                   eta_r, effective_mass, n_bodies, n_spheres, bx, bv, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat,
-                   bcount, sbody, sx, srad, ppi, pj, ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat,
+                   eta_r, effective_mass, n_bodies, n_spheres, bx, bv, bw, bR, bf, bt, brm, brv, brn, binvm, binvi,
+                   bmat, bcount, sbody, sx, srad, ppi, pj, ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat,
                    e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min):
     """Contact forces, torques and rolling torques on every body from the Verlet lists (the
     arguments of ``contact_forces_ranged``; its row pointers unused here, and nothing put aside

@@ -340,16 +340,18 @@ def select_near_pairs(n_spheres, start, pi, pj, hist, sx, srad, margin, near, ne
     """
     for s in range(n_spheres):
         near_allow[s] = np.inf
-        for a in range(3):
-            sxn[s, a] = sx[s, a]
     n_rows = start.shape[0] - 1
     if margin == np.inf:
-        # a bed filling or flowing: after every rebuild, so a pass with no arithmetic
+        # a bed filling or flowing: after every rebuild, so a pass with no arithmetic (and no
+        # reference positions: nothing is left out)
         for k in range(start[n_rows]):
             near[k] = k
         for r in range(n_rows + 1):
             near_start[r] = start[r]
         return start[n_rows]
+    for s in range(n_spheres):
+        for a in range(3):
+            sxn[s, a] = sx[s, a]
     width = hist.shape[1]
     n = 0
     for r in range(n_rows):
