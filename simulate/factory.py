@@ -47,7 +47,8 @@ from demcal.simulate.integrate import matrices_from_quats, quaternions_from_unif
 from demcal.simulate.neighbours import bin_spheres, first_clear
 from demcal.simulate.walls import wall_distances, walls_near
 
-#: Draws tested per call into numpy and numba (the clumps placed do not depend on it).
+#: Draws made in a batch's first call into numpy, then twice as many each call (the clumps placed
+#: do not depend on it).
 DRAWS_AT_ONCE = 16
 
 
@@ -178,10 +179,21 @@ class ParticleFactory:
         room = int(keep.sum()) + (self.n_due(sim.time) - self.inserted) * max(
             sim.templates[k].n_spheres for k in self.templates)
         nearby = _Nearby(x[keep], r[keep], room, self.region_lo - margin, self.region_hi + margin, margin)
-        while self.inserted < self.n_due(sim.time):
-            if not self._insert_one(sim, nearby, gap):
-                break
-            placed += 1
+        draws = None
+        try:
+            while self.inserted < self.n_due(sim.time):
+                if draws is not None and len(self.templates) > 1:
+                    draws.release()     # the next template is drawn from the generator
+                    draws = None
+                template = self._next_template()
+                if draws is None:
+                    draws = _Draws(self.rng, sim.templates[template], self.region_lo, self.region_hi)
+                if not self._insert_one(sim, nearby, gap, template, draws):
+                    break
+                placed += 1
+        finally:
+            if draws is not None:
+                draws.release()
         return placed
 
     def _next_template(self) -> int:
@@ -192,47 +204,34 @@ class ParticleFactory:
             self._pending = self.templates[int(self.rng.choice(len(self.templates), p=self.probabilities))]
         return self._pending
 
-    def _insert_one(self, sim, nearby: "_Nearby", gap: float) -> bool:
-        """Place the next clump at least ``gap`` [m] clear of the spheres ``nearby`` (the placed
-        clump's spheres are added to them).
-
-        Each draw takes six numbers from the generator: three for the orientation, three for
-        the position. Draws are made ``DRAWS_AT_ONCE`` at a time and tested in order; the
-        generator is then set back to just after the draw placed, so the clumps, and the
-        numbers left for the next, are those of one draw at a time."""
-        template = self._next_template()
+    def _insert_one(self, sim, nearby: "_Nearby", gap: float, template: int, draws: "_Draws") -> bool:
+        """Place the next clump, of ``template``, at the first of its ``draws`` at least ``gap``
+        [m] clear of the spheres ``nearby`` and of the walls (the placed clump's spheres are
+        added to them), within ``max_attempts`` draws."""
         tpl = sim.templates[template]
-        packed = sim._w
-        offsets = tpl.centres - tpl.centre_of_mass
-        radii = tpl.radii[:, None]
-        tried = 0
-        while tried < self.max_attempts:
-            n_draws = min(DRAWS_AT_ONCE, self.max_attempts - tried)
-            state = self.rng.bit_generator.state
-            u = self.rng.random((n_draws, 6))
-            q = quaternions_from_uniforms(u[:, :3])
-            pos = self.region_lo + u[:, 3:] * (self.region_hi - self.region_lo)
-            centres = pos[:, None, :] + offsets @ matrices_from_quats(q).transpose(0, 2, 1)
-            inside = ~(np.any(centres - radii < self.region_lo, axis=(1, 2))
-                       | np.any(centres + radii > self.region_hi, axis=(1, 2)))
-            m = -1
-            while True:
-                m = nearby.first_clear(m + 1, pos, tpl.bounding_radius, centres, tpl.radii, gap, inside)
-                if m < 0 or not _touches_a_wall(packed, pos[m], tpl.bounding_radius, centres[m], radii):
-                    break
+        first = draws.taken
+        limit = first + self.max_attempts
+        m = first
+        while m < limit:
+            end = draws.made_at_least(m + 1, limit)
+            m = nearby.first_clear(m, draws.pos[:end], tpl.bounding_radius, draws.centres[:end], tpl.radii, gap,
+                                   draws.inside[:end])
             if m < 0:
-                self.failed_attempts += n_draws
-                tried += n_draws
-                continue
-            self.failed_attempts += m
-            self.rng.bit_generator.state = state
-            self.rng.random((m + 1, 6))     # the generator just after the draw placed
-            body = sim.add_clump(template, pos[m], q[m], velocity=self.velocity, material=self.material)
-            nearby.add(centres[m], tpl.radii)
-            self.bodies.append(body)
-            self.body_templates.append(template)
-            self._pending = None
-            return True
+                m = end
+            elif _touches_a_wall(sim._w, draws.pos[m], tpl.bounding_radius, draws.centres[m], draws.radii):
+                m += 1
+            else:
+                self.failed_attempts += m - first
+                draws.taken = m + 1
+                body = sim.add_clump(template, draws.pos[m], draws.q[m], velocity=self.velocity,
+                                     material=self.material)
+                nearby.add(draws.centres[m], tpl.radii)
+                self.bodies.append(body)
+                self.body_templates.append(template)
+                self._pending = None
+                return True
+        self.failed_attempts += limit - first
+        draws.taken = limit
         return False
 
     def to_dict(self) -> dict:
@@ -242,6 +241,50 @@ class ParticleFactory:
                 "start_time": self.start_time, "end_time": self.end_time, "material": self.material,
                 "velocity": self.velocity.tolist(), "batch_steps": self.batch_steps, "inserted": self.inserted,
                 "failed_attempts": self.failed_attempts}
+
+
+class _Draws:
+    """Candidate placements of one template, drawn ahead from a factory's generator and handed
+    out in order (``taken`` of them so far).
+
+    Each draw takes six numbers from the generator: three for the orientation, three for the
+    position. Draws are made in blocks (``DRAWS_AT_ONCE``, doubling), a block a call into numpy;
+    ``release`` sets the generator back to just after the last draw taken, so the clumps placed,
+    and the numbers left for the next use of the generator, are those of one draw at a time."""
+
+    def __init__(self, rng, tpl, lo, hi):
+        self.rng, self.lo, self.hi = rng, lo, hi
+        self.offsets = tpl.centres - tpl.centre_of_mass
+        self.radii = tpl.radii[:, None]
+        self.state = rng.bit_generator.state
+        self.taken = 0
+        self.q = np.empty((0, 4))
+        self.pos = np.empty((0, 3))
+        self.centres = np.empty((0,) + self.offsets.shape)
+        self.inside = np.empty(0, bool)
+
+    def made_at_least(self, n: int, limit: int) -> int:
+        """Make draws until there are ``n`` (a block at a time, never beyond ``limit``); returns
+        how many there are, at most ``limit``."""
+        while len(self.q) < n:
+            block = min(max(DRAWS_AT_ONCE, len(self.q)), limit - len(self.q))
+            u = self.rng.random((block, 6))
+            q = quaternions_from_uniforms(u[:, :3])
+            pos = self.lo + u[:, 3:] * (self.hi - self.lo)
+            centres = pos[:, None, :] + self.offsets @ matrices_from_quats(q).transpose(0, 2, 1)
+            inside = ~(np.any(centres - self.radii < self.lo, axis=(1, 2))
+                       | np.any(centres + self.radii > self.hi, axis=(1, 2)))
+            self.q = np.concatenate([self.q, q])
+            self.pos = np.concatenate([self.pos, pos])
+            self.centres = np.concatenate([self.centres, centres])
+            self.inside = np.concatenate([self.inside, inside])
+        return min(len(self.q), limit)
+
+    def release(self) -> None:
+        """Set the generator back to just after the last draw taken."""
+        if self.taken < len(self.q):
+            self.rng.bit_generator.state = self.state
+            self.rng.random((self.taken, 6))
 
 
 def _touches_a_wall(packed: dict, centre_of_mass, reach: float, centres, radii) -> bool:

@@ -88,8 +88,9 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
     the cell-sorted spheres (five runs cover the own cell and the 13 forward neighbours).
 
     The per-sphere passes run on numba's threads; each sphere's pairs go to slots of their own
-    and are then joined in sphere order, and the gaps are minima (exact in any order), so the
-    lists and allowances are the same on any number of threads.
+    and are then joined into rows by blocks of spheres, each block's pairs placed after those of
+    the blocks before it, as one pass in order would place them; the gaps are minima (exact in
+    any order). So the lists and allowances are the same on any number of threads.
 
     Parameters
     ----------
@@ -100,7 +101,8 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
     allow : float64 (>= n_spheres,)
         Filled with each active sphere's allowance [m] (at least skin / 2).
     pool_size : int
-        Threads in numba's pool (``numba.config.NUMBA_NUM_THREADS``): a bound on thread ids.
+        Threads in numba's pool (``numba.config.NUMBA_NUM_THREADS``): a bound on thread ids, and
+        the blocks of the joining (at most ``JOIN_BLOCKS_MAX``).
 
     Returns
     -------
@@ -179,9 +181,16 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
         cs[p] = scell[s]
         gap[p] = allow[s] - skin
     # a sphere with no other sphere in the shell of cells just beyond its 27 has the bound of
-    # the 125 (a sphere falling through empty space); counted by rows of contiguous cells
+    # the 125 (a sphere falling through empty space); counted by rows of contiguous cells, once
+    # per occupied cell (at its first sphere), unless the shell may hold the sphere's own clump
+    shell = np.empty(m, np.int8)
     for p in numba.prange(m):
-        if _shell_is_clear(p, cs, bs, cell_start, nx, ny, nz):
+        if p == cell_start[cs[p]]:
+            shell[p] = _shell_of_cell(cs[p], cell_start, nx, ny, nz)
+    for p in numba.prange(m):
+        held = shell[cell_start[cs[p]]]
+        if held == SHELL_CLEAR or (held == SHELL_OWN_CLUMP_ONLY
+                                   and _shell_holds_own_clump_only(p, cs, bs, cell_start, nx, ny, nz)):
             gap[p] = far[order[p]] - skin
     row = np.empty(5, np.int64)  # first cell of each forward stencil row, relative to the own cell
     row[0] = 0
@@ -247,28 +256,26 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
             least = min(least, gaps[t, p])
         allow[order[p]] = max(0.5 * skin, 0.5 * (least + skin))
 
-    # back to sphere ids, ordered by first sphere (counting sort) into compressed rows
-    start = np.zeros(n_spheres + 1, np.int64)
+    # back to sphere ids, ordered by first sphere (counting sort) into compressed rows; each
+    # block of cell-ordered spheres counts and places its pairs apart, blocks in order, so a
+    # row holds its pairs in the order of a single pass on any number of threads
+    n_blocks = min(pool_size, JOIN_BLOCKS_MAX, max(m, 1))
+    place = np.zeros((n_blocks, n_spheres), np.int64)
+    for blk in numba.prange(n_blocks):
+        _count_rows(blk * m // n_blocks, (blk + 1) * m // n_blocks, order, slot, found, tb, place[blk])
+    start = np.empty(n_spheres + 1, np.int64)
     n_pairs = 0
-    for p in range(m):
-        a = order[p]
-        for q in range(slot[p], slot[p] + found[p]):
-            b = order[tb[q]]
-            start[min(a, b) + 1] += 1
-        n_pairs += found[p]
     for s in range(n_spheres):
-        start[s + 1] += start[s]
-    pos = start[:n_spheres].copy()
+        start[s] = n_pairs
+        for blk in range(n_blocks):
+            k = place[blk, s]
+            place[blk, s] = n_pairs     # the block's first place in row s
+            n_pairs += k
+    start[n_spheres] = n_pairs
     pi = np.empty(n_pairs, np.int64)
     pj = np.empty(n_pairs, np.int64)
-    for p in range(m):
-        a = order[p]
-        for q in range(slot[p], slot[p] + found[p]):
-            b = order[tb[q]]
-            lo_ = min(a, b)
-            pi[pos[lo_]] = lo_
-            pj[pos[lo_]] = max(a, b)
-            pos[lo_] += 1
+    for blk in numba.prange(n_blocks):
+        _place_rows(blk * m // n_blocks, (blk + 1) * m // n_blocks, order, slot, found, tb, place[blk], pi, pj)
 
     width = old_hist.shape[1]
     hist = np.zeros((n_pairs, width))
@@ -286,11 +293,44 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
     return start, pi, pj, hist
 
 
+#: Most blocks the joining of a rebuild's pairs is split into (each holds a row count per sphere).
+JOIN_BLOCKS_MAX = 8
+
+
 @loop_kernel
-def _shell_is_clear(p, cs, bs, cell_start, nx, ny, nz):
-    """Whether the shell of cells just beyond the 27 around sphere ``p`` (cell order) holds no
-    sphere but of its own clump."""
-    c = cs[p]
+def _count_rows(p0, p1, order, slot, found, tb, count):
+    """Pairs found from cell-ordered spheres ``p0``..``p1 - 1`` (``build_pair_list``), counted
+    into ``count`` by row (their first sphere)."""
+    for p in range(p0, p1):
+        a = order[p]
+        for q in range(slot[p], slot[p] + found[p]):
+            count[min(a, order[tb[q]])] += 1
+
+
+@loop_kernel
+def _place_rows(p0, p1, order, slot, found, tb, place, pi, pj):
+    """Those pairs into ``pi``, ``pj`` at ``place`` (by row, the next free place of this block)."""
+    for p in range(p0, p1):
+        a = order[p]
+        for q in range(slot[p], slot[p] + found[p]):
+            b = order[tb[q]]
+            row = min(a, b)
+            k = place[row]
+            pi[k] = row
+            pj[k] = max(a, b)
+            place[row] = k + 1
+
+
+#: What the shell of cells just beyond the 27 around a cell holds (``_shell_of_cell``).
+SHELL_CLEAR, SHELL_OCCUPIED, SHELL_OWN_CLUMP_ONLY = 1, 0, -1
+
+
+@loop_kernel
+def _shell_of_cell(c, cell_start, nx, ny, nz):
+    """What the shell of cells just beyond the 27 around cell ``c`` holds: no sphere
+    (``SHELL_CLEAR``); else, with more than 64 spheres in the 125 cells, ``SHELL_OCCUPIED``; else
+    ``SHELL_OWN_CLUMP_ONLY`` (they may all be of the clump of a sphere in ``c``: one sphere at a
+    time, ``_shell_holds_own_clump_only``)."""
     cz = c // (nx * ny)
     cy = (c // nx) % ny
     cx = c % nx
@@ -306,10 +346,20 @@ def _shell_is_clear(p, cs, bs, cell_start, nx, ny, nz):
                 if abs(z - cz) <= 1 and abs(y - cy) <= 1:
                     inner += cell_start[base + cx + 2] - cell_start[base + cx - 1]
     if outer == inner:
-        return True
+        return SHELL_CLEAR
     if outer > 64:
-        return False
-    # the shell may hold only the sphere's own clump
+        return SHELL_OCCUPIED
+    return SHELL_OWN_CLUMP_ONLY
+
+
+@loop_kernel
+def _shell_holds_own_clump_only(p, cs, bs, cell_start, nx, ny, nz):
+    """Whether every sphere in the shell of cells just beyond the 27 around sphere ``p`` (cell
+    order) is of its own clump."""
+    c = cs[p]
+    cz = c // (nx * ny)
+    cy = (c // nx) % ny
+    cx = c % nx
     for z in range(max(cz - 2, 0), min(cz + 3, nz)):
         for y in range(max(cy - 2, 0), min(cy + 3, ny)):
             base = (z * ny + y) * nx

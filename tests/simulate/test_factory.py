@@ -69,6 +69,26 @@ def test_full_region_does_not_hang():
     assert factory.failed_attempts > 0
 
 
+@pytest.mark.parametrize("crowded", [False, True])
+def test_the_generator_is_left_just_after_the_last_draw_used(crowded):
+    # one template: a placed clump used its rejected draws and its own, a clump that found no
+    # room max_attempts draws, six numbers each; draws made ahead are given back, none used twice
+    if crowded:
+        sim = simulation(DEMParameters(), dt=7.43678e-5)
+        factory = ParticleFactory(sim.add_template(DEMParameters().template()), 10, (0.0, 0.0, 0.0),
+                                  (0.03, 0.03, 0.03), seed=4, end_time=0.0, max_attempts=300)
+        sim.add_factory(factory)
+        sim.run(n_steps=3)
+        assert 1 <= factory.inserted < 10 and factory.failed_attempts > 300
+    else:
+        sim, factory = _sim(60, seed=4, start=0.0, end=0.05)
+        sim.run(duration=0.06)
+        assert factory.inserted == 60 and factory.failed_attempts > 0
+    ref = np.random.default_rng(4)
+    ref.random((factory.failed_attempts + factory.inserted, 6))
+    assert factory.rng.random() == ref.random()
+
+
 def test_bad_factory_arguments():
     with pytest.raises(InputError, match="seed"):
         ParticleFactory(0, 5, LO, HI, seed=1.5)
