@@ -73,8 +73,8 @@ from benchmarks.repose_vs_liggghts import machine, versions  # noqa: E402
 from demcal.errors import InputError, SimulationError  # noqa: E402
 from demcal.jsonio import write_json  # noqa: E402
 from demcal.simulate.factory import ParticleFactory  # noqa: E402
-from demcal.simulate.liggghts.deck import LOG_NAME, ReposeCase, write_deck  # noqa: E402
-from demcal.simulate.liggghts.run import (SCREEN_NAME, LiggghtsUnavailable, find_liggghts,  # noqa: E402
+from demcal.simulate.liggghts.deck import ReposeCase, write_deck  # noqa: E402
+from demcal.simulate.liggghts.run import (LiggghtsUnavailable, find_liggghts, liggghts_command,  # noqa: E402
                                           package_version, parse_log)
 from demcal.simulate.scenes import build_paper_repose_case  # noqa: E402
 
@@ -201,7 +201,7 @@ def run_case(n_spheres: int, ranks: int, args, workdir: Path) -> dict:
     deck.script.write_text(text.replace(anchor, "\nprocessors      * 1 1" + anchor))
     deck.log_file.unlink(missing_ok=True)
 
-    cmd = [*mpi_prefix(ranks), exe, "-in", deck.script.name, "-log", LOG_NAME, "-screen", SCREEN_NAME]
+    cmd = [*mpi_prefix(ranks), *liggghts_command(exe, deck)]
     usage0, t0 = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
     proc = subprocess.run(cmd, cwd=workdir, env=dict(os.environ, OMP_NUM_THREADS="1"),
                           capture_output=True, text=True)

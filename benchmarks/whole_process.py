@@ -68,8 +68,8 @@ def main(argv=None) -> int:
     if args.rounds < 1:
         parser.error(f"--rounds must be >= 1, got {args.rounds}")
 
-    from demcal.simulate.liggghts.deck import LOG_NAME, write_deck
-    from demcal.simulate.liggghts.run import SCREEN_NAME, find_liggghts
+    from demcal.simulate.liggghts.deck import write_deck
+    from demcal.simulate.liggghts.run import find_liggghts, liggghts_command
 
     exe = find_liggghts(None)
     if exe is None:
@@ -83,7 +83,7 @@ def main(argv=None) -> int:
                                                              duration=args.duration)]
     with tempfile.TemporaryDirectory(prefix="demcal-whole-process-") as tmp:
         deck = write_deck(Path(tmp), args.seed, args.duration)
-        liggghts_cmd = [exe, "-in", deck.script.name, "-log", LOG_NAME, "-screen", SCREEN_NAME]
+        liggghts_cmd = liggghts_command(exe, deck)
         for k in range(args.rounds):
             demcal_s = timed(demcal_cmd, ROOT, env)
             liggghts_s = timed(liggghts_cmd, deck.workdir, env)

@@ -135,6 +135,14 @@ def read_positions(path):
             np.ascontiguousarray(data[:, 2:5]), np.ascontiguousarray(data[:, 5]))
 
 
+def liggghts_command(exe: str, deck) -> list[str]:
+    """The command line that runs ``deck`` (``write_deck``) in its folder, its log and screen
+    output to files there."""
+    # "-screen none" crashes LIGGGHTS 3.8 (the STL reader prints to a NULL screen), so the
+    # screen goes to a file.
+    return [exe, "-in", deck.script.name, "-log", LOG_NAME, "-screen", SCREEN_NAME]
+
+
 def run_liggghts(seed: int, workdir, duration: float = 10.0, case: ReposeCase | None = None,
                  binary=None, nice: int = 10, timeout: float | None = None,
                  dump_interval: float | None = None) -> dict:
@@ -188,9 +196,7 @@ def run_liggghts(seed: int, workdir, duration: float = 10.0, case: ReposeCase | 
     for stale in (deck.positions_file, deck.log_file):
         stale.unlink(missing_ok=True)
 
-    # "-screen none" crashes LIGGGHTS 3.8 (the STL reader prints to a NULL screen), so the
-    # screen goes to a file.
-    cmd = [exe, "-in", deck.script.name, "-log", LOG_NAME, "-screen", SCREEN_NAME]
+    cmd = liggghts_command(exe, deck)
     env = dict(os.environ, OMP_NUM_THREADS="1")
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
