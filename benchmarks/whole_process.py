@@ -3,18 +3,22 @@ outside, in turn.
 
     python -m benchmarks.whole_process                 # 4 pairs, seed 1, 10 s simulated
     python -m benchmarks.whole_process --rounds 6 --seed 2
+    python -m benchmarks.whole_process --fresh         # each demcal process compiles its kernels
 
 ``benchmarks/repose_vs_liggghts.py`` compares the time-step loops; this times what a user
 waits for. demcal's process: the interpreter's start, the imports, the kernels loaded from
 numba's cache (run ``demcal compile`` first, or the first process compiles them), the case set
-up, filled, lifted and run to its end, and the heap read (``run_demcal``). LIGGGHTS' process:
+up, filled, lifted and run to its end, and the heap read (``run_demcal``). With ``--fresh``
+each demcal process starts from an empty cache of its own (``NUMBA_CACHE_DIR``), as the first
+command of a fresh environment: it compiles the kernels it runs. LIGGGHTS' process:
 ``liggghts -in in.repose`` on the same deck (``simulate.liggghts.deck.write_deck``), to its
 exit. One core each (``NUMBA_NUM_THREADS=1``, ``OMP_NUM_THREADS=1``), never both at once.
 The two processes of a round run one after the other and their ratio is taken round by round
 (a machine whose speed drifts moves both of a pair); the summary is the median and range of
 those ratios.
 
-Output: ``benchmarks/results/whole_process_<UTC time>.json``.
+Output: ``benchmarks/results/whole_process_<UTC time>.json`` (``whole_process_fresh_...`` with
+``--fresh``).
 """
 
 from __future__ import annotations
@@ -63,6 +67,8 @@ def main(argv=None) -> int:
     parser.add_argument("--rounds", type=int, default=4, help="pairs of processes (default 4)")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--duration", type=float, default=10.0, help="simulated time [s] (default 10)")
+    parser.add_argument("--fresh", action="store_true",
+                        help="each demcal process starts from an empty numba cache (it compiles its kernels)")
     parser.add_argument("--results", type=Path, default=HERE / "results", help="folder of the JSON output")
     args = parser.parse_args(argv)
     if args.rounds < 1:
@@ -77,7 +83,7 @@ def main(argv=None) -> int:
     env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1")
     now = dt.datetime.now(dt.timezone.utc)
     doc = {"date": now.isoformat(timespec="seconds"), "seed": args.seed, "duration": args.duration,
-           "machine": machine(), "versions": versions(), "rounds": []}
+           "fresh_numba_cache": args.fresh, "machine": machine(), "versions": versions(), "rounds": []}
     print(f"machine: {doc['machine']['cpu']}, {doc['machine']['cores']} cores", flush=True)
     demcal_cmd = [sys.executable, "-c", DEMCAL_SCRIPT.format(root=str(ROOT), seed=args.seed,
                                                              duration=args.duration)]
@@ -85,7 +91,8 @@ def main(argv=None) -> int:
         deck = write_deck(Path(tmp), args.seed, args.duration)
         liggghts_cmd = liggghts_command(exe, deck)
         for k in range(args.rounds):
-            demcal_s = timed(demcal_cmd, ROOT, env)
+            cache = {"NUMBA_CACHE_DIR": str(Path(tmp) / f"numba-cache-{k}")} if args.fresh else {}
+            demcal_s = timed(demcal_cmd, ROOT, dict(env, **cache))
             liggghts_s = timed(liggghts_cmd, deck.workdir, env)
             doc["rounds"].append({"demcal_s": demcal_s, "liggghts_s": liggghts_s, "ratio": liggghts_s / demcal_s})
             print(f"round {k + 1}: demcal {demcal_s:.1f} s, LIGGGHTS {liggghts_s:.1f} s, "
@@ -95,10 +102,12 @@ def main(argv=None) -> int:
                       "median_demcal_s": statistics.median(r["demcal_s"] for r in doc["rounds"]),
                       "median_liggghts_s": statistics.median(r["liggghts_s"] for r in doc["rounds"])}
     s = doc["summary"]
-    print(f"whole processes, LIGGGHTS / demcal: median {s['median_ratio']:.2f} ({s['min_ratio']:.2f}-"
+    fresh = " (demcal from an empty cache)" if args.fresh else ""
+    print(f"whole processes{fresh}, LIGGGHTS / demcal: median {s['median_ratio']:.2f} ({s['min_ratio']:.2f}-"
           f"{s['max_ratio']:.2f}); demcal {s['median_demcal_s']:.1f} s, LIGGGHTS {s['median_liggghts_s']:.1f} s")
     args.results.mkdir(parents=True, exist_ok=True)
-    out = args.results / f"whole_process_{now.strftime('%Y%m%dT%H%M%SZ')}.json"
+    kind = "whole_process_fresh" if args.fresh else "whole_process"
+    out = args.results / f"{kind}_{now.strftime('%Y%m%dT%H%M%SZ')}.json"
     write_json(out, doc)
     print(f"written: {out}")
     return 0

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import hashlib
 import inspect
+import types as types_module
 from pathlib import Path
 
 import numba
@@ -103,6 +104,23 @@ def threaded_kernel(fn):
 def evaluator(fn):
     """Compile ``fn`` with the shared flags, inlined at numba level into its callers."""
     return numba.njit(**INLINE_FLAGS)(fn)
+
+
+def serial_twin(threaded):
+    """A kernel of the same source as the ``threaded_kernel`` ``threaded``, compiled without
+    threads: its ``numba.prange`` loops run as plain loops (``numba.get_thread_id()`` is 0), and
+    it skips the parallel passes' compile time (the list rebuild compiles in a third of it).
+
+    The twin is named ``<name>_serial``: numba keys a function's cached machine code by its name,
+    bytecode and argument types, not by its compile flags, so under the same name the two
+    variants would load each other's code from the cache."""
+    fn = threaded.py_func
+    twin = types_module.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + "_serial", fn.__defaults__,
+                                     fn.__closure__)
+    twin.__qualname__ = fn.__qualname__ + "_serial"
+    twin.__doc__ = fn.__doc__
+    twin.__module__ = fn.__module__
+    return kernel(twin)
 
 
 def serial_or_threaded(serial, threaded):

@@ -101,11 +101,11 @@ from demcal.simulate.clump import ClumpTemplate
 from demcal.simulate.contact.rolling import kick_mode, lever_index
 from demcal.simulate.forces import (HIST_IMPACT_SPEED, HIST_ROLLING, contact_forces, contact_forces_ranged,
                                     history_width, odd_history_columns)
-from demcal.simulate.integrate import (drift, half_kick, matrix_from_quat, quat_from_matrix, quat_multiply,
-                                       refresh_rotation)
+from demcal.simulate.integrate import (drift, half_kick, matrices_from_quats, quat_from_matrix,
+                                       quat_multiply, refresh_rotation)
 from demcal.simulate.materials import MaterialTable
-from demcal.simulate.neighbours import (admit_spheres, ascending_pairs, build_pair_list, build_wall_list,
-                                        grid_shape, morton_keys, padded_cell_count, renumber_pair_list,
+from demcal.simulate.neighbours import (admit_spheres, ascending_pairs, build_wall_list, grid_shape, morton_keys,
+                                        padded_cell_count, rebuild_pair_list, renumber_pair_list,
                                         renumber_wall_list, select_near_pairs)
 from demcal.simulate.threads import THREADS_MIN_SPHERES, threads_per_run
 from demcal.simulate.timestep import DEFAULT_MAX_FRACTION, check_time_step, rayleigh_time
@@ -425,9 +425,9 @@ def _advance(ranged, n_steps, t, dt, settings, bodies, spheres, lists, walls, ta
         if step >= n_steps:
             break
         if need_rebuild or pairs_stale:
-            pstart, ppi, pj, ph = build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo,
-                                                  inv_cell, dims, cell_start, pstart, pj, ph, sallow,
-                                                  pool_size)
+            pstart, ppi, pj, ph = rebuild_pair_list(ranged, n_spheres, sx, srad, sbody, bactive, skin, lo,
+                                                    inv_cell, dims, cell_start, pstart, pj, ph, sallow,
+                                                    pool_size if ranged else 1)
             _copy_rows(sx, sx0, n_spheres)
             n_rebuilds += 1
             near = np.empty(ppi.shape[0], np.int64)
@@ -796,61 +796,89 @@ class Simulation:
         ``position`` is its centre of mass [m]; ``orientation`` a quaternion (w, x, y, z)
         rotating the template frame into the world; ``angular_velocity`` [rad/s] world frame.
         """
-        if not 0 <= int(template) < len(self.templates):
-            raise InputError(f"unknown template id {template!r}; {len(self.templates)} defined")
-        tpl = self.templates[int(template)]
+        return int(self.add_clumps([template], [position], [orientation], velocities=[velocity],
+                                   angular_velocities=[angular_velocity], material=material)[0])
+
+    def add_clumps(self, templates, positions, orientations, *, velocities=(0.0, 0.0, 0.0),
+                   angular_velocities=(0.0, 0.0, 0.0), material: str = "particle") -> np.ndarray:
+        """Add clumps at once, row by row as ``add_clump`` would add them one at a time (the same
+        body ids, sphere rows and bits); returns their body ids.
+
+        ``templates`` (n,), ``positions`` (n, 3), ``orientations`` (n, 4); ``velocities`` and
+        ``angular_velocities`` one 3-vector for all or (n, 3). A factory's batch of clumps costs
+        one pass of numpy operations instead of one per clump.
+        """
+        ids = np.asarray(templates).reshape(-1)
+        n = ids.size
+        if n == 0:
+            return np.zeros(0, np.int64)
+        if not np.issubdtype(ids.dtype, np.integer):
+            raise InputError(f"template ids must be integers, got {ids.tolist()!r}")
+        unknown = ids[(ids < 0) | (ids >= len(self.templates))]
+        if unknown.size:
+            raise InputError(f"unknown template id {int(unknown[0])!r}; {len(self.templates)} defined")
         mat = self.materials.index(material)
-        q_user = np.asarray(orientation, dtype=float).reshape(4)
-        norm = np.linalg.norm(q_user)
-        if not (np.isfinite(norm) and norm > 0):
-            raise InputError(f"orientation must be a non-zero quaternion (w, x, y, z), got {orientation!r}")
-        pos = np.asarray(position, dtype=float).reshape(3)
-        vel = np.asarray(velocity, dtype=float).reshape(3)
-        omega = np.asarray(angular_velocity, dtype=float).reshape(3)
-        for name, v in (("position", pos), ("velocity", vel), ("angular_velocity", omega)):
-            if not np.all(np.isfinite(v)):
-                raise InputError(f"{name} must be finite, got {v.tolist()}")
-        q_body = quat_multiply(q_user / norm, self._template_quat[int(template)])
-        R = matrix_from_quat(q_body)
-        b = self.n_bodies
-        s0 = self.n_spheres
-        ns = tpl.n_spheres
-        self._reserve(b + 1, s0 + ns)
+        fields = {}
+        for name, value, width in (("orientation", orientations, 4), ("position", positions, 3),
+                                   ("velocity", velocities, 3), ("angular_velocity", angular_velocities, 3)):
+            a = np.asarray(value, dtype=float)
+            try:
+                a = np.broadcast_to(a, (n, width)) if a.ndim == 1 else a.reshape(n, width)
+            except ValueError:
+                raise InputError(f"{name} must be {width} numbers per clump ({n} clumps), got shape "
+                                 f"{a.shape}") from None
+            fields[name] = a
+        q_user, pos, vel, omega = (fields[k] for k in ("orientation", "position", "velocity", "angular_velocity"))
+        q_user = np.ascontiguousarray(q_user)   # each row's norm as numpy.linalg.norm takes it
+        norm = np.sqrt(np.array([row.dot(row) for row in q_user]))
+        bad = ~(np.isfinite(norm) & (norm > 0))
+        if bad.any():
+            raise InputError(f"orientation must be a non-zero quaternion (w, x, y, z), got "
+                             f"{q_user[np.argmax(bad)].tolist()}")
+        for name in ("position", "velocity", "angular_velocity"):
+            finite = np.all(np.isfinite(fields[name]), axis=1)
+            if not finite.all():
+                raise InputError(f"{name} must be finite, got {fields[name][np.argmin(finite)].tolist()}")
+        q_body = quat_multiply((q_user / norm[:, None]).T, np.array([self._template_quat[t] for t in ids]).T).T
+        R = matrices_from_quats(q_body)
+        spheres = np.array([self.templates[t].n_spheres for t in ids], dtype=np.int64)
+        b0, s0 = self.n_bodies, self.n_spheres
+        first = s0 + np.concatenate([[0], np.cumsum(spheres)])    # each clump's first sphere row
+        s1 = int(first[-1])
+        self._reserve(b0 + n, s1)
         B, S = self._b, self._s
-        B["bx"][b] = pos
-        B["bv"][b] = vel
-        B["bq"][b] = q_body
-        B["bR"][b] = R
-        inertia_world = R @ np.diag(tpl.principal_moments) @ R.T
-        B["bL"][b] = inertia_world @ omega
-        B["bw"][b] = omega
-        for key in ("bf", "bt", "brv"):
-            B[key][b] = 0.0
-        B["brm"][b] = 0.0
-        B["bmass"][b] = tpl.mass
-        B["binvm"][b] = 1.0 / tpl.mass
-        B["bI"][b] = tpl.principal_moments
-        B["binvi"][b] = 1.0 / tpl.principal_moments
-        B["bmat"][b] = mat
-        B["bactive"][b] = True
-        B["btemplate"][b] = int(template)
-        B["bid"][b] = b                      # a new body and its spheres take the last rows
-        self._body_row[b] = b
-        S["sid"][s0:s0 + ns] = np.arange(s0, s0 + ns)
-        self._sphere_row[s0:s0 + ns] = np.arange(s0, s0 + ns)
-        S["sbody"][s0:s0 + ns] = b
-        S["soff"][s0:s0 + ns] = tpl.offsets
-        S["srad"][s0:s0 + ns] = tpl.radii
-        S["sx"][s0:s0 + ns] = pos + tpl.offsets @ R.T
-        S["sx0"][s0:s0 + ns] = S["sx"][s0:s0 + ns]
-        S["sxw"][s0:s0 + ns] = S["sx"][s0:s0 + ns]
-        self.n_bodies = b + 1
-        self.n_spheres = s0 + ns
+        new_bodies, new_spheres = slice(b0, b0 + n), slice(s0, s1)   # they take the last rows
+        bodies = np.arange(b0, b0 + n)
+        for key, value in (("bx", pos), ("bv", vel), ("bq", q_body), ("bR", R), ("bw", omega), ("bf", 0.0),
+                           ("bt", 0.0), ("brv", 0.0), ("brm", 0.0), ("bmat", mat), ("bactive", True),
+                           ("btemplate", ids), ("bid", bodies)):
+            B[key][new_bodies] = value
+        self._body_row[new_bodies] = bodies
+        S["sid"][new_spheres] = self._sphere_row[new_spheres] = np.arange(s0, s1)
+        S["sbody"][new_spheres] = np.repeat(bodies, spheres)
+        for t in np.unique(ids):
+            tpl = self.templates[t]
+            of = np.flatnonzero(ids == t)
+            B["bmass"][b0 + of] = tpl.mass
+            B["binvm"][b0 + of] = 1.0 / tpl.mass
+            B["bI"][b0 + of] = tpl.principal_moments
+            B["binvi"][b0 + of] = 1.0 / tpl.principal_moments
+            R_t = R[of]
+            inertia_world = R_t @ np.diag(tpl.principal_moments) @ R_t.transpose(0, 2, 1)
+            B["bL"][b0 + of] = (inertia_world @ omega[of][:, :, None])[:, :, 0]
+            rows = (first[of][:, None] + np.arange(tpl.n_spheres)).reshape(-1)
+            S["soff"][rows] = np.tile(tpl.offsets, (of.size, 1))
+            S["srad"][rows] = np.tile(tpl.radii, of.size)
+            S["sx"][rows] = (pos[of][:, None, :] + tpl.offsets @ R_t.transpose(0, 2, 1)).reshape(-1, 3)
+        S["sx0"][new_spheres] = S["sx"][new_spheres]
+        S["sxw"][new_spheres] = S["sx"][new_spheres]
+        self.n_bodies = b0 + n
+        self.n_spheres = s1
         # no rebuild: the next step admits the new spheres into the lists (``_advance``)
         if mat not in self._materials_checked:   # the pairs only grow: a material checked stays so
             self._check_pairs_defined()
             self._materials_checked.add(mat)
-        return b
+        return bodies
 
     # ---------------------------------------------------------------- stability
     def rayleigh_time(self) -> float:

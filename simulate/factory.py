@@ -164,7 +164,6 @@ class ParticleFactory:
 
     def insert_due(self, sim) -> int:
         """Insert the clumps due at ``sim.time``; returns how many were placed."""
-        placed = 0
         if self.inserted == 0 and self.n_total and not self.bodies:
             sim.reserve(sim.n_bodies + self.n_total)
         if self.inserted >= self.n_due(sim.time):
@@ -180,21 +179,30 @@ class ParticleFactory:
             sim.templates[k].n_spheres for k in self.templates)
         nearby = _Nearby(x[keep], r[keep], room, self.region_lo - margin, self.region_hi + margin, margin)
         draws = None
+        due = self.n_due(sim.time) - self.inserted
+        templates, positions, orientations = [], [], []   # the batch's clumps, added at once
         try:
-            while self.inserted < self.n_due(sim.time):
+            while len(templates) < due:
                 if draws is not None and len(self.templates) > 1:
                     draws.release()     # the next template is drawn from the generator
                     draws = None
                 template = self._next_template()
                 if draws is None:
                     draws = _Draws(self.rng, sim.templates[template], self.region_lo, self.region_hi)
-                if not self._insert_one(sim, nearby, gap, template, draws):
+                m = self._place_one(sim, nearby, gap, template, draws)
+                if m < 0:
                     break
-                placed += 1
+                templates.append(template)
+                positions.append(draws.pos[m])
+                orientations.append(draws.q[m])
         finally:
             if draws is not None:
                 draws.release()
-        return placed
+            bodies = sim.add_clumps(templates, positions, orientations, velocities=self.velocity,
+                                    material=self.material)
+            self.bodies.extend(bodies.tolist())
+            self.body_templates.extend(templates)
+        return len(templates)
 
     def _next_template(self) -> int:
         """Template of the next clump: drawn once per clump, and only if there are several."""
@@ -204,10 +212,10 @@ class ParticleFactory:
             self._pending = self.templates[int(self.rng.choice(len(self.templates), p=self.probabilities))]
         return self._pending
 
-    def _insert_one(self, sim, nearby: "_Nearby", gap: float, template: int, draws: "_Draws") -> bool:
-        """Place the next clump, of ``template``, at the first of its ``draws`` at least ``gap``
-        [m] clear of the spheres ``nearby`` and of the walls (the placed clump's spheres are
-        added to them), within ``max_attempts`` draws."""
+    def _place_one(self, sim, nearby: "_Nearby", gap: float, template: int, draws: "_Draws") -> int:
+        """The first of the next clump's ``draws`` (of ``template``) at least ``gap`` [m] clear of
+        the spheres ``nearby`` and of the walls, within ``max_attempts`` draws; -1 if none. The
+        clump's spheres are added to those ``nearby``."""
         tpl = sim.templates[template]
         first = draws.taken
         limit = first + self.max_attempts
@@ -223,16 +231,12 @@ class ParticleFactory:
             else:
                 self.failed_attempts += m - first
                 draws.taken = m + 1
-                body = sim.add_clump(template, draws.pos[m], draws.q[m], velocity=self.velocity,
-                                     material=self.material)
                 nearby.add(draws.centres[m], tpl.radii)
-                self.bodies.append(body)
-                self.body_templates.append(template)
                 self._pending = None
-                return True
+                return m
         self.failed_attempts += limit - first
         draws.taken = limit
-        return False
+        return -1
 
     def to_dict(self) -> dict:
         return {"template": self.template, "templates": list(self.templates),

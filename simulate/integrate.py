@@ -380,8 +380,9 @@ def quaternions_from_uniforms(u) -> np.ndarray:
 
 def matrices_from_quats(q) -> np.ndarray:
     """``matrix_from_quat`` of each row of ``q`` (n, 4), to the same bits: each row's norm is
-    taken as ``numpy.linalg.norm`` takes it (a dot product), the rest is elementwise."""
-    q = np.asarray(q, dtype=float)
+    taken as ``numpy.linalg.norm`` takes it (a dot product, of a contiguous row: a strided row's
+    may sum in another order), the rest is elementwise."""
+    q = np.ascontiguousarray(q, dtype=float)
     norm = np.sqrt(np.array([row.dot(row) for row in q]))
     w, x, y, z = (q / norm[:, None]).T
     R = np.empty((q.shape[0], 3, 3))

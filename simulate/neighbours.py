@@ -55,7 +55,7 @@ import math
 import numba
 import numpy as np
 
-from demcal.simulate._jit import kernel, loop_kernel, threaded_kernel
+from demcal.simulate._jit import kernel, loop_kernel, serial_or_threaded, serial_twin, threaded_kernel
 from demcal.simulate.walls import CYLINDER, PLANE, wall_distance
 
 
@@ -213,8 +213,9 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
     found = np.empty(m, np.int64)
     # each thread lowers the gaps in a copy of its own, joined by their minimum
     gaps = np.empty((pool_size, m))
-    for t in range(gaps.shape[0]):
-        gaps[t, :] = gap
+    for p in numba.prange(m):   # not a slice assignment: its shape check compiles a formatted message
+        for t in range(gaps.shape[0]):
+            gaps[t, p] = gap[p]
     for p in numba.prange(m):
         g = gaps[numba.get_thread_id()]
         xi = xs[p]
@@ -295,6 +296,11 @@ def build_pair_list(n_spheres, sx, srad, sbody, bactive, skin, lo, inv_cell, dim
 
 #: Most blocks the joining of a rebuild's pairs is split into (each holds a row count per sphere).
 JOIN_BLOCKS_MAX = 8
+
+#: ``build_pair_list`` compiled for one thread (pass a pool of 1), and the two as one kernel
+#: ``rebuild_pair_list(use_threads, ...)`` for the step loop (``_jit.serial_or_threaded``).
+build_pair_list_serial = serial_twin(build_pair_list)
+rebuild_pair_list = serial_or_threaded(build_pair_list_serial, build_pair_list)
 
 
 @loop_kernel

@@ -9,7 +9,7 @@ import pytest
 
 from demcal.errors import InputError, SimulationError
 from demcal.simulate import DEMParameters, MaterialTable, Plane, Simulation, rayleigh_time
-from demcal.simulate.integrate import axis_angle_quat
+from demcal.simulate.integrate import axis_angle_quat, matrix_from_quat, quat_from_matrix, quat_multiply
 from tests.simulate.helpers import R, floor, simulation, sphere_template
 
 
@@ -51,6 +51,53 @@ def test_state_readers_agree_with_what_was_added():
     tpl_obj = sim.templates[tpl]
     e = 0.5 * tpl_obj.mass * 0.01 + 0.5 * tpl_obj.principal_moments[2] * 4.0
     assert sim.kinetic_energy() == pytest.approx(e, rel=1e-12)
+
+
+def test_clumps_added_at_once_are_those_the_per_clump_arithmetic_gives():
+    """``add_clumps`` (a factory's batch) gives, to the bit, the bodies and spheres of the
+    arithmetic of one clump: the orientation over its norm times the template's principal frame,
+    that quaternion's rotation matrix R, the spheres at x + offsets R^T and L = R I R^T w; and
+    the same as ``add_clump`` clump by clump. Two templates of 5 and 1 spheres, mixed."""
+    rng = np.random.default_rng(11)
+    n = 40
+    pos = rng.uniform(-0.1, 0.1, (n, 3))
+    q = rng.normal(size=(n, 4)) * rng.uniform(0.1, 10.0, (n, 1))     # not normalised
+    v, w = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    sims = []
+    for _ in range(2):
+        sim = simulation(DEMParameters(), dt=1e-5)
+        templates = [sim.add_template(DEMParameters().template()), sphere_template(sim)]
+        sims.append(sim)
+    ids = rng.choice(templates, n)
+    assert sims[0].add_clumps(ids, pos, q, velocities=v, angular_velocities=w).tolist() == list(range(n))
+    for k in range(n):
+        assert sims[1].add_clump(int(ids[k]), pos[k], q[k], velocity=v[k], angular_velocity=w[k]) == k
+    spheres, momenta, owner = [], [], []
+    for k in range(n):
+        tpl = sims[0].templates[ids[k]]
+        q_body = quat_multiply(q[k] / np.linalg.norm(q[k]), quat_from_matrix(tpl.principal_axes))
+        R = matrix_from_quat(q_body)
+        spheres.append(pos[k] + tpl.offsets @ R.T)
+        momenta.append(R @ np.diag(tpl.principal_moments) @ R.T @ w[k])
+        owner += [k] * tpl.n_spheres
+    for sim in sims:
+        np.testing.assert_array_equal(sim.sphere_positions(), np.vstack(spheres))
+        np.testing.assert_array_equal(sim.angular_momenta(), np.array(momenta))
+        np.testing.assert_array_equal(sim.sphere_body(), owner)
+        np.testing.assert_array_equal(sim.positions(), pos)
+        np.testing.assert_array_equal(sim.velocities(), v)
+        np.testing.assert_array_equal(sim.angular_velocities(), w)
+    # a bad row stops the whole batch before anything is added
+    sim = sims[0]
+    with pytest.raises(InputError, match=r"non-zero quaternion .* got \[0.0, 0.0, 0.0, 0.0\]"):
+        sim.add_clumps([0, 0], pos[:2], [[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0]])
+    with pytest.raises(InputError, match="position must be 3 numbers per clump"):
+        sim.add_clumps([0], [[0.0, 0.0]], [[1.0, 0.0, 0.0, 0.0]])
+    with pytest.raises(InputError, match="velocity must be finite"):
+        sim.add_clumps([0], [[0.0, 0.0, 0.0]], [[1.0, 0.0, 0.0, 0.0]], velocities=[np.nan, 0.0, 0.0])
+    with pytest.raises(InputError, match="unknown template id 7"):
+        sim.add_clumps([0, 7], pos[:2], q[:2])
+    assert sim.n_bodies == n and sim.add_clumps([], np.zeros((0, 3)), np.zeros((0, 4))).size == 0
 
 
 def test_input_errors_name_the_problem():

@@ -9,8 +9,8 @@ import pytest
 
 from demcal.simulate import DEMParameters
 from demcal.simulate.clump import segment_template
-from demcal.simulate.neighbours import (JOIN_BLOCKS_MAX, build_pair_list, build_wall_list, grid_shape,
-                                       padded_cell_count)
+from demcal.simulate.neighbours import (JOIN_BLOCKS_MAX, build_pair_list, build_pair_list_serial, build_wall_list,
+                                       grid_shape, padded_cell_count)
 from demcal.simulate.walls import Plane, Rectangle, pack_walls, wall_distances
 from tests.simulate.helpers import R, floor, simulation
 
@@ -75,18 +75,20 @@ def test_pair_list_equals_brute_force(seed, threads):
 
 def test_the_rebuild_is_the_same_on_one_thread_and_on_all():
     """Lists, their order and the allowances, to the bit: on one thread in one pass (a pool of
-    one, so the pairs are joined in one block), in as many blocks as the joining takes, and on
-    every thread."""
+    one, so the pairs are joined in one block), in as many blocks as the joining takes, on
+    every thread, and compiled without threads (the serial runs' kernel)."""
     sx, srad, sbody, active = _cloud(3, n_bodies=400)
     skin, lo, hi = 0.002, np.array([-0.06, -0.06, -0.06]), np.array([0.06, 0.06, 0.06])
     cell_xyz, dims = grid_shape(lo, hi, 2 * srad.max() + skin)
     empty = (np.zeros(1, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)))
     out, allowances = [], []
-    for threads, pool in ((1, 1), (1, JOIN_BLOCKS_MAX), (POOL, POOL)):
+    for rebuild, threads, pool in ((build_pair_list, 1, 1), (build_pair_list, 1, JOIN_BLOCKS_MAX),
+                                   (build_pair_list, POOL, POOL), (build_pair_list_serial, POOL, 1),
+                                   (build_pair_list_serial, POOL, JOIN_BLOCKS_MAX)):
         numba.set_num_threads(threads)
         allow = np.zeros(sx.shape[0])
-        out.append(build_pair_list(sx.shape[0], sx, srad, sbody, active, skin, lo, 1.0 / cell_xyz, dims,
-                                   np.zeros(padded_cell_count(dims) + 1, np.int64), *empty, allow, pool))
+        out.append(rebuild(sx.shape[0], sx, srad, sbody, active, skin, lo, 1.0 / cell_xyz, dims,
+                           np.zeros(padded_cell_count(dims) + 1, np.int64), *empty, allow, pool))
         allowances.append(allow)
     for other, allow in zip(out[1:], allowances[1:]):
         for a, b in zip(out[0], other):
