@@ -372,6 +372,17 @@ steps_until_stale = serial_or_threaded(_steps_serial, _steps_ranged)
 NEAR_SHORT, NEAR_LONG, NEAR_MIN_MARGIN = 16, 128, 1.0 / 16.0
 
 
+@evaluator
+def _near_pairs(n_spheres, start, pi, pj, hist, sx, srad, margin, skin, sxn, snear):
+    """The near pairs of the list ``start``, ``pi``, ``pj`` (``select_near_pairs``, into new
+    arrays as long as the list's): a margin grown to the skin takes every pair."""
+    near = np.empty(pi.shape[0], np.int64)
+    near_start = np.empty(start.shape[0], np.int64)
+    select_near_pairs(n_spheres, start, pi, pj, hist, sx, srad, margin if margin < skin else np.inf, near,
+                      near_start, sxn, snear)
+    return near, near_start
+
+
 @kernel
 def _advance(ranged, n_steps, t, dt, settings, bodies, spheres, lists, walls, table, grid):
     """Advance the state by ``n_steps`` steps (see the module docstring for the step).
@@ -410,10 +421,7 @@ def _advance(ranged, n_steps, t, dt, settings, bodies, spheres, lists, walls, ta
     n_rebuilds = 0
     n_wall_rebuilds = 0
     step = -1 if need_forces else 0
-    near = np.empty(ppi.shape[0], np.int64)
-    near_start = np.empty(pstart.shape[0], np.int64)
-    select_near_pairs(n_spheres, pstart, ppi, pj, ph, sx, srad, margin if margin < skin else np.inf, near,
-                      near_start, sxn, snear)
+    near, near_start = _near_pairs(n_spheres, pstart, ppi, pj, ph, sx, srad, margin, skin, sxn, snear)
     selected_at = step
     # the first part of ``step`` is done and its lists are fresh (a plain bool from the start: a
     # literal False would compile the steps a second time, for that type)
@@ -430,16 +438,13 @@ def _advance(ranged, n_steps, t, dt, settings, bodies, spheres, lists, walls, ta
                                                     pool_size if ranged else 1)
             _copy_rows(sx, sx0, n_spheres)
             n_rebuilds += 1
-            near = np.empty(ppi.shape[0], np.int64)
-            near_start = np.empty(pstart.shape[0], np.int64)
         if need_rebuild or pairs_stale or near_stale:
             lasted = step - selected_at
             if near_stale and lasted < NEAR_SHORT:
                 margin = min(2.0 * margin, skin)
             elif lasted > NEAR_LONG:
                 margin = max(0.5 * margin, NEAR_MIN_MARGIN * skin)
-            select_near_pairs(n_spheres, pstart, ppi, pj, ph, sx, srad, margin if margin < skin else np.inf,
-                              near, near_start, sxn, snear)
+            near, near_start = _near_pairs(n_spheres, pstart, ppi, pj, ph, sx, srad, margin, skin, sxn, snear)
             selected_at = step
         if need_rebuild or walls_stale:
             wstart, ws, wk, wh = build_wall_list(n_spheres, sx, srad, sbody, bactive, skin, wkind,

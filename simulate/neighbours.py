@@ -55,7 +55,7 @@ import math
 import numba
 import numpy as np
 
-from demcal.simulate._jit import kernel, loop_kernel, serial_or_threaded, serial_twin, threaded_kernel
+from demcal.simulate._jit import evaluator, kernel, loop_kernel, serial_or_threaded, serial_twin, threaded_kernel
 from demcal.simulate.walls import CYLINDER, PLANE, wall_distance
 
 
@@ -327,6 +327,12 @@ def _place_rows(p0, p1, order, slot, found, tb, place, pi, pj):
             place[row] = k + 1
 
 
+@evaluator
+def _cell_coordinates(c, nx, ny):
+    """Coordinates (x, y, z) of cell ``c`` of a grid ``nx`` by ``ny`` by any, numbered x fastest."""
+    return c % nx, (c // nx) % ny, c // (nx * ny)
+
+
 #: What the shell of cells just beyond the 27 around a cell holds (``_shell_of_cell``).
 SHELL_CLEAR, SHELL_OCCUPIED, SHELL_OWN_CLUMP_ONLY = 1, 0, -1
 
@@ -337,9 +343,7 @@ def _shell_of_cell(c, cell_start, nx, ny, nz):
     (``SHELL_CLEAR``); else, with more than 64 spheres in the 125 cells, ``SHELL_OCCUPIED``; else
     ``SHELL_OWN_CLUMP_ONLY`` (they may all be of the clump of a sphere in ``c``: one sphere at a
     time, ``_shell_holds_own_clump_only``)."""
-    cz = c // (nx * ny)
-    cy = (c // nx) % ny
-    cx = c % nx
+    cx, cy, cz = _cell_coordinates(c, nx, ny)
     inner = 0
     outer = 0
     for z in range(cz - 2, cz + 3):
@@ -362,16 +366,13 @@ def _shell_of_cell(c, cell_start, nx, ny, nz):
 def _shell_holds_own_clump_only(p, cs, bs, cell_start, nx, ny, nz):
     """Whether every sphere in the shell of cells just beyond the 27 around sphere ``p`` (cell
     order) is of its own clump."""
-    c = cs[p]
-    cz = c // (nx * ny)
-    cy = (c // nx) % ny
-    cx = c % nx
+    cx, cy, cz = _cell_coordinates(cs[p], nx, ny)
     for z in range(max(cz - 2, 0), min(cz + 3, nz)):
         for y in range(max(cy - 2, 0), min(cy + 3, ny)):
             base = (z * ny + y) * nx
             for k in range(cell_start[base + max(cx - 2, 0)], cell_start[base + min(cx + 3, nx)]):
-                ck = cs[k]
-                ring = max(abs(ck // (nx * ny) - cz), abs((ck // nx) % ny - cy), abs(ck % nx - cx))
+                kx, ky, kz = _cell_coordinates(cs[k], nx, ny)
+                ring = max(abs(kz - cz), abs(ky - cy), abs(kx - cx))
                 if ring >= 2 and bs[k] != bs[p]:
                     return False
     return True
