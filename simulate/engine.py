@@ -19,7 +19,8 @@ two-sided, rims included); ``wall_index(name)`` finds one.
 A wall translates at its ``velocity`` during ``[move_start, move_stop)``;
 ``set_wall_motion(k, velocity, start, stop)`` changes that between runs. Particle factories
 (``simulate.factory.ParticleFactory``) are added with ``add_factory`` and insert clumps between
-chunks of steps; ``reserve(n_bodies)`` pre-allocates for clumps added one by one. Gravity may
+chunks of steps; ``reserve(n_bodies)`` pre-allocates for clumps added one by one, and
+``add_clumps(templates, positions, orientations)`` adds many at once (a factory's batch). Gravity may
 be changed between runs (``sim.gravity = (gx, gy, gz)``, e.g. to tilt a plate slowly).
 ``run(duration=...)`` or ``run(n_steps=...)`` returns a ``RunSummary``; ``progress(sim)`` is
 called after every chunk.
