@@ -103,7 +103,7 @@ from demcal.simulate.contact.rolling import kick_mode, lever_index
 from demcal.simulate.forces import (HIST_IMPACT_SPEED, HIST_ROLLING, contact_forces, contact_forces_ranged,
                                     history_width, odd_history_columns)
 from demcal.simulate.integrate import (drift, half_kick, matrices_from_quats, quat_from_matrix,
-                                       quat_multiply, refresh_rotation)
+                                       quat_multiply, refresh_rotation, row_norms)
 from demcal.simulate.materials import MaterialTable
 from demcal.simulate.neighbours import (admit_spheres, ascending_pairs, build_wall_list, grid_shape, morton_keys,
                                         padded_cell_count, rebuild_pair_list, renumber_pair_list,
@@ -835,8 +835,7 @@ class Simulation:
                                  f"{a.shape}") from None
             fields[name] = a
         q_user, pos, vel, omega = (fields[k] for k in ("orientation", "position", "velocity", "angular_velocity"))
-        q_user = np.ascontiguousarray(q_user)   # each row's norm as numpy.linalg.norm takes it
-        norm = np.sqrt(np.array([row.dot(row) for row in q_user]))
+        norm = row_norms(q_user)     # to the bits of numpy.linalg.norm of one row
         bad = ~(np.isfinite(norm) & (norm > 0))
         if bad.any():
             raise InputError(f"orientation must be a non-zero quaternion (w, x, y, z), got "

@@ -378,12 +378,19 @@ def quaternions_from_uniforms(u) -> np.ndarray:
     return q
 
 
+def row_norms(a) -> np.ndarray:
+    """Euclidean norm of each row of ``a`` (n, k), to the bits of ``numpy.linalg.norm`` of that
+    row alone: the square root of its dot product with itself, taken on a contiguous copy (numpy
+    may sum a strided row in another order)."""
+    a = np.ascontiguousarray(a, dtype=float)
+    return np.sqrt(np.array([row.dot(row) for row in a]))
+
+
 def matrices_from_quats(q) -> np.ndarray:
     """``matrix_from_quat`` of each row of ``q`` (n, 4), to the same bits: each row's norm is
-    taken as ``numpy.linalg.norm`` takes it (a dot product, of a contiguous row: a strided row's
-    may sum in another order), the rest is elementwise."""
-    q = np.ascontiguousarray(q, dtype=float)
-    norm = np.sqrt(np.array([row.dot(row) for row in q]))
+    taken as ``numpy.linalg.norm`` takes it (``row_norms``), the rest is elementwise."""
+    q = np.asarray(q, dtype=float)
+    norm = row_norms(q)
     w, x, y, z = (q / norm[:, None]).T
     R = np.empty((q.shape[0], 3, 3))
     R[:, 0, 0], R[:, 0, 1], R[:, 0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
