@@ -139,14 +139,17 @@ def run_all(tasks: Iterable[dict], runner: Callable[[dict], dict], store: RunSto
         store.put(rec)
         return rec
 
-    bar = tqdm(total=len(pending), desc=desc, unit="run", disable=not progress or not pending)
     failed = 0
     attempts = {key: 0 for key, _ in pending}
     queue = list(pending)
     own = executor is None and bool(pending)
     if own:
         executor = Workers(workers, scheduler, prepare=prepare)
+    bar = None
     try:
+        if pending:
+            executor.ready()    # before the bar: its rate and time left count runs, not compiling
+        bar = tqdm(total=len(pending), desc=desc, unit="run", disable=not progress or not pending)
         while queue:
             futures = {executor.submit(_execute, runner, task): (key, task) for key, task in queue}
             queue = []
@@ -167,7 +170,8 @@ def run_all(tasks: Iterable[dict], runner: Callable[[dict], dict], store: RunSto
                 failed += status == "failed"
                 bar.update(1)
     finally:
-        bar.close()
+        if bar is not None:
+            bar.close()
         if own:
             executor.close()
     records = [store.get(k) for k in keys]
@@ -194,6 +198,13 @@ class Workers:
         self.close()
         return False
 
+    def ready(self) -> None:
+        """Call ``prepare`` now, once, if the runs are to go to local worker processes (a
+        campaign's first compile of the DEM kernels takes half a minute or more)."""
+        if self.prepare is not None and not self.scheduler and self.workers > 1:
+            self.prepare()
+            self.prepare = None
+
     def submit(self, fn, *args):
         """A future of ``fn(*args)``."""
         if self.scheduler:
@@ -202,9 +213,7 @@ class Workers:
         if self.workers <= 1:
             return _LazyResult(fn, args)  # one run at a time: a large one may use every core
         if self._pool is None:
-            if self.prepare is not None:
-                self.prepare()
-                self.prepare = None
+            self.ready()
             self._pool = run_processes(self.workers)
         try:
             return self._pool.submit(fn, *args)

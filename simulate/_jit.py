@@ -39,11 +39,13 @@ from __future__ import annotations
 
 import hashlib
 import inspect
+import sys
 import types as types_module
 from pathlib import Path
 
 import numba
 from numba import types
+from numba.core import event
 from numba.core.errors import TypingError
 from numba.extending import overload
 
@@ -83,6 +85,31 @@ def refresh_stale_cache() -> None:
 
 
 refresh_stale_cache()
+
+
+class _CompileNotice(event.Listener):
+    """Says once per process, on stderr, that this package's kernels are being compiled: the first
+    command after installing spends half a minute or more on it, which would otherwise pass in
+    silence (a campaign's progress bar standing at 0). numba emits ``numba:compile`` only for a
+    kernel missing from the cache, so a process that loads them says nothing."""
+
+    said = False
+
+    def on_start(self, ev):
+        function = getattr(ev.data.get("dispatcher"), "py_func", None)
+        if not self.said and (getattr(function, "__module__", None) or "").startswith(__package__ + "."):
+            self.said = True
+            from tqdm import tqdm    # written above any progress bar on the terminal
+
+            tqdm.write("demcal: compiling the DEM kernels for this installation, once (half a minute to a "
+                       "minute; `demcal compile` does it ahead of time); later runs load them from the "
+                       "cache", file=sys.stderr)
+
+    def on_end(self, ev):
+        pass
+
+
+event.register("numba:compile", _CompileNotice())
 
 
 def kernel(fn):

@@ -151,6 +151,29 @@ def test_prepare_runs_once_here_before_local_workers_and_only_when_needed(tmp_pa
     assert calls == [os.getpid()]
 
 
+def test_prepare_runs_before_the_progress_bar_opens(tmp_path, monkeypatch):
+    """The campaign's ``prepare`` (a first compile of the DEM: half a minute or more) runs before
+    the bar opens, so the bar's rate and time left count runs only, not the compilation."""
+    import demcal.analyse.runs as runs
+
+    calls = []
+
+    class Bar:
+        def __init__(self, *args, **kwargs):
+            calls.append("bar")
+
+        def update(self, n):
+            pass
+
+        def close(self):
+            pass
+
+    monkeypatch.setattr(runs, "tqdm", Bar)
+    run_all([{"x": 1, "seed": 0}], square_runner, RunStore(tmp_path / "runs"), workers=2,
+            prepare=lambda: calls.append("prepared"))
+    assert calls == ["prepared", "bar"]
+
+
 def pid_runner(inputs):
     """A stand-in run that says which process made it (and can kill that process)."""
     if inputs.get("die"):

@@ -112,3 +112,28 @@ def test_demcal_compile_readies_the_serial_and_the_threaded_step_loop():
     assert done.returncode == 0, done.stderr[-3000:]
     assert "DEM kernels ready" in done.stdout
     assert done.stdout.split()[-2:] == ["True", "True"]
+
+
+
+_COMPILE_ONE = textwrap.dedent("""
+    import sys, numba, numpy as np
+    from demcal.simulate.engine import _copy_rows
+    numba.njit(lambda x: x + 1)(1)          # not the engine's
+    if sys.argv[1] == "engine":
+        _copy_rows(np.zeros((2, 3)), np.zeros((2, 3)), 2)
+        _copy_rows(np.zeros((2, 3), np.float32), np.zeros((2, 3), np.float32), 2)
+""")
+
+
+def test_compiling_the_engine_says_so_once_and_loading_it_says_nothing(tmp_path):
+    """The first command of an installation compiles for half a minute or more: it says so on
+    stderr, once per process however many kernels it compiles, and only for the engine's (a
+    user's own numba function compiles in silence); loading them from the cache is silent."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    said = []
+    for what in ("other", "engine", "engine"):
+        done = subprocess.run([sys.executable, "-c", _COMPILE_ONE, what], env=env, capture_output=True, text=True,
+                              timeout=300)
+        assert done.returncode == 0, done.stderr
+        said.append(done.stderr.count("demcal: compiling the DEM kernels"))
+    assert said == [0, 1, 0]
