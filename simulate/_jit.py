@@ -109,7 +109,8 @@ class _CompileNotice(event.Listener):
         pass
 
 
-event.register("numba:compile", _CompileNotice())
+compile_notice = _CompileNotice()
+event.register("numba:compile", compile_notice)
 
 
 def kernel(fn):

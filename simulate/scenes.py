@@ -136,7 +136,9 @@ def compile_kernels(threaded: bool = False) -> None:
     if threaded:
         import subprocess
         import sys
+        # the child compiles in silence: this process says so once for both
         child = subprocess.Popen([sys.executable, "-c",
+                                  "from demcal.simulate._jit import compile_notice; compile_notice.said = True; "
                                   "from demcal.simulate.scenes import step_cases; step_cases(threads=2)"])
     try:
         step_cases(threads=None)

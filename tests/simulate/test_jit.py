@@ -114,7 +114,6 @@ def test_demcal_compile_readies_the_serial_and_the_threaded_step_loop():
     assert done.stdout.split()[-2:] == ["True", "True"]
 
 
-
 _COMPILE_ONE = textwrap.dedent("""
     import sys, numba, numpy as np
     from demcal.simulate.engine import _copy_rows
