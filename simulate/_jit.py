@@ -44,10 +44,11 @@ import types as types_module
 from pathlib import Path
 
 import numba
+from llvmlite import ir
 from numba import types
-from numba.core import event
+from numba.core import cgutils, event
 from numba.core.errors import TypingError
-from numba.extending import overload
+from numba.extending import intrinsic, overload
 
 #: Flags of every compiled kernel.
 JIT_FLAGS = dict(
@@ -178,3 +179,28 @@ def serial_or_threaded(serial, threaded):
     # whose cached machine code holds it
     overload(scope["either"], jit_options=dict(JIT_FLAGS, cache=False))(scope["typed"])
     return scope["either"]
+
+
+@intrinsic
+def prefetch(typingctx, array, row):
+    """``prefetch(array, row)`` in a kernel asks the processor to bring the first cache line of
+    ``array[row]`` into its caches (LLVM's ``llvm.prefetch``: a read, kept close). A hint only: it
+    changes no value, and an address out of bounds does not fault."""
+    if not isinstance(array, types.Array) or not isinstance(row, types.Integer):
+        return None
+
+    def codegen(context, builder, signature, args):
+        array_type = signature.args[0]
+        view = context.make_array(array_type)(context, builder, args[0])
+        index = context.cast(builder, args[1], signature.args[1], types.intp)
+        indices = [index] + [context.get_constant(types.intp, 0)] * (array_type.ndim - 1)
+        address = cgutils.get_item_pointer(context, builder, array_type, view, indices)
+        byte_pointer = ir.IntType(8).as_pointer()
+        i32 = ir.IntType(32)
+        hint = cgutils.get_or_insert_function(builder.module,
+                                              ir.FunctionType(ir.VoidType(), [byte_pointer, i32, i32, i32]),
+                                              "llvm.prefetch.p0")
+        builder.call(hint, [builder.bitcast(address, byte_pointer), i32(0), i32(3), i32(1)])
+        return context.get_dummy_value()
+
+    return types.void(array, row), codegen

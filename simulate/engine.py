@@ -100,8 +100,8 @@ from demcal.errors import InputError, SimulationError
 from demcal.simulate._jit import evaluator, kernel, loop_kernel, serial_or_threaded, threaded_kernel
 from demcal.simulate.clump import ClumpTemplate
 from demcal.simulate.contact.rolling import kick_mode, lever_index
-from demcal.simulate.forces import (HIST_IMPACT_SPEED, HIST_ROLLING, contact_forces, contact_forces_ranged,
-                                    history_width, odd_history_columns)
+from demcal.simulate.forces import (HIST_IMPACT_SPEED, HIST_ROLLING, PREFETCH_AHEAD, PREFETCH_MIN_SPHERES,
+                                    contact_forces, contact_forces_ranged, history_width, odd_history_columns)
 from demcal.simulate.integrate import (drift, half_kick, matrices_from_quats, quat_from_matrix,
                                        quat_multiply, refresh_rotation, row_norms)
 from demcal.simulate.materials import MaterialTable
@@ -302,6 +302,7 @@ def _move(ranged, step, t, dt, mode, settings, bodies, spheres, walls):
 def _contacts(ranged, step, dt, settings, bodies, spheres, lists, walls, table, wcv, aside):
     """The second part of a step: the contact forces from the (fresh) lists."""
     lever_mode, rolling_model, eta_r, effective_mass = settings[4], settings[5], settings[6], settings[7]
+    ahead = settings[12]
     n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, bactive = bodies
     n_spheres, sbody, soff, srad, sx, sx0, sxw, sxn, sallow, swallow, snear = spheres
     pstart, ppi, pj, ph, wstart, ws, wk, wh, near, near_start = lists
@@ -312,8 +313,8 @@ def _contacts(ranged, step, dt, settings, bodies, spheres, lists, walls, table, 
     hist_dt = dt if step >= 0 else 0.0
     _wall_contact_velocities(ws, wk, sx, srad, wkind, worig, wnorm, wu, wv, whalf, wvel_now, wspin_now, wcv)
     all_contact_forces(ranged, aside_body, aside_f, aside_t, aside_rm, aside_rv, near, near_start, wstart, hist_dt,
-                       dt, lever_mode, rolling_model, eta_r, effective_mass, n_bodies, n_spheres, bx, bv, bw, bR,
-                       bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph, ws, wk,
+                       dt, lever_mode, rolling_model, eta_r, effective_mass, ahead, n_bodies, n_spheres, bx, bv, bw,
+                       bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph, ws, wk,
                        wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat, e_star, g_star, damp, mu_s, mu_r, log_e,
                        e_exp, log_v_ref, v_min)
 
@@ -409,7 +410,7 @@ def _advance(ranged, n_steps, t, dt, settings, bodies, spheres, lists, walls, ta
     packs them.
     """
     (gx, gy, gz, skin, lever_mode, rolling_model, eta_r, effective_mass, need_rebuild, need_forces, pool_size,
-     margin) = settings
+     margin, _) = settings
     n_bodies, bx, bv, bq, bL, bw, bR, bf, bt, brm, brv, brn, binvm, binvi, bmat, bcount, bactive = bodies
     n_spheres, sbody, soff, srad, sx, sx0, sxw, sxn, sallow, swallow, snear = spheres
     pstart, ppi, pj, ph, wstart, ws, wk, wh = lists
@@ -597,6 +598,10 @@ class Simulation:
         Below some 4,000 spheres the whole state (about 500 bytes a sphere with its contacts)
         stays in a core's cache and sorting would change only the order of roundoff.
         Body and sphere ids, and every reader, keep the order of addition.
+    prefetch_min_spheres : int
+        From this many spheres the sphere-sphere loop asks for each pair's second sphere some
+        pairs ahead (``simulate.forces.PREFETCH_AHEAD``): faster once the state outgrows the
+        caches, slower while it fits them. The result is the same to the bit either way.
     threads : int or None
         Threads of the step loop. None (default): once the simulation holds
         ``THREADS_MIN_SPHERES`` spheres, its contacts are split into fixed ranges run on
@@ -609,7 +614,8 @@ class Simulation:
                  gravity=(0.0, 0.0, -GRAVITY), rolling_lever: str = "liggghts_reff", skin: float | None = None,
                  max_dt_fraction: float = DEFAULT_MAX_FRACTION, force: bool = False,
                  max_speed: float = 50.0, chunk_steps: int = 200, sort_every: int = 1000,
-                 sort_min_spheres: int = 4096, threads: int | None = None):
+                 sort_min_spheres: int = 4096, prefetch_min_spheres: int = PREFETCH_MIN_SPHERES,
+                 threads: int | None = None):
         if not isinstance(materials, MaterialTable):
             raise InputError(f"materials must be a MaterialTable, got {type(materials).__name__}")
         self.materials = materials
@@ -635,11 +641,12 @@ class Simulation:
         if int(chunk_steps) < 1:
             raise InputError(f"chunk_steps must be >= 1, got {chunk_steps!r}")
         self.chunk_steps = int(chunk_steps)
-        if int(sort_every) < 0 or int(sort_min_spheres) < 0:
-            raise InputError(f"sort_every and sort_min_spheres must be >= 0, got {sort_every!r}, "
-                             f"{sort_min_spheres!r}")
+        if int(sort_every) < 0 or int(sort_min_spheres) < 0 or int(prefetch_min_spheres) < 0:
+            raise InputError(f"sort_every, sort_min_spheres and prefetch_min_spheres must be >= 0, got "
+                             f"{sort_every!r}, {sort_min_spheres!r}, {prefetch_min_spheres!r}")
         self.sort_every = int(sort_every)
         self.sort_min_spheres = int(sort_min_spheres)
+        self.prefetch_min_spheres = int(prefetch_min_spheres)
         self._steps_since_sort = 0
         self.total_sorts = 0
         if threads is not None and int(threads) < 1:
@@ -1010,7 +1017,7 @@ class Simulation:
             n_steps, self.time, self.dt,
             (g[0], g[1], g[2], skin, self._lever, pt.rolling_model, pt.rolling_damping_ratio,
              pt.contact_effective_mass, self._need_rebuild, self._need_forces, numba.config.NUMBA_NUM_THREADS,
-             self._near_fraction * skin),
+             self._near_fraction * skin, PREFETCH_AHEAD if self.n_spheres >= self.prefetch_min_spheres else 0),
             (self.n_bodies, B["bx"], B["bv"], B["bq"], B["bL"], B["bw"], B["bR"], B["bf"], B["bt"], B["brm"],
              B["brv"], B["brn"], B["binvm"], B["binvi"], B["bmat"], B["bcount"], B["bactive"]),
             (self.n_spheres, S["sbody"], S["soff"], S["srad"], S["sx"], S["sx0"], S["sxw"], S["sxn"], S["sallow"],

@@ -17,7 +17,7 @@ import math
 import numba
 import numpy as np
 
-from demcal.simulate._jit import loop_kernel, threaded_kernel
+from demcal.simulate._jit import loop_kernel, prefetch, threaded_kernel
 from demcal.simulate.contact.hertz_mindlin import impact_damping, normal_force, tangential_force
 from demcal.simulate.contact.rolling import (EPSD, LIGGGHTS_REFF, constant_torque, epsd_torque,
                                              rolling_lever)
@@ -47,9 +47,9 @@ def history_width(velocity_restitution: bool, rolling_model: int) -> int:
 
 @loop_kernel
 def contact_forces(fbody, ff, ft, frm, frv, near, near_start, wstart, hist_dt, dt, lever_mode, rolling_model,
-                   eta_r, effective_mass, n_bodies, n_spheres, bx, bv, bw, bR, bf, bt, brm, brv, brn, binvm, binvi,
-                   bmat, bcount, sbody, sx, srad, ppi, pj, ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf, wcv, wmat,
-                   e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min):
+                   eta_r, effective_mass, ahead, n_bodies, n_spheres, bx, bv, bw, bR, bf, bt, brm, brv, brn, binvm,
+                   binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph, ws, wk, wh, wkind, worig, wnorm, wu, wv, whalf,
+                   wcv, wmat, e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min):
     """Contact forces, torques and rolling torques on every body from the Verlet lists (the
     arguments of ``contact_forces_ranged``; its row pointers unused here, and nothing put aside
     in its work arrays, since every body is in the one range).
@@ -57,6 +57,9 @@ def contact_forces(fbody, ff, ft, frm, frv, near, near_start, wstart, hist_dt, d
     The sphere-sphere loop visits the listed pairs ``near`` (``near_start``: their row pointers,
     the last one their number; ``simulate.neighbours.select_near_pairs``), the only ones that
     may touch: the rest of the list ``ppi``, ``pj``, ``ph`` is not read.
+
+    ``ahead``: pairs ahead whose second sphere the sphere-sphere loop asks for (``pair_forces``;
+    0: none).
 
     ``hist_dt`` is the time step used to accumulate tangential displacement (0 for a force
     evaluation that must not advance the contact history). A pair with ``e_exp`` != 0 takes
@@ -80,7 +83,7 @@ def contact_forces(fbody, ff, ft, frm, frv, near, near_start, wstart, hist_dt, d
                         wu, wv, whalf)
     _zero(0, n_bodies, bf, bt, brm, brv, brn)
     pair_forces(0, near_start[near_start.shape[0] - 1], hist_dt, dt, lever_mode, rolling_model, eta_r,
-                effective_mass, bx, bv, bw, bR, binvm, binvi, bmat, bcount, sbody, sx, srad, near, ppi, pj, ph,
+                effective_mass, ahead, bx, bv, bw, bR, binvm, binvi, bmat, bcount, sbody, sx, srad, near, ppi, pj, ph,
                 e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min, bf, bt, brm, brv, 0, n_bodies,
                 fbody, ff, ft, frm, frv)
     wall_forces(0, ws.shape[0], hist_dt, lever_mode, rolling_model, eta_r, effective_mass, bx, bv, bw, bR,
@@ -91,13 +94,24 @@ def contact_forces(fbody, ff, ft, frm, frv, near, near_start, wstart, hist_dt, d
 #: Ranges the lists are split into by ``contact_forces_ranged``, whatever the number of threads.
 N_RANGES = 32
 
+#: Pairs ahead whose second sphere's rows the sphere-sphere loop asks for (``pair_forces``), and
+#: the spheres from which the engine has it do so. A list runs by first sphere, so the first
+#: sphere's rows come in order, but the second's may lie far off in memory: in a settled bed of
+#: 100,000 spheres (about 39 MB of state) three pairs in ten had their spheres 200 or more rows
+#: apart, and each cost 1.5 to 2.7 times as much as the others (two runs). Asked for 32 pairs
+#: ahead, the loop over that bed took 11.4 ms instead of 13.1 (0.87); over beds of 20,000 and
+#: 2,500 spheres, whose state the caches hold, 1.03 and 1.01 times as long
+#: (``benchmarks/settled_step.py``, medians of 9 rounds in turn; AMD EPYC, 2 MB of L2 a core,
+#: 32 MB of L3, 2026-11-30). Asking for the second body's rows as well made the loop slower.
+PREFETCH_AHEAD, PREFETCH_MIN_SPHERES = 32, 50_000
+
 
 @threaded_kernel
 def contact_forces_ranged(fbody, ff, ft, frm, frv, near, near_start, wstart, hist_dt, dt, lever_mode, rolling_model,
-                          eta_r, effective_mass, n_bodies, n_spheres, bx, bv, bw, bR, bf, bt, brm, brv, brn, binvm,
-                          binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph, ws, wk, wh, wkind, worig, wnorm,
-                          wu, wv, whalf, wcv, wmat, e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref,
-                          v_min):
+                          eta_r, effective_mass, ahead, n_bodies, n_spheres, bx, bv, bw, bR, bf, bt, brm, brv,
+                          brn, binvm, binvi, bmat, bcount, sbody, sx, srad, ppi, pj, ph, ws, wk, wh, wkind, worig,
+                          wnorm, wu, wv, whalf, wcv, wmat, e_star, g_star, damp, mu_s, mu_r, log_e, e_exp,
+                          log_v_ref, v_min):
     """``contact_forces`` on threads: the bodies split into ``N_RANGES`` runs of about equal
     numbers of listed pairs, each run computing the near pairs of its bodies' spheres (the first
     sphere of each pair; the lists are in rows by sphere, ``near_start`` and ``wstart``) and
@@ -129,7 +143,7 @@ def contact_forces_ranged(fbody, ff, ft, frm, frv, near, near_start, wstart, his
     for c in numba.prange(N_RANGES):
         _zero(first[c], first[c + 1], bf, bt, brm, brv, brn)
         aside[c] = pair_forces(k[c], k[c + 1], hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass,
-                               bx, bv, bw, bR, binvm, binvi, bmat, bcount, sbody, sx, srad, near, ppi, pj, ph,
+                               ahead, bx, bv, bw, bR, binvm, binvi, bmat, bcount, sbody, sx, srad, near, ppi, pj, ph,
                                e_star, g_star, damp, mu_s, mu_r, log_e, e_exp, log_v_ref, v_min, bf, bt, brm, brv,
                                first[c], first[c + 1], fbody, ff, ft, frm, frv)
         wall_forces(q[c], q[c + 1], hist_dt, lever_mode, rolling_model, eta_r, effective_mass, bx, bv, bw, bR,
@@ -158,10 +172,13 @@ def _zero(b0, b1, bf, bt, brm, brv, brn):
 
 
 @loop_kernel
-def pair_forces(k0, k1, hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass, bx, bv, bw, bR, binvm,
-                binvi, bmat, bcount, sbody, sx, srad, near, ppi, pj, ph, e_star, g_star, damp, mu_s, mu_r, log_e,
-                e_exp, log_v_ref, v_min, bf, bt, brm, brv, b_lo, b_hi, fbody, ff, ft, frm, frv):
+def pair_forces(k0, k1, hist_dt, dt, lever_mode, rolling_model, eta_r, effective_mass, ahead, bx, bv, bw, bR,
+                binvm, binvi, bmat, bcount, sbody, sx, srad, near, ppi, pj, ph, e_star, g_star, damp, mu_s, mu_r,
+                log_e, e_exp, log_v_ref, v_min, bf, bt, brm, brv, b_lo, b_hi, fbody, ff, ft, frm, frv):
     """Sphere-sphere contacts ``near[k0]``..``near[k1 - 1]`` of the list, added to the body sums.
+
+    With ``ahead`` > 0 the rows of the second sphere of the pair that many pairs on are asked
+    for ahead (``prefetch``; see ``PREFETCH_AHEAD``).
 
     The second body of a pair outside ``b_lo``..``b_hi - 1`` gets its share in the next row of
     ``fbody``, ``ff``, ``ft``, ``frm``, ``frv`` from row ``k0`` on instead (added later by the
@@ -170,6 +187,11 @@ def pair_forces(k0, k1, hist_dt, dt, lever_mode, rolling_model, eta_r, effective
     store = hist_dt > 0.0
     n_aside = 0
     for e in range(k0, k1):
+        if ahead > 0 and e + ahead < k1:
+            later = pj[near[e + ahead]]
+            prefetch(sx, later)
+            prefetch(srad, later)
+            prefetch(sbody, later)
         k = near[e]
         i = ppi[k]
         j = pj[k]

@@ -84,3 +84,23 @@ def test_a_bed_sorted_every_few_steps_settles_like_one_never_sorted():
         runs.append(sim)
     assert runs[0].total_sorts == 0 and runs[1].total_sorts >= 60
     np.testing.assert_allclose(runs[1].positions(), runs[0].positions(), rtol=0, atol=1e-7)
+
+
+@pytest.mark.parametrize("threads", [None, 2])
+def test_asking_for_the_second_spheres_ahead_changes_no_bit(threads):
+    """The contact loop's prefetch hints (``prefetch_min_spheres``, on here for every size) only
+    move data: the pour, on the plain loop and on the ranged one, is the same to the bit as
+    without them."""
+    runs = []
+    for prefetch_from in (10**9, 0):
+        sim = simulation(DEMParameters(), dt=5e-5, gravity=(0.0, 0.0, -9.81), lo=(-0.1, -0.1, -0.02),
+                         hi=(0.1, 0.1, 0.3), sort_every=0, prefetch_min_spheres=prefetch_from, threads=threads)
+        tpl = sim.add_template(segment_template(0.025, 0.011, 5, 912.0))
+        sim.add_walls(box_rectangles((-0.05, -0.03, 0.0), (0.05, 0.03, 0.25), faces=("x-", "x+", "y-", "y+", "z-")))
+        sim.add_factory(ParticleFactory(tpl, 40, (-0.045, -0.025, 0.02), (0.045, 0.025, 0.12), seed=5,
+                                        start_time=0.0, end_time=0.05))
+        sim.run(duration=0.2)
+        runs.append(sim)
+    assert runs[1].n_contacts()[0] > 10             # a bed, its contacts in the loop
+    for reader in ("positions", "velocities", "angular_velocities"):
+        np.testing.assert_array_equal(getattr(runs[1], reader)(), getattr(runs[0], reader)(), err_msg=reader)
