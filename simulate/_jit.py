@@ -33,6 +33,9 @@ A step of a one-particle rig costs less than half what it did (``benchmarks/RESU
 ``serial_or_threaded`` pairs a serial kernel with its threaded variant, chosen when the caller
 compiles, so that the threaded variants (about half of the compile time) are compiled only by
 a process that runs on threads.
+
+A process that has to compile the kernels (none in the cache) says so once on stderr; ``prefetch``
+is a cache hint for kernels (``simulate.forces.PREFETCH_AHEAD``).
 """
 
 from __future__ import annotations
