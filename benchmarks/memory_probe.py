@@ -29,7 +29,6 @@ can be read against it: if the probe stays flat where the engine does not, the e
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import statistics
@@ -41,7 +40,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from benchmarks.repose_vs_liggghts import machine, versions  # noqa: E402
+from benchmarks.repose_vs_liggghts import write_measurements  # noqa: E402
 from demcal.simulate.neighbours import morton_keys  # noqa: E402
 
 #: Body rows of the probe: position, velocity, angular velocity, force, torque (3 each) and
@@ -261,8 +260,7 @@ def main(argv=None) -> int:
                 f"{n} spheres, {t} / {configs[0]} threads",
                 [rate(r, n, t) / rate(r, n, configs[0]) for r in range(1, args.rounds + 1)])
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump({"machine": machine(), "versions": versions(), "rows": rows, "ratios": ratios}, f, indent=1)
+        write_measurements(args.json, rows=rows, ratios=ratios)
     return 0
 
 

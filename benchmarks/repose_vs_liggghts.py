@@ -116,6 +116,13 @@ def versions() -> dict:
     return {**code_version(), "numpy": np.__version__, "numba": numba.__version__}
 
 
+def write_measurements(path, **numbers) -> Path:
+    """``numbers`` as JSON in ``path``, with the machine, the code and library versions and the
+    time (UTC)."""
+    return write_json(path, {"machine": machine(), "versions": versions(),
+                             "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), **numbers}, indent=1)
+
+
 def startup_times() -> list:
     """Seconds from interpreter start to the first steps in two fresh processes in a row that
     share an empty numba cache: the first compiles every kernel and stores it, the second loads

@@ -20,7 +20,6 @@ selections at the phase's rate, against the phase's own time per step.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import sys
@@ -32,7 +31,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from benchmarks.dem_scaling import FILL_PHASE, SETTLED_PHASE, scaled_carton  # noqa: E402
-from benchmarks.repose_vs_liggghts import machine, versions  # noqa: E402
+from benchmarks.repose_vs_liggghts import write_measurements  # noqa: E402
 from demcal.simulate import engine  # noqa: E402
 from demcal.simulate.forces import PREFETCH_AHEAD, contact_forces  # noqa: E402
 from demcal.simulate.neighbours import build_pair_list_serial, select_near_pairs  # noqa: E402
@@ -168,9 +167,7 @@ def main(argv=None) -> int:
         rows.append(case(n, args.fill_time, args.seed))
         print("\n".join(report(rows[-1])), flush=True)
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump({"machine": machine(), "versions": versions(),
-                       "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "rows": rows}, fh, indent=1)
+        write_measurements(args.json, rows=rows)
     return 0
 
 
