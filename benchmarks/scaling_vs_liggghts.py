@@ -46,6 +46,7 @@ from benchmarks import dem_scaling, liggghts_scaling  # noqa: E402
 from benchmarks.repose_vs_liggghts import machine, versions  # noqa: E402
 from demcal.jsonio import write_json  # noqa: E402
 from demcal.simulate.liggghts.run import LiggghtsUnavailable  # noqa: E402
+from demcal.simulate.scenes import compile_kernels  # noqa: E402
 
 
 def demcal_run(n_spheres: int, cores: int, args) -> dict:
@@ -148,6 +149,7 @@ def main(argv=None) -> int:
 
     use_liggghts = not args.skip_liggghts
     core_counts = [1] if args.cores == 1 else [1, args.cores]
+    compile_kernels(threaded=True)   # every kernel a demcal case may use, before any timing
     runs = []
     for k in range(args.rounds):
         for n in args.spheres:
