@@ -601,7 +601,7 @@ class Simulation:
     prefetch_min_spheres : int
         From this many spheres the sphere-sphere loop asks for each pair's second sphere some
         pairs ahead (``simulate.forces.PREFETCH_AHEAD``): faster once the state outgrows the
-        caches, slower while it fits them. The result is the same to the bit either way.
+        caches, no gain while they hold it. The result is the same to the bit either way.
     threads : int or None
         Threads of the step loop. None (default): once the simulation holds
         ``THREADS_MIN_SPHERES`` spheres, its contacts are split into fixed ranges run on
