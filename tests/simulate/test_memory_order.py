@@ -25,17 +25,23 @@ def test_morton_keys_interleave_the_cell_bits():
     assert morton_keys(np.array([[-5.0, -5.0, -5.0]]), (0, 0, 0), 0.01).tolist() == [0]
 
 
-def _poured_bed(**hooks):
-    """Segments poured at random into a box: their order of addition is not their order in space."""
-    params = DEMParameters().with_(**hooks)
-    sim = simulation(params, dt=5e-5, gravity=(0.0, 0.0, -9.81), lo=(-0.1, -0.1, -0.02),
-                     hi=(0.1, 0.1, 0.3), sort_every=0)
+def _pour(n_clumps, heights, seed, fill_time, duration, params=None, **options):
+    """``n_clumps`` segments poured at random into a box from ``heights`` [m] over ``fill_time``,
+    run for ``duration`` [s] (``options``: the Simulation's): their order of addition is not their
+    order in space."""
+    sim = simulation(params or DEMParameters(), dt=5e-5, gravity=(0.0, 0.0, -9.81), lo=(-0.1, -0.1, -0.02),
+                     hi=(0.1, 0.1, 0.3), **options)
     tpl = sim.add_template(segment_template(0.025, 0.011, 5, 912.0))
     sim.add_walls(box_rectangles((-0.05, -0.03, 0.0), (0.05, 0.03, 0.25), faces=("x-", "x+", "y-", "y+", "z-")))
-    sim.add_factory(ParticleFactory(tpl, 60, (-0.045, -0.025, 0.08), (0.045, 0.025, 0.24), seed=7,
-                                    start_time=0.0, end_time=0.1))
-    sim.run(duration=0.3)
+    sim.add_factory(ParticleFactory(tpl, n_clumps, (-0.045, -0.025, heights[0]), (0.045, 0.025, heights[1]),
+                                    seed=seed, start_time=0.0, end_time=fill_time))
+    sim.run(duration=duration)
     return sim
+
+
+def _poured_bed(**hooks):
+    """A bed of 60 segments, never sorted, with the model hooks ``hooks``."""
+    return _pour(60, (0.08, 0.24), 7, 0.1, 0.3, DEMParameters().with_(**hooks), sort_every=0)
 
 
 @pytest.mark.parametrize("hooks", [{}, {"rolling_model": "epsd", "e_pp_exponent": 0.2, "e_pw_exponent": 0.2}])
@@ -72,16 +78,8 @@ def test_sorting_renumbers_without_changing_anything(hooks):
 def test_a_bed_sorted_every_few_steps_settles_like_one_never_sorted():
     """Sorted every 25 steps from the first particle on, against never: the same heap up to the
     divergence of roundoff, which a short pour keeps small."""
-    runs = []
-    for every in (0, 25):
-        sim = simulation(DEMParameters(), dt=5e-5, gravity=(0.0, 0.0, -9.81), lo=(-0.1, -0.1, -0.02),
-                         hi=(0.1, 0.1, 0.3), sort_every=every, sort_min_spheres=0, chunk_steps=25)
-        tpl = sim.add_template(segment_template(0.025, 0.011, 5, 912.0))
-        sim.add_walls(box_rectangles((-0.05, -0.03, 0.0), (0.05, 0.03, 0.25), faces=("x-", "x+", "y-", "y+", "z-")))
-        sim.add_factory(ParticleFactory(tpl, 30, (-0.045, -0.025, 0.05), (0.045, 0.025, 0.1), seed=3,
-                                        start_time=0.0, end_time=0.02))
-        sim.run(duration=0.08)
-        runs.append(sim)
+    runs = [_pour(30, (0.05, 0.1), 3, 0.02, 0.08, sort_every=every, sort_min_spheres=0, chunk_steps=25)
+            for every in (0, 25)]
     assert runs[0].total_sorts == 0 and runs[1].total_sorts >= 60
     np.testing.assert_allclose(runs[1].positions(), runs[0].positions(), rtol=0, atol=1e-7)
 
@@ -91,16 +89,8 @@ def test_asking_for_the_second_spheres_ahead_changes_no_bit(threads):
     """The contact loop's prefetch hints (``prefetch_min_spheres``, on here for every size) only
     move data: the pour, on the plain loop and on the ranged one, is the same to the bit as
     without them."""
-    runs = []
-    for prefetch_from in (10**9, 0):
-        sim = simulation(DEMParameters(), dt=5e-5, gravity=(0.0, 0.0, -9.81), lo=(-0.1, -0.1, -0.02),
-                         hi=(0.1, 0.1, 0.3), sort_every=0, prefetch_min_spheres=prefetch_from, threads=threads)
-        tpl = sim.add_template(segment_template(0.025, 0.011, 5, 912.0))
-        sim.add_walls(box_rectangles((-0.05, -0.03, 0.0), (0.05, 0.03, 0.25), faces=("x-", "x+", "y-", "y+", "z-")))
-        sim.add_factory(ParticleFactory(tpl, 40, (-0.045, -0.025, 0.02), (0.045, 0.025, 0.12), seed=5,
-                                        start_time=0.0, end_time=0.05))
-        sim.run(duration=0.2)
-        runs.append(sim)
+    runs = [_pour(40, (0.02, 0.12), 5, 0.05, 0.2, sort_every=0, prefetch_min_spheres=prefetch_from, threads=threads)
+            for prefetch_from in (10**9, 0)]
     assert runs[1].n_contacts()[0] > 10             # a bed, its contacts in the loop
     for reader in ("positions", "velocities", "angular_velocities"):
         np.testing.assert_array_equal(getattr(runs[1], reader)(), getattr(runs[0], reader)(), err_msg=reader)
