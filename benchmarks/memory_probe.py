@@ -24,6 +24,7 @@ can be read against it: if the probe stays flat where the engine does not, the e
     python benchmarks/memory_probe.py --index-bits 32      # the pair list's indices in 32 bits
     python benchmarks/memory_probe.py --spheres 20000 100000 --threads 1 2   # the engine's ranged
                                                            # kernels on 1, then 2 threads
+    python benchmarks/memory_probe.py --ahead 0 32         # rows asked for 32 pairs ahead, and not
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from benchmarks.repose_vs_liggghts import write_measurements  # noqa: E402
+from demcal.simulate._jit import prefetch  # noqa: E402
 from demcal.simulate.neighbours import morton_keys  # noqa: E402
 
 #: Body rows of the probe: position, velocity, angular velocity, force, torque (3 each) and
@@ -49,8 +51,18 @@ BODY_COLUMNS, SPHERE_COLUMNS, HISTORY_COLUMNS = 24, 4, 3
 
 
 @numba.njit(cache=False, fastmath=False)
-def pair_pass(pi, pj, sx, body, hist, stiffness):
+def pair_pass(pi, pj, sx, body, hist, stiffness, ahead=0):
+    # with ``ahead`` the second sphere's row and its body's row (192 bytes: every cache line of
+    # it) are asked for that many pairs ahead; the engine's contact loop asks for its second
+    # sphere's rows alone (``simulate.forces.PREFETCH_AHEAD``)
+    flat = body.reshape(-1)
     for k in range(pi.size):
+        if ahead > 0 and k + ahead < pi.size:
+            later = pj[k + ahead]
+            prefetch(sx, later)
+            for c in range(0, BODY_COLUMNS, 8):
+                prefetch(flat, later * BODY_COLUMNS + c)
+            prefetch(flat, later * BODY_COLUMNS + BODY_COLUMNS - 1)
         i = pi[k]
         j = pj[k]
         dx = sx[j, 0] - sx[i, 0]
@@ -188,9 +200,11 @@ def bed(n: int, seed: int, index_dtype=np.int64):
             np.zeros((len(pairs), HISTORY_COLUMNS)))
 
 
-def measure(n: int, seconds: float, seed: int, index_dtype=np.int64, threads: int | None = None) -> dict:
+def measure(n: int, seconds: float, seed: int, index_dtype=np.int64, threads: int | None = None,
+            ahead: int = 0) -> dict:
     """Sphere-steps per second of the probe's passes on a bed of ``n`` spheres: the serial
-    kernels, or with ``threads`` the ranged ones on that many threads."""
+    kernels (asking for the second sphere's rows ``ahead`` pairs ahead), or with ``threads`` the
+    ranged ones on that many threads."""
     sx, body, pi, pj, hist = bed(n, seed, index_dtype)
     if threads:
         numba.set_num_threads(threads)
@@ -201,7 +215,7 @@ def measure(n: int, seconds: float, seed: int, index_dtype=np.int64, threads: in
             body_pass_threaded(body, sx, 0.0)
     else:
         def step():
-            pair_pass(pi, pj, sx, body, hist, 1.0)
+            pair_pass(pi, pj, sx, body, hist, 1.0, ahead)
             body_pass(body, sx, 0.0)
     step()
     steps, start = 0, time.perf_counter()
@@ -225,40 +239,50 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", type=int, nargs="+",
                     help="run each size with the engine's ranged kernels on these thread counts, in turn "
                          "(default: the serial kernels, one thread)")
+    ap.add_argument("--ahead", type=int, nargs="+", default=[0],
+                    help="serial pass: ask for each pair's second sphere and body rows this many pairs "
+                         "ahead (0: not); several values run in turn")
     ap.add_argument("--json", help="write the numbers here")
     args = ap.parse_args(argv)
     numba.set_num_threads(1)
     index_dtype = np.int32 if args.index_bits == 32 else np.int64
-    configs = args.threads or [None]
+    configs = [(t, a) for t in (args.threads or [None]) for a in (args.ahead if t is None else [0])]
     rows = []
     for r in range(1, args.rounds + 1):
         for n in args.spheres:
-            for t in configs:
+            for t, a in configs:
                 row = {"round": r, "index_bits": args.index_bits, "threads": t or 1, "ranged": t is not None,
-                       **measure(n, args.seconds, seed=r, index_dtype=index_dtype, threads=t)}
+                       "ahead": a, **measure(n, args.seconds, seed=r, index_dtype=index_dtype, threads=t, ahead=a)}
                 rows.append(row)
-                print(f"round {r}  {n:>7} spheres  {'serial' if t is None else f'{t} thread(s), ranged'}  "
+                kind = f"serial, ahead {a}" if t is None else f"{t} thread(s), ranged"
+                print(f"round {r}  {n:>7} spheres  {kind}  "
                       f"{row['pairs_per_sphere']:.2f} pairs/sphere  {row['bytes_per_sphere']:.0f} B/sphere "
                       f"({row['state_mb']:.1f} MB)  {row['sphere_steps_per_s']:.3g} sphere-steps/s", flush=True)
 
-    def rate(r, n, t):
-        return next(x["sphere_steps_per_s"] for x in rows if (x["round"], x["spheres"], x["threads"]) == (r, n, t or 1))
+    def rate(r, n, config):
+        t, a = config
+        return next(x["sphere_steps_per_s"] for x in rows
+                    if (x["round"], x["spheres"], x["threads"], x["ahead"]) == (r, n, t or 1, a))
 
     def show(label, values):
         print(f"{label}: " + ", ".join(f"{v:.2f}" for v in values) + f" (median {statistics.median(values):.2f})")
         return values
 
+    def name(config):
+        t, a = config
+        return f"{t or 1} thread(s)" + (f", ahead {a}" if a else "")
+
     ratios = {}
-    for t in configs:
+    for config in configs:
         for n in args.spheres[1:]:
-            ratios[f"{n}/{args.spheres[0]} spheres, {t or 1} thread(s)"] = show(
-                f"{n} / {args.spheres[0]} spheres, {t or 1} thread(s)",
-                [rate(r, n, t) / rate(r, args.spheres[0], t) for r in range(1, args.rounds + 1)])
-    for t in configs[1:]:
+            label = f"{n} / {args.spheres[0]} spheres, {name(config)}"
+            ratios[label] = show(label, [rate(r, n, config) / rate(r, args.spheres[0], config)
+                                         for r in range(1, args.rounds + 1)])
+    for config in configs[1:]:
         for n in args.spheres:
-            ratios[f"{n} spheres, {t}/{configs[0]} threads"] = show(
-                f"{n} spheres, {t} / {configs[0]} threads",
-                [rate(r, n, t) / rate(r, n, configs[0]) for r in range(1, args.rounds + 1)])
+            label = f"{n} spheres, {name(config)} / {name(configs[0])}"
+            ratios[label] = show(label, [rate(r, n, config) / rate(r, n, configs[0])
+                                         for r in range(1, args.rounds + 1)])
     if args.json:
         write_measurements(args.json, rows=rows, ratios=ratios)
     return 0

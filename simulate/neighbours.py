@@ -541,13 +541,12 @@ def admit_spheres(first, n_spheres, sx, srad, sbody, bactive, skin, sx0, allow, 
             w_s = min(w_s, d - srad[s] - wmax)
         if w_s < least:
             return False
-        a_s = _admit_rings(s, np.inf, False, least, sx, sx0, srad, sbody, allow, lo, inv_cell, dims, head, nxt,
-                           reach, edge, ring)
+        a_s = _admit_rings(s, np.inf, sx, sx0, srad, sbody, allow, lo, inv_cell, dims, head, nxt, reach, edge, ring)
         if a_s < least:
             # give s skin / 2 by narrowing the neighbours that leave it less: valid while
             # each has not yet moved that far from its reference
-            if _admit_rings(s, least, True, least, sx, sx0, srad, sbody, allow, lo, inv_cell, dims, head, nxt,
-                            reach, edge, ring) < 0.0:
+            if _admit_rings(s, least, sx, sx0, srad, sbody, allow, lo, inv_cell, dims, head, nxt, reach, edge,
+                            ring) < 0.0:
                 return False
             a_s = least
         allow[s] = a_s
@@ -568,14 +567,16 @@ def _into_cell(j, sx0, srad, allow, lo, inv_cell, dims, head, nxt, reach):
 
 
 @kernel
-def _admit_rings(s, limit, narrow, least, sx, sx0, srad, sbody, allow, lo, inv_cell, dims, head, nxt, reach,
-                 edge, ring):
+def _admit_rings(s, need, sx, sx0, srad, sbody, allow, lo, inv_cell, dims, head, nxt, reach, edge, ring):
     """The smallest room |x_s - sx0_j| - R_s - R_j - allow_j over the spheres j in cells (other
     clumps than s's), searched ring of cells by ring around s while a sphere beyond could have
-    less than that smallest and ``limit``; every ring when s lies outside the grid.
+    less than that smallest (``need`` infinite); every ring when s lies outside the grid.
 
-    With ``narrow``, each j with room below ``least`` instead has its allowance narrowed to
-    leave s ``least`` (``admit_spheres``); returns -1 if one has already moved that far."""
+    With a finite ``need``, each j with room below it instead has its allowance narrowed to
+    leave s ``need``, ring by ring while a sphere beyond could have less (``admit_spheres``);
+    returns -1 if one has already moved that far."""
+    # a flag passed as a constant would compile this twice (numba types True and False apart)
+    narrow = need < np.inf
     cell = np.empty(3, np.int64)
     inside = True
     for a in range(3):
@@ -590,7 +591,7 @@ def _admit_rings(s, limit, narrow, least, sx, sx0, srad, sbody, allow, lo, inv_c
                 if sbody[j] != sbody[s] and not narrow:
                     best = min(best, _room(s, j, sx, sx0, srad) - allow[j])
                 elif sbody[j] != sbody[s]:
-                    narrowed = _room(s, j, sx, sx0, srad) - least
+                    narrowed = _room(s, j, sx, sx0, srad) - need
                     if narrowed < allow[j]:
                         moved2 = 0.0
                         for a in range(3):
@@ -601,7 +602,7 @@ def _admit_rings(s, limit, narrow, least, sx, sx0, srad, sbody, allow, lo, inv_c
                 j = nxt[j]
         # a sphere beyond ring r is at least r cell edges from s (a margin of a billionth of
         # an edge over the rounding)
-        if inside and r * edge - srad[s] - reach > min(best, limit) + 1e-9 * edge:
+        if inside and r * edge - srad[s] - reach > min(best, need) + 1e-9 * edge:
             break
     return best
 

@@ -3,9 +3,9 @@
 the reported 95 % interval of every parameter, and the validation must find the calibrated
 heap equivalent to the photographed ones.
 
-The default suite uses a small carton of three shapes: 60 segments, about 70 round seeds and
-a carton scaled to 0.5 of three-sphere kernels; the same carton of two-sphere clumps is opt-in
-(the kernel's and the clump's together 3 min 25 s on 2 cores, 2026-11-29). Their heaps scatter by five to ten degrees, so the lab's heap-to-heap sd sets the
+The default suite uses a small carton of each shape: 60 segments, about 70 round seeds, and
+a carton scaled to 0.5 of three-sphere kernels and of two-sphere clumps (the two together
+3 min 25 s on 2 cores, 2026-11-29). Their heaps scatter by five to ten degrees, so the lab's heap-to-heap sd sets the
 tolerance. The full cartons are opt-in (``-m validation``): the paper's (about 20 minutes on 2
 cores, the paper's 16 photos) and each other shape's default carton, photographed FULL_PHOTOS
 (30) times, with up to FULL_VALIDATION_CAP (80) validation runs. The round seed's and the
@@ -92,13 +92,10 @@ def test_small_carton_virtual_lab(tmp_path):
 SHAPE_SCALES = {"sphere": 0.35, "kernel": 0.5, "clump": 0.5}
 
 
-# The two-sphere clump's small carton is opt-in: it was the suite's longest test (about 190 s of
-# a 15-minute suite on 2 cores), and the kernel's three spheres and the segment's five already
-# calibrate a clump of several spheres in the default suite.
 @pytest.mark.parametrize("shape", [
     "sphere",
     "kernel",
-    pytest.param("clump", marks=pytest.mark.validation),
+    "clump",
 ])
 def test_small_carton_virtual_lab_of_each_shape(shape, tmp_path):
     truth = replace(TRUTH, shape=OTHER_SHAPES[shape], particle_density_kg_m3=1200.0, shear_modulus_pa=1.04e6,
