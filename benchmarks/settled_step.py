@@ -4,7 +4,9 @@ The carton of ``dem_scaling.py`` is filled for its 0.6 s (on every thread: the s
 on any number of them), then its settled phase (0.15 s) runs on one thread, as there, for the
 phase's throughput, its pair-list rebuilds and the near-pair margin it ends with. On the state
 it leaves, each kernel of a step is then timed alone, on one thread (the serial kernels, the
-median of 9 rounds): the contact forces over every listed pair (as the settled phase visits
+shortest of 15 rounds: the machine this was written on has windows of tens of milliseconds in
+which a core runs about 1.45 times slower, and a kernel timed in rounds of a few milliseconds may
+spend most of its rounds in one; ``benchmarks/RESULTS.md``): the contact forces over every listed pair (as the settled phase visits
 them while its margin stays at the skin), with and without asking for each pair's second
 sphere ``PREFETCH_AHEAD`` pairs ahead (in turn, round by round), then over the pairs whose two
 spheres are within ``LOCAL_ROWS`` rows of each other in memory and over the others apart (less
@@ -21,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import sys
 import time
 
@@ -39,12 +40,12 @@ from demcal.simulate.threads import threads_limited_to  # noqa: E402
 
 #: Pairs whose spheres are at most this many rows apart count as near in memory.
 LOCAL_ROWS = 200
-#: Rounds of each timing (their median is given).
-ROUNDS = 9
+#: Rounds of each timing (the shortest is given).
+ROUNDS = 15
 
 
-def median_time(fn, calls: int, rounds: int = ROUNDS) -> float:
-    """Median over ``rounds`` of the mean time [s] of ``calls`` calls of ``fn`` (after one)."""
+def shortest_time(fn, calls: int, rounds: int = ROUNDS) -> float:
+    """Shortest over ``rounds`` of the mean time [s] of ``calls`` calls of ``fn`` (after one)."""
     fn()
     times = []
     for _ in range(rounds):
@@ -52,7 +53,7 @@ def median_time(fn, calls: int, rounds: int = ROUNDS) -> float:
         for _ in range(calls):
             fn()
         times.append((time.perf_counter() - t0) / calls)
-    return statistics.median(times)
+    return min(times)
 
 
 def kernel_times(sim) -> dict:
@@ -85,33 +86,33 @@ def kernel_times(sim) -> dict:
         return chosen.size
 
     out = {"pairs": int(ppi.shape[0]), "wall_pairs": int(ws.shape[0])}
-    out["forces_all_s"] = median_time(forces, calls)
+    out["forces_all_s"] = shortest_time(forces, calls)
     # with and without the hints of the second spheres, in turn
     plain, hinted = [], []
     for _ in range(ROUNDS):
-        plain.append(median_time(forces, calls, 1))
-        hinted.append(median_time(lambda: forces(PREFETCH_AHEAD), calls, 1))
-    out["forces_all_plain_s"], out["forces_all_prefetch_s"] = statistics.median(plain), statistics.median(hinted)
+        plain.append(shortest_time(forces, calls, 1))
+        hinted.append(shortest_time(lambda: forces(PREFETCH_AHEAD), calls, 1))
+    out["forces_all_plain_s"], out["forces_all_prefetch_s"] = min(plain), min(hinted)
     apart = np.abs(pj - ppi)
     visit(np.zeros(ppi.shape[0], bool))
-    out["forces_no_pair_s"] = median_time(forces, calls)
+    out["forces_no_pair_s"] = shortest_time(forces, calls)
     for name, mask in (("local", apart < LOCAL_ROWS), ("far", apart >= LOCAL_ROWS)):
         out[f"{name}_pairs"] = visit(mask)
-        out[f"forces_{name}_s"] = median_time(forces, calls)
+        out[f"forces_{name}_s"] = shortest_time(forces, calls)
     visit(np.ones(ppi.shape[0], bool))
     allow = S["sallow"].copy()
-    out["rebuild_s"] = median_time(lambda: build_pair_list_serial(
+    out["rebuild_s"] = shortest_time(lambda: build_pair_list_serial(
         ns, S["sx"], S["srad"], S["sbody"], B["bactive"], sim.skin, sim.domain_lo, inv_cell, dims, cell_start,
         pstart, pj, ph, allow, 1), max(2, calls // 10))
     chosen, chosen_start = np.empty_like(near), np.empty_like(near_start)
     sxn, snear = S["sxn"].copy(), S["snear"].copy()
-    out["select_s"] = median_time(lambda: select_near_pairs(
+    out["select_s"] = shortest_time(lambda: select_near_pairs(
         ns, pstart, ppi, pj, ph, S["sx"], S["srad"], 0.25 * sim.skin, chosen, chosen_start, sxn, snear), calls)
     bodies = [B[k].copy() for k in ("bactive", "bx", "bv", "bq", "bL", "bw", "bR", "bf", "bt", "brm", "brv", "brn",
                                     "binvm", "binvi")]
-    out["kick_s"] = median_time(lambda: engine._kick_drift(nb, sim.dt, 0.0, 0.0, 0.0, -9.81, 0, *bodies), calls)
+    out["kick_s"] = shortest_time(lambda: engine._kick_drift(nb, sim.dt, 0.0, 0.0, 0.0, -9.81, 0, *bodies), calls)
     spheres = [S[k].copy() for k in ("sx", "sx0", "sxw", "sxn", "sallow", "swallow", "snear")]
-    out["spheres_s"] = median_time(lambda: engine._update_spheres(
+    out["spheres_s"] = shortest_time(lambda: engine._update_spheres(
         ns, S["sbody"], S["soff"], B["bx"], B["bR"], B["bactive"], *spheres, 0.0), calls)
     return out
 
