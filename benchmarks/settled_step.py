@@ -5,15 +5,16 @@ on any number of them), then its settled phase (0.15 s) runs on one thread, as t
 phase's throughput, its pair-list rebuilds and the near-pair margin it ends with. On the state
 it leaves, each kernel of a step is then timed alone, on one thread (the serial kernels, the
 shortest of 15 rounds: the machine this was written on has windows of tens of milliseconds in
-which a core runs about 1.45 times slower, and a kernel timed in rounds of a few milliseconds may
-spend most of its rounds in one; ``benchmarks/RESULTS.md``): the contact forces over every listed pair (as the settled phase visits
-them while its margin stays at the skin), with and without asking for each pair's second
-sphere ``PREFETCH_AHEAD`` pairs ahead (in turn, round by round), then over the pairs whose two
-spheres are within ``LOCAL_ROWS`` rows of each other in memory and over the others apart (less
-the cost of a call with no pair: the wall contacts and the zeroing of the sums); a pair-list
-rebuild; a near-pair selection; a kick and drift; the sphere positions. Times are per sphere,
-or per pair, so that the sizes compare directly; the step adds them up with the rebuilds and
-selections at the phase's rate, against the phase's own time per step.
+which a core runs about 1.45 times slower, and a kernel timed in rounds of a few milliseconds
+may spend most of its rounds in one; ``benchmarks/RESULTS.md``): the contact forces over every
+listed pair (as the settled phase visits them while its margin stays at the skin), with and
+without asking for each pair's second sphere ``PREFETCH_AHEAD`` pairs ahead (in turn, round by
+round), then over the pairs whose two spheres are within ``LOCAL_ROWS`` rows of each other in
+memory and over the others apart (less the cost of a call with no pair: the wall contacts and
+the zeroing of the sums); a pair-list rebuild; a near-pair selection; a kick and drift; the
+sphere positions. Times are per sphere, or per pair, so that the sizes compare directly; the
+step adds them up with the rebuilds and selections at the phase's rate, against the phase's own
+time per step.
 
     python benchmarks/settled_step.py                      # 2,500 and 100,000 spheres
     python benchmarks/settled_step.py --spheres 2500 20000 100000 --json out.json

@@ -3,20 +3,21 @@
 the reported 95 % interval of every parameter, and the validation must find the calibrated
 heap equivalent to the photographed ones.
 
-The default suite uses a small carton of each shape: 60 segments, about 70 round seeds, and
-a carton scaled to 0.5 of three-sphere kernels and of two-sphere clumps (the two together
-3 min 25 s on 2 cores, 2026-11-29). Their heaps scatter by five to ten degrees, so the lab's heap-to-heap sd sets the
-tolerance. The full cartons are opt-in (``-m validation``): the paper's (about 20 minutes on 2
-cores, the paper's 16 photos) and each other shape's default carton, photographed FULL_PHOTOS
-(30) times, with up to FULL_VALIDATION_CAP (80) validation runs. The round seed's and the
-kernel's heaps scatter by about 1.4 deg, so the tolerance is about that: with 16 photos and 40
-runs the validation had about 89 % power when on target and 67 % at a bias of 0.5 deg
+The default suite uses a small carton of each shape: 60 segments, about 70 round seeds, and a
+carton scaled to 0.5 of three-sphere kernels and of two-sphere clumps (the two together
+3 min 25 s on 2 cores, 2026-11-29). Their heaps scatter by five to ten degrees, so the lab's heap-to-heap
+sd sets the tolerance. The full cartons are opt-in (``-m validation``): the paper's (about 20
+minutes on 2 cores, the paper's 16 photos) and each other shape's default carton, photographed
+FULL_PHOTOS (30) times, with up to FULL_VALIDATION_CAP (80) validation runs. The round seed's
+and the kernel's heaps scatter by about 1.4 deg, so the tolerance is about that: with 16 photos
+and 40 runs the validation had about 89 % power when on target and 67 % at a bias of 0.5 deg
 (``analyse.equivalence.tost_power``), and the round seed's ended *undecided* once (30.46 deg
-[30.09, 30.84] against 30.99, tolerance 1.0); with 30 photos and 80 runs it has 99.7 % and 91 %. On 2026-11-29, on 2 cores,
-alone, every truth lay inside its 95 % interval and each validation was *equivalent*: the round
-seed's in 13 min 23 s (23 heaps at 30.56 deg against the photos' 30.41, tolerance 1.51), the
-kernel's in 22 min 58 s (56 heaps at 33.28 deg against 33.47, tolerance 1.43) and the clump's in
-12 min 38 s (40 heaps at 38.05 deg against 37.40, tolerance 3.01).
+[30.09, 30.84] against 30.99, tolerance 1.0); with 30 photos and 80 runs it has 99.7 % and 91 %.
+On 2026-11-29, on 2 cores, alone, every truth lay inside its 95 % interval and each validation
+was *equivalent*: the round seed's in 13 min 23 s (23 heaps at 30.56 deg against the photos'
+30.41, tolerance 1.51), the kernel's in 22 min 58 s (56 heaps at 33.28 deg against 33.47,
+tolerance 1.43) and the clump's in 12 min 38 s (40 heaps at 38.05 deg against 37.40, tolerance
+3.01).
 
 Measured over seeds (lab seed 20 + k, campaign seed k; k = 1 is the test's own), with the virtual
 lab photographing each twin heap's own spheres: the round seed's carton passed for every k in
