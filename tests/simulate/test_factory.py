@@ -55,7 +55,10 @@ def test_insertion_follows_the_rate():
         sim.run(duration=duration)
         # clump k is due at (k + 1) / 100 s and enters at the first step boundary after it
         assert factory.inserted == min(100, int(100 * sim.time + 1e-9))
-    assert factory.inserted == 100 and factory.failed_attempts < 100
+    # the draws rejected for want of room depend on where the clumps before fell: 89 to 128 over
+    # 13 pours from other draws (as another machine's last bits would pour them); the bound
+    # catches a factory that rejects half as often again as any of them did
+    assert factory.inserted == 100 and factory.failed_attempts < 200
 
 
 def test_full_region_does_not_hang():

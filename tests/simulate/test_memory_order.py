@@ -91,6 +91,8 @@ def test_asking_for_the_second_spheres_ahead_changes_no_bit(threads):
     without them."""
     runs = [_pour(40, (0.02, 0.12), 5, 0.05, 0.2, sort_every=0, prefetch_min_spheres=prefetch_from, threads=threads)
             for prefetch_from in (10**9, 0)]
-    assert runs[1].n_contacts()[0] > 10             # a bed, its contacts in the loop
+    # a bed, its contacts in the loop: 8 to 33 sphere contacts at the end over 13 pours of these
+    # segments from other draws (as another machine's last bits would pour them)
+    assert runs[1].n_contacts()[0] >= 3
     for reader in ("positions", "velocities", "angular_velocities"):
         np.testing.assert_array_equal(getattr(runs[1], reader)(), getattr(runs[0], reader)(), err_msg=reader)

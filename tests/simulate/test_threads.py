@@ -68,9 +68,11 @@ def test_the_ranged_loop_gives_the_heap_of_the_plain_one_over_seeds():
             sim = _pour(100 + seed, threads)
             heights[threads].append(sim.positions()[:, 2].mean())
             contacts[threads].append(sum(sim.n_contacts()))
+    # the runs did part (the mean heights; the contact counts, whole numbers, can all agree when
+    # the runs part late, as in one of two pours from other draws)
+    assert np.any(np.array(heights[None]) != np.array(heights[2]))
     for obs in (heights, contacts):
         one, two = np.array(obs[None], float), np.array(obs[2], float)
-        assert np.any(one != two)               # the runs did part
         se = np.sqrt(one.var(ddof=1) / one.size + two.var(ddof=1) / two.size)
         assert abs(one.mean() - two.mean()) < 3 * se
 
