@@ -510,8 +510,9 @@ def _check_drum_run(res):
     # frame by frame the photo agrees with the profile of the same spheres (the profile's chord
     # spans the bed's width, the estimator's the free surface's: on a steeper, S-shaped surface
     # they part by a few degrees); a bed 15 seeds across slumps and rocks between frames, which
-    # the frames' sd reports
-    np.testing.assert_allclose(rec["frame_angles"], rec["frame_profile_angles"], atol=5.0)
+    # the frames' sd reports. Over seeds 1-40 (200 frames) the two part by 1.6 deg rms, at most
+    # 5.4, and a pour of other draws reached 6.1: 8 deg is 5 times the rms
+    np.testing.assert_allclose(rec["frame_angles"], rec["frame_profile_angles"], atol=8.0)
     assert obs["angle_profile_deg"] == pytest.approx(obs["angle_deg"], abs=3.0)
     assert obs["angle_sd_deg"] == pytest.approx(np.std(rec["frame_angles"], ddof=1))
 
