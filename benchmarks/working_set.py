@@ -19,7 +19,7 @@ shortest of the rounds is reported (a core of the machine this was written on ha
 which it runs about 1.45 times slower; ``settled_step.py``), with the median beside it, as ns
 a pair and as bytes: the rows the loop reads and writes for the block (pair list and history,
 sphere rows, body rows). The small bed itself (``--reference``, filled the same way) is timed
-over all its pairs alongside, as the throughput the acceptance compares against.
+over all its pairs alongside, as the baseline a flat throughput would keep.
 
     python benchmarks/working_set.py                        # a 100,000-sphere bed, 2,500 as reference
     python benchmarks/working_set.py --blocks 2500 10000 50000 100000 --rounds 21 --json out.json
@@ -71,7 +71,7 @@ def block_pairs(sim, n_block: int) -> tuple[np.ndarray, int, int]:
     """The list positions of the pairs with both spheres in the block of ``n_block`` sphere rows
     in the middle of the bed (whole bodies: spheres are stored body after body), and the block's
     numbers of spheres and bodies."""
-    pstart, ppi, pj, _ = sim._pairs
+    _, ppi, pj, _ = sim._pairs
     sbody = sim._s["sbody"][:sim.n_spheres]
     n_block = min(n_block, sim.n_spheres)
     first = (sim.n_spheres - n_block) // 2
